@@ -1,0 +1,130 @@
+#!/usr/bin/env node
+// Build step of the phone app: copy the few onnxruntime-web files the app uses (the WASM
+// backend only) from node_modules into www/vendor/, copy a bundle (model.onnx + bundle.json,
+// validated, SHA-256 checked) into www/bundle/, and write www/precache.json: every file the
+// service worker caches for offline use, with its SHA-256, and a version that changes when
+// any of them changes (so phones pick up a new app or bundle on their next online visit).
+//
+//   node tools/build.mjs [--bundle DIR] [--www DIR]
+//
+// DIR defaults: ../crossing_assist/assets/default_bundle, www (relative to android_demo/).
+
+import { createHash } from 'node:crypto';
+import { copyFileSync, existsSync, mkdirSync, readdirSync, readFileSync, renameSync, rmSync, statSync, writeFileSync } from 'node:fs';
+import { dirname, join, relative, resolve, sep } from 'node:path';
+import { fileURLToPath } from 'node:url';
+import { BundleError, parseBundleMeta } from '../www/js/bundle.js';
+
+const HERE = dirname(dirname(fileURLToPath(import.meta.url)));
+export const ORT_FILES = ['ort.wasm.min.mjs', 'ort-wasm-simd-threaded.mjs', 'ort-wasm-simd-threaded.wasm'];
+const NOT_CACHED = new Set(['precache.json', 'sw.js']);
+
+class BuildError extends Error {}
+
+function sha256(path) {
+  return createHash('sha256').update(readFileSync(path)).digest('hex');
+}
+
+/** Copy src to dst through a temporary file and a rename (never a half-written file). */
+function copyAtomic(src, dst) {
+  mkdirSync(dirname(dst), { recursive: true });
+  const tmp = `${dst}.tmp-${process.pid}`;
+  copyFileSync(src, tmp);
+  renameSync(tmp, dst);
+}
+
+function writeAtomic(dst, text) {
+  const tmp = `${dst}.tmp-${process.pid}`;
+  writeFileSync(tmp, text);
+  renameSync(tmp, dst);
+}
+
+function copyOrt(www) {
+  const dist = join(HERE, 'node_modules', 'onnxruntime-web', 'dist');
+  for (const name of ORT_FILES) {
+    const src = join(dist, name);
+    if (!existsSync(src)) throw new BuildError(`${src} is missing; run 'npm ci' in android_demo first`);
+    copyAtomic(src, join(www, 'vendor', name));
+  }
+}
+
+/** Validate and copy a bundle folder into www/bundle/; returns the parsed meta. */
+export function copyBundle(bundleDir, www) {
+  const jsonPath = join(bundleDir, 'bundle.json');
+  if (!existsSync(jsonPath)) {
+    throw new BuildError(`no bundle at ${bundleDir} (bundle.json missing); pass --bundle DIR, a folder written by crossing-export`);
+  }
+  let meta;
+  try {
+    meta = parseBundleMeta(JSON.parse(readFileSync(jsonPath, 'utf8')));
+  } catch (err) {
+    if (err instanceof SyntaxError) throw new BuildError(`${jsonPath} is not valid JSON; re-export the bundle`);
+    throw err;
+  }
+  const modelPath = join(bundleDir, meta.model_file);
+  if (!existsSync(modelPath)) throw new BuildError(`${modelPath} is missing; copy the whole bundle folder`);
+  if (statSync(modelPath).size !== meta.model_size || sha256(modelPath) !== meta.model_sha256) {
+    throw new BuildError(`${modelPath} differs from bundle.json (size or SHA-256); copy the bundle again or re-export it`);
+  }
+  const out = join(www, 'bundle');
+  rmSync(out, { recursive: true, force: true });
+  copyAtomic(modelPath, join(out, meta.model_file));
+  copyAtomic(jsonPath, join(out, 'bundle.json'));
+  return meta;
+}
+
+function listFiles(root, dir = root) {
+  const out = [];
+  for (const entry of readdirSync(dir, { withFileTypes: true })) {
+    const path = join(dir, entry.name);
+    if (entry.isDirectory()) out.push(...listFiles(root, path));
+    else if (entry.isFile() && !entry.name.includes('.tmp-')) out.push(relative(root, path).split(sep).join('/'));
+  }
+  return out.sort();
+}
+
+/** Write www/precache.json: {version, files: [{url, sha256, bytes}]} for the service worker. */
+export function writePrecache(www) {
+  const files = listFiles(www)
+    .filter((p) => !NOT_CACHED.has(p))
+    .map((p) => ({ url: p, sha256: sha256(join(www, p)), bytes: statSync(join(www, p)).size }));
+  const version = createHash('sha256').update(JSON.stringify(files)).digest('hex').slice(0, 16);
+  writeAtomic(join(www, 'precache.json'), `${JSON.stringify({ version, files }, null, 1)}\n`);
+  return { version, files };
+}
+
+function parseArgs(argv) {
+  const args = { bundle: resolve(HERE, '..', 'crossing_assist', 'assets', 'default_bundle'), www: join(HERE, 'www') };
+  for (let i = 0; i < argv.length; i += 1) {
+    const key = argv[i];
+    if ((key === '--bundle' || key === '--www') && i + 1 < argv.length) args[key.slice(2)] = resolve(argv[++i]);
+    else if (key === '-h' || key === '--help') args.help = true;
+    else throw new BuildError(`unknown argument ${JSON.stringify(key)}; usage: node tools/build.mjs [--bundle DIR] [--www DIR]`);
+  }
+  return args;
+}
+
+function main() {
+  try {
+    const args = parseArgs(process.argv.slice(2));
+    if (args.help) {
+      console.log('usage: node tools/build.mjs [--bundle DIR] [--www DIR]');
+      return 0;
+    }
+    copyOrt(args.www);
+    const meta = copyBundle(args.bundle, args.www);
+    const { version, files } = writePrecache(args.www);
+    const total = files.reduce((s, f) => s + f.bytes, 0);
+    console.log(`built ${args.www}: ${meta.actions.n}-action bundle, ${files.length} files, `
+      + `${(total / 1e6).toFixed(1)} MB cached offline, version ${version}`);
+    return 0;
+  } catch (err) {
+    if (err instanceof BuildError || err instanceof BundleError) {
+      console.error(`error: ${err.message}`);
+      return 2;
+    }
+    throw err;
+  }
+}
+
+if (process.argv[1] && resolve(process.argv[1]) === fileURLToPath(import.meta.url)) process.exit(main());

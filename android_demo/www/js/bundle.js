@@ -1,0 +1,143 @@
+// bundle.json (schema 1, docs/contracts.md section 3) validation, ported from
+// crossing_assist/bundle.py: the phone refuses a bundle the Python runtime would refuse, with
+// one line naming the field and the fix. Pure (no DOM): runs in Node (build step, tests) and
+// in the browser.
+
+import { DEFAULT_FOV_DEG, spaceGroups, spaceNames } from './actions.js';
+
+export const SCHEMA_VERSION = 1;
+export const INPUT_NAME = 'frames';
+export const OUTPUT_NAMES = ['probs', 'entropy', 'mutual_info', 'variance', 'votes'];
+export const UNCERTAINTY_MEASURES = ['entropy', 'mutual_info', 'variance'];
+
+export class BundleError extends Error {
+  constructor(message) {
+    super(message);
+    this.name = 'BundleError';
+  }
+}
+
+function get(obj, key, where) {
+  if (obj === null || typeof obj !== 'object' || Array.isArray(obj)) {
+    throw new BundleError(`bundle.json: ${where || 'the top level'} must be an object; re-export the bundle`);
+  }
+  if (!(key in obj)) {
+    throw new BundleError(`bundle.json: missing field '${where ? `${where}.` : ''}${key}'; re-export the bundle with crossing-export`);
+  }
+  return obj[key];
+}
+
+function num(value, name, lo, hi, { loOpen = false, hiOpen = false } = {}) {
+  if (typeof value !== 'number' || !Number.isFinite(value)) {
+    throw new BundleError(`bundle.json: ${name} = ${JSON.stringify(value)} is not a finite number`);
+  }
+  const okLo = loOpen ? value > lo : value >= lo;
+  const okHi = hiOpen ? value < hi : value <= hi;
+  if (!okLo || !okHi) {
+    throw new BundleError(`bundle.json: ${name} = ${value} is out of range; valid: ${loOpen ? '(' : '['}${lo}, ${hi}${hiOpen ? ')' : ']'}`);
+  }
+  return value;
+}
+
+function int(value, name, lo, hi = Infinity) {
+  if (!Number.isInteger(value) || value < lo || value > hi) {
+    throw new BundleError(`bundle.json: ${name} = ${JSON.stringify(value)} must be an integer in ${lo}..${hi === Infinity ? '' : hi}`);
+  }
+  return value;
+}
+
+const same = (a, b) => JSON.stringify(a) === JSON.stringify(b);
+
+function parseActions(d) {
+  const n = get(d, 'n', 'actions');
+  if (![4, 8, 13].includes(n)) throw new BundleError(`bundle.json: actions.n = ${JSON.stringify(n)} invalid; valid: 4, 8, 13`);
+  const names = get(d, 'names', 'actions');
+  const bins = get(d, 'bins', 'actions');
+  if (!same(names, spaceNames(n))) {
+    throw new BundleError(`bundle.json: actions.names disagree with the ${n}-action space; re-export the bundle`);
+  }
+  if (!same(bins, spaceGroups(n))) {
+    throw new BundleError(`bundle.json: actions.bins disagree with the ${n}-action space; re-export the bundle`);
+  }
+  return { n, names, bins };
+}
+
+function parseInput(d) {
+  for (const [key, want] of [['layout', 'NHWC'], ['dtype', 'uint8'], ['color', 'RGB']]) {
+    const got = get(d, key, 'input');
+    if (got !== want) throw new BundleError(`bundle.json: input.${key} = ${JSON.stringify(got)} unsupported; valid: '${want}'`);
+  }
+  const size = get(d, 'size', 'input');
+  if (!Array.isArray(size) || size.length !== 2 || !size.every((s) => Number.isInteger(s) && s >= 16 && s <= 4096)) {
+    throw new BundleError(`bundle.json: input.size = ${JSON.stringify(size)} invalid; valid: [H, W] integers in 16..4096`);
+  }
+  const triple = (key, positive) => {
+    const v = get(d, key, 'input');
+    if (!Array.isArray(v) || v.length !== 3) throw new BundleError(`bundle.json: input.${key} must be a list of 3 numbers (R, G, B)`);
+    return v.map((x, i) => num(x, `input.${key}[${i}]`, 0, 1e6, { loOpen: positive }));
+  };
+  return { size, mean: triple('mean', false), std: triple('std', true) };
+}
+
+function parseCalibration(d) {
+  const c = get(d, 'conformal', 'calibration');
+  const u = get(d, 'uncertainty', 'calibration');
+  const measure = get(u, 'measure', 'calibration.uncertainty');
+  if (!UNCERTAINTY_MEASURES.includes(measure)) {
+    throw new BundleError(`bundle.json: calibration.uncertainty.measure = ${JSON.stringify(measure)} unknown; valid: ${UNCERTAINTY_MEASURES.join(', ')}`);
+  }
+  return {
+    temperature: num(get(d, 'temperature', 'calibration'), 'calibration.temperature', 0, 100, { loOpen: true }),
+    conformal: {
+      coverage: num(get(c, 'coverage', 'calibration.conformal'), 'calibration.conformal.coverage', 0, 1, { loOpen: true, hiOpen: true }),
+      threshold: num(get(c, 'threshold', 'calibration.conformal'), 'calibration.conformal.threshold', 0, 1),
+      n_frames: int(get(c, 'n_frames', 'calibration.conformal'), 'calibration.conformal.n_frames', 0),
+    },
+    uncertainty: {
+      measure,
+      threshold: num(get(u, 'threshold', 'calibration.uncertainty'), 'calibration.uncertainty.threshold', 0, 1e6, { loOpen: true }),
+    },
+  };
+}
+
+/**
+ * Validate a parsed bundle.json object; returns a normalised copy
+ * ({schema_version, model_file, actions: {n, names, bins}, fov_deg, input, mc, calibration,
+ * precision, model_sha256, model_size, raw}) or throws BundleError (one line).
+ */
+export function parseBundleMeta(meta) {
+  const version = get(meta, 'schema_version', '');
+  if (!Number.isInteger(version)) throw new BundleError(`bundle.json: schema_version = ${JSON.stringify(version)} must be an integer`);
+  if (version !== SCHEMA_VERSION) {
+    const fix = version > SCHEMA_VERSION ? 'update the app' : 're-export the bundle';
+    throw new BundleError(`bundle.json: schema_version ${version} unsupported (this app reads ${SCHEMA_VERSION}); ${fix}`);
+  }
+  const modelFile = get(meta, 'model_file', '');
+  if (typeof modelFile !== 'string' || !/^[^/\\]+\.onnx$/.test(modelFile) || modelFile.startsWith('.')) {
+    throw new BundleError(`bundle.json: model_file = ${JSON.stringify(modelFile)} must be a plain file name ending in .onnx`);
+  }
+  const sha = get(meta, 'model_sha256', '');
+  if (typeof sha !== 'string' || !/^[0-9a-f]{64}$/.test(sha)) {
+    throw new BundleError(`bundle.json: model_sha256 = ${JSON.stringify(sha)} is not a lowercase hex SHA-256`);
+  }
+  const precision = get(meta, 'precision', '');
+  if (!['fp32', 'int8'].includes(precision)) {
+    throw new BundleError(`bundle.json: precision = ${JSON.stringify(precision)} unknown; valid: fp32, int8`);
+  }
+  const mc = get(meta, 'mc', '');
+  return {
+    schema_version: version,
+    model_file: modelFile,
+    actions: parseActions(get(meta, 'actions', '')),
+    fov_deg: num(get(meta, 'fov_deg', ''), 'fov_deg', 0, 180, { loOpen: true, hiOpen: true }),
+    input: parseInput(get(meta, 'input', '')),
+    mc: { samples: int(get(mc, 'samples', 'mc'), 'mc.samples', 1, 1024), p: num(get(mc, 'p', 'mc'), 'mc.p', 0, 1, { hiOpen: true }) },
+    calibration: parseCalibration(get(meta, 'calibration', '')),
+    precision,
+    model_sha256: sha,
+    model_size: int(get(meta, 'model_size', ''), 'model_size', 64),
+    raw: meta,
+  };
+}
+
+export { DEFAULT_FOV_DEG };

@@ -1,0 +1,112 @@
+// The rear camera: getUserMedia into a <video>, and a grabber that hands out each NEW camera
+// frame once as RGB bytes. A camera that stops delivering frames (frozen, unplugged, taken by
+// another app) yields nothing, so no fresh decision arrives and the watchdog stops the beacon.
+
+import { rgbaToRgb } from './model.js';
+
+export const MAX_WIDTH = 640; // frames wider than this are downscaled (aspect kept), as the Python runtime does
+
+export class CameraError extends Error {
+  constructor(message) {
+    super(message);
+    this.name = 'CameraError';
+  }
+}
+
+/** Open the rear camera into `video`; resolves with the MediaStream once frames flow. */
+export async function openCamera(video) {
+  if (!navigator.mediaDevices?.getUserMedia) {
+    throw new CameraError('This browser gives no camera access here: open the app over https:// or http://localhost');
+  }
+  let stream;
+  try {
+    stream = await navigator.mediaDevices.getUserMedia({
+      audio: false,
+      video: { facingMode: { ideal: 'environment' }, width: { ideal: 640 }, height: { ideal: 480 } },
+    });
+  } catch (err) {
+    const why = err?.name === 'NotAllowedError' ? 'permission was refused: allow the camera in the browser settings' : `${err?.name || 'error'}: ${err?.message || err}`;
+    throw new CameraError(`Cannot open the camera (${why})`);
+  }
+  video.muted = true;
+  video.playsInline = true;
+  video.srcObject = stream;
+  await video.play();
+  return stream;
+}
+
+/** Hands out each new video frame once, as {rgb, width, height, seq}. */
+export class FrameGrabber {
+  constructor(video, maxWidth = MAX_WIDTH) {
+    this.video = video;
+    this.maxWidth = maxWidth;
+    this.canvas = document.createElement('canvas');
+    this.ctx = this.canvas.getContext('2d', { willReadFrequently: true });
+    this.presented = 0; // frames the browser presented so far
+    this.taken = 0; // the `presented` count at the last grab
+    this.waiters = [];
+    this.lastTime = -1;
+    if ('requestVideoFrameCallback' in HTMLVideoElement.prototype) {
+      const onFrame = () => {
+        this.presented += 1;
+        this.wake();
+        video.requestVideoFrameCallback(onFrame);
+      };
+      video.requestVideoFrameCallback(onFrame);
+    } else {
+      // Fallback: a frame is new when the video's clock moved.
+      this.poll = setInterval(() => {
+        if (video.currentTime !== this.lastTime) {
+          this.lastTime = video.currentTime;
+          this.presented += 1;
+          this.wake();
+        }
+      }, 15);
+    }
+  }
+
+  wake() {
+    const waiters = this.waiters;
+    this.waiters = [];
+    for (const resolve of waiters) resolve(true);
+  }
+
+  /** Resolves true when a frame newer than the last grab is there, false after timeoutMs. */
+  waitForNewFrame(timeoutMs) {
+    if (this.presented > this.taken) return Promise.resolve(true);
+    return new Promise((resolve) => {
+      const timer = setTimeout(() => {
+        this.waiters = this.waiters.filter((w) => w !== done);
+        resolve(false);
+      }, timeoutMs);
+      const done = (v) => {
+        clearTimeout(timer);
+        resolve(v);
+      };
+      this.waiters.push(done);
+    });
+  }
+
+  /** The current frame as RGB, {rgb, width, height, seq} (downscaled to width <= maxWidth), or null. */
+  grab() {
+    const { videoWidth: vw, videoHeight: vh } = this.video;
+    if (!vw || !vh) return null;
+    const scale = Math.min(1, this.maxWidth / vw);
+    const width = Math.max(1, Math.round(vw * scale));
+    const height = Math.max(1, Math.round(vh * scale));
+    if (this.canvas.width !== width || this.canvas.height !== height) {
+      this.canvas.width = width;
+      this.canvas.height = height;
+      this.rgb = new Uint8Array(width * height * 3);
+    }
+    this.ctx.drawImage(this.video, 0, 0, width, height);
+    const rgba = this.ctx.getImageData(0, 0, width, height).data;
+    this.taken = this.presented;
+    return { rgb: rgbaToRgb(rgba, this.rgb), width, height, seq: this.taken };
+  }
+
+  close() {
+    if (this.poll) clearInterval(this.poll);
+    this.wake();
+  }
+}

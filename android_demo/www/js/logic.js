@@ -1,0 +1,365 @@
+// The decision logic shared with the Python runtime, ported line by line from
+// crossing_assist/runtime/belief.py (temporal filter), gate.py (UPMS gate) and decide.py
+// (freshness / watchdog and the Decider state machine). docs/readme_runtime.md
+// ("Decision logic") states every formula; android_demo/test_vectors.json (generated from the
+// Python runtime) is reproduced by test/logic.test.mjs in Node and by the browser test.
+//
+// Pure: no DOM, no clocks, no randomness. Times in seconds, angles in degrees (negative =
+// left), yaw rate in degrees per second (positive = the user turns right).
+
+import { DEFAULT_FOV_DEG, N_BINS, headingToPan, spaceGroups, xToHeading } from './actions.js';
+
+export const N_STATES = N_BINS + 1;
+export const SATURATION_HALF = Math.atanh(0.5); // alpha(threshold) = 1/2
+export const GATE_LEARNER = 'learner';
+export const GATE_HOLD = 'hold';
+export const GATE_STOP = 'stop';
+export const REASON_OK = 'ok';
+export const REASON_UNCERTAIN = 'uncertain';
+export const REASON_STALE = 'stale';
+export const REASON_FAILED = 'failed';
+
+export const DEFAULT_FILTER = Object.freeze({ tau_forget_s: 2.0, tau_diffuse_s: 2.0, tau_evidence_s: 0.1, eps: 0.01 });
+export const DEFAULT_GATE = Object.freeze({
+  saturation: SATURATION_HALF, alpha_min: 0.5, hold_time_s: 1.5, hold_turn_deg: 45.0, agree_deg: 15.0,
+  belief_entropy_threshold: 1.2,
+});
+export const DEFAULT_DECISION = Object.freeze({
+  n_actions: 13, fov_deg: DEFAULT_FOV_DEG, measure: 'entropy', threshold: 1.2, watchdog_s: 0.5,
+  rate_min_hz: 2.0, rate_max_hz: 6.0,
+});
+
+// ----------------------------------------------------------------------------- pinhole helpers
+
+function binCenterX(k) {
+  return (k - 0.5) / N_BINS;
+}
+
+function headingToX(h, fovDeg) {
+  const half = (fovDeg * Math.PI) / 360;
+  return 0.5 + Math.tan((h * Math.PI) / 180) / (2 * Math.tan(half));
+}
+
+// ----------------------------------------------------------------------------- belief (filter)
+
+/** The belief with no evidence: 1/13 everywhere. */
+export function uniformBelief() {
+  return new Array(N_STATES).fill(1.0 / N_STATES);
+}
+
+/** Move bin mass for a turn of psiDeg (positive = user turned right; goal moves left). */
+export function yawShift(b, psiDeg, fovDeg) {
+  if (psiDeg === 0) return b.slice();
+  const out = new Array(N_STATES).fill(0);
+  out[0] = b[0];
+  for (let k = 1; k < N_STATES; k += 1) {
+    const h = xToHeading(binCenterX(k), fovDeg) - psiDeg;
+    if (!(h > -90 && h < 90)) {
+      out[0] += b[k];
+      continue;
+    }
+    const x = headingToX(h, fovDeg);
+    if (x < 0 || x > 1) {
+      out[0] += b[k];
+      continue;
+    }
+    const z = Math.min(Math.max(N_BINS * x - 0.5, 0), N_BINS - 1);
+    const i = Math.floor(z);
+    const f = z - i;
+    if (i >= N_BINS - 1) {
+      out[N_BINS] += b[k];
+    } else {
+      out[i + 1] += (1 - f) * b[k];
+      out[i + 2] += f * b[k];
+    }
+  }
+  return out;
+}
+
+/** Spread bin mass to neighbours (reflecting edges); unknown untouched. */
+export function diffuse(b, dt, tauS) {
+  const d = 0.25 * (1 - Math.exp(-dt / tauS));
+  const out = b.slice();
+  for (let k = 1; k < N_STATES; k += 1) {
+    const left = b[Math.max(1, k - 1)];
+    const right = b[Math.min(N_BINS, k + 1)];
+    out[k] = (1 - 2 * d) * b[k] + d * left + d * right;
+  }
+  return out;
+}
+
+/** Relax toward the uniform belief: lam b + (1 - lam) / 13, lam = exp(-dt / tau). */
+export function forget(b, dt, tauS) {
+  const lam = Math.exp(-dt / tauS);
+  return b.map((v) => lam * v + (1 - lam) / N_STATES);
+}
+
+/** Per-state probabilities (13) from action probabilities (A): an action's mass is split over its bins. */
+export function binLikelihood(probs, groups, lookup) {
+  const q = new Array(N_STATES);
+  q[0] = probs[0];
+  for (let k = 1; k < N_STATES; k += 1) {
+    const a = lookup[k];
+    q[k] = probs[a] / groups[a].length;
+  }
+  return q;
+}
+
+/** Tempered Bayes update b * (q + eps)^w, normalised; w <= 0 returns b. */
+export function update(b, q, weight, eps) {
+  if (weight <= 0) return b.slice();
+  const post = b.map((v, k) => v * (q[k] + eps) ** weight);
+  const s = post.reduce((acc, v) => acc + v, 0);
+  return post.map((v) => v / s);
+}
+
+/** Prediction half of a step: yaw shift by yawRate * dt, diffusion, forgetting. */
+export function predict(b, dt, yawRateDps, fovDeg, cfg) {
+  if (dt <= 0) return b.slice();
+  let out = yawShift(b, yawRateDps * dt, fovDeg);
+  out = diffuse(out, dt, cfg.tau_diffuse_s);
+  return forget(out, dt, cfg.tau_forget_s);
+}
+
+/** Sum 13-way probabilities (unknown + bins) into the space's actions. */
+export function binProbsToActionProbs(b, groups) {
+  return groups.map((g, a) => (a === 0 ? b[0] : g.reduce((s, k) => s + b[k], 0)));
+}
+
+/** Entropy (nats) of the belief summed into the action space (0 log 0 = 0). */
+export function beliefEntropy(b, groups) {
+  let h = 0;
+  for (const p of binProbsToActionProbs(b, groups)) if (p > 0) h -= p * Math.log(p);
+  return h;
+}
+
+function argmax(values) {
+  let best = 0;
+  for (let i = 1; i < values.length; i += 1) if (values[i] > values[best]) best = i;
+  return best;
+}
+
+/** The belief's most probable action (first on ties) and its heading: [a, heading | null]. */
+export function beliefHeading(b, groups, fovDeg) {
+  const a = argmax(binProbsToActionProbs(b, groups));
+  if (a === 0) return [0, null];
+  const bins = groups[a];
+  const lo = Math.max(1, bins[0] - 1);
+  const hi = Math.min(N_BINS, bins[bins.length - 1] + 1);
+  let sw = 0;
+  let swx = 0;
+  for (let k = lo; k <= hi; k += 1) {
+    sw += b[k];
+    swx += b[k] * binCenterX(k);
+  }
+  return [a, xToHeading(swx / sw, fovDeg)];
+}
+
+// ----------------------------------------------------------------------------- gate (UPMS)
+
+/** UPMS coefficient 1 - tanh(c u) in [0, 1]; u = Infinity (or NaN) gives 0. */
+export function alpha(u, c) {
+  if (!Number.isFinite(u)) return 0;
+  return 1 - Math.tanh(c * Math.max(u, 0));
+}
+
+/** Rational mixing of the learner and the hold: {state, heading_deg, weight_learner, confidence}. */
+export function mix(hLearner, aLearner, hHold, aHold, cfg) {
+  const aL = hLearner !== null ? aLearner : 0;
+  const aF = hHold !== null ? aHold : 0;
+  const conf = Math.max(aL, aF);
+  if (conf < cfg.alpha_min) return { state: GATE_STOP, heading_deg: null, weight_learner: 0, confidence: conf };
+  const wL = aL / (aL + aF);
+  const state = aL >= cfg.alpha_min ? GATE_LEARNER : GATE_HOLD;
+  let heading;
+  if (hLearner !== null && hHold !== null && Math.abs(hLearner - hHold) <= cfg.agree_deg) {
+    heading = wL * hLearner + (1 - wL) * hHold;
+  } else if (aL >= aF) {
+    heading = hLearner;
+  } else {
+    heading = hHold;
+  }
+  return { state, heading_deg: heading, weight_learner: wL, confidence: conf };
+}
+
+// ----------------------------------------------------------------------------- decider
+
+/**
+ * Evidence weight of a frame before time scaling: max(0, 1 - 2 tanh(c U)); 0 for failed
+ * frames, non-finite uncertainty, and when argmax(probs) is unknown.
+ */
+export function frameWeight(obs, cFrame) {
+  if (!obs.ok || !obs.probs || !Number.isFinite(obs.uncertainty)) return 0;
+  if (argmax(obs.probs) === 0) return 0;
+  return Math.max(0, 1 - 2 * Math.tanh(cFrame * Math.max(obs.uncertainty, 0)));
+}
+
+/**
+ * Complete decision config: defaults overridden by `cfg` (same field names as the Python
+ * DecisionConfig; `filter` and `gate` are nested objects). Throws RangeError when invalid.
+ */
+export function decisionConfig(cfg = {}) {
+  const out = {
+    ...DEFAULT_DECISION,
+    ...cfg,
+    filter: { ...DEFAULT_FILTER, ...(cfg.filter || {}) },
+    gate: { ...DEFAULT_GATE, ...(cfg.gate || {}) },
+  };
+  spaceGroups(out.n_actions);
+  for (const [name, v] of Object.entries(out.filter)) if (!(v > 0)) throw new RangeError(`Invalid ${name}: ${v}; valid: > 0`);
+  for (const name of ['saturation', 'hold_time_s', 'hold_turn_deg', 'agree_deg', 'belief_entropy_threshold']) {
+    if (!(out.gate[name] > 0)) throw new RangeError(`Invalid ${name}: ${out.gate[name]}; valid: > 0`);
+  }
+  if (!(out.gate.alpha_min > 0 && out.gate.alpha_min < 1)) throw new RangeError(`Invalid alpha_min: ${out.gate.alpha_min}; valid: 0 < alpha_min < 1`);
+  if (!(out.threshold > 0)) throw new RangeError(`Invalid threshold: ${out.threshold}; valid: > 0`);
+  if (!(out.watchdog_s > 0)) throw new RangeError(`Invalid watchdog_s: ${out.watchdog_s}; valid: > 0`);
+  if (!(out.rate_min_hz > 0 && out.rate_min_hz <= out.rate_max_hz)) {
+    throw new RangeError(`Invalid pulse rates: ${out.rate_min_hz}..${out.rate_max_hz} Hz; valid: 0 < min <= max`);
+  }
+  return out;
+}
+
+/** The decision config a bundle implies (its action space, FOV and calibrated threshold). */
+export function configFromBundle(meta, overrides = {}) {
+  return decisionConfig({
+    n_actions: meta.actions.n,
+    fov_deg: meta.fov_deg,
+    measure: meta.calibration.uncertainty.measure,
+    threshold: meta.calibration.uncertainty.threshold,
+    ...overrides,
+  });
+}
+
+/** The stateful decision step (port of decide.Decider). Call step() with non-decreasing t. */
+export class Decider {
+  constructor(cfg = {}) {
+    this.cfg = decisionConfig(cfg);
+    this.groups = spaceGroups(this.cfg.n_actions);
+    this.lookup = new Array(N_STATES).fill(0);
+    this.groups.forEach((g, a) => g.forEach((k) => { this.lookup[k] = a; }));
+    const learnerThreshold = this.cfg.measure === 'entropy' ? this.cfg.threshold : this.cfg.gate.belief_entropy_threshold;
+    this.cFrame = this.cfg.gate.saturation / this.cfg.threshold;
+    this.cLearner = this.cfg.gate.saturation / learnerThreshold;
+    this.reset();
+  }
+
+  /** Back to the start: uniform belief, no hold, no frame seen. */
+  reset() {
+    this.belief = uniformBelief();
+    this.tPrev = null;
+    this.tLastOk = null;
+    this.holdHeading = null;
+    this.holdT = 0;
+    this.holdTurned = 0;
+  }
+
+  /**
+   * Advance to time t (s) with this frame's outputs, obs = {probs: number[A], uncertainty,
+   * ok} (null = no new frame: a tick). Returns the decision (same fields as the Python
+   * Decision.to_json(); non-finite floats become null).
+   */
+  step(t, obs, yawRateDps = 0) {
+    const { cfg } = this;
+    const dt = this.tPrev === null ? 0 : Math.max(0, t - this.tPrev);
+    this.tPrev = this.tPrev === null ? t : Math.max(t, this.tPrev);
+    const psi = yawRateDps * dt;
+    this.belief = predict(this.belief, dt, yawRateDps, cfg.fov_deg, cfg.filter);
+    if (this.holdHeading !== null) {
+      this.holdHeading -= psi;
+      this.holdTurned += Math.abs(psi);
+    }
+    let w = 0;
+    if (obs && obs.ok) {
+      w = frameWeight(obs, this.cFrame);
+      const since = this.tLastOk === null ? cfg.filter.tau_evidence_s : t - this.tLastOk;
+      w *= Math.min(1, Math.max(0, since) / cfg.filter.tau_evidence_s);
+      if (w > 0) this.belief = update(this.belief, binLikelihood(obs.probs, this.groups, this.lookup), w, cfg.filter.eps);
+      this.tLastOk = t;
+    }
+    const [aL, hL] = beliefHeading(this.belief, this.groups, cfg.fov_deg);
+    const uL = hL !== null ? beliefEntropy(this.belief, this.groups) : Infinity;
+    const alL = alpha(uL, this.cLearner);
+    const uF = this.holdHeading !== null && Math.abs(this.holdHeading) < 90
+      ? (t - this.holdT) / cfg.gate.hold_time_s + this.holdTurned / cfg.gate.hold_turn_deg
+      : Infinity;
+    const alF = alpha(uF, cfg.gate.saturation);
+    const hF = Number.isFinite(uF) ? this.holdHeading : null;
+    const m = mix(hL, alL, hF, alF, cfg.gate);
+    let reason;
+    if (obs && !obs.ok) {
+      reason = REASON_FAILED;
+    } else if (this.tLastOk === null || t - this.tLastOk > cfg.watchdog_s) {
+      reason = REASON_STALE;
+    } else {
+      reason = m.state === GATE_STOP ? REASON_UNCERTAIN : REASON_OK;
+      if (hL !== null && alL >= cfg.gate.alpha_min) {
+        this.holdHeading = hL;
+        this.holdT = t;
+        this.holdTurned = 0;
+      }
+    }
+    const stop = reason !== REASON_OK;
+    const heading = stop ? null : m.heading_deg;
+    const q = (m.confidence - cfg.gate.alpha_min) / (1 - cfg.gate.alpha_min);
+    const rate = cfg.rate_min_hz + Math.min(1, Math.max(0, q)) * (cfg.rate_max_hz - cfg.rate_min_hz);
+    const fin = (v) => (v === null || !Number.isFinite(v) ? null : v);
+    return {
+      t, gate: stop ? GATE_STOP : m.state, reason, stop,
+      heading_deg: heading, pan: heading === null ? null : headingToPan(heading, cfg.fov_deg / 2),
+      rate_hz: rate, frame_weight: w, learner_action: aL, learner_heading: hL, learner_u: fin(uL),
+      alpha_learner: alL, hold_heading: hF, hold_u: fin(uF), alpha_hold: alF,
+      weight_learner: m.weight_learner, belief: this.belief.slice(),
+    };
+  }
+}
+
+// ----------------------------------------------------------------------------- engine / beacon
+
+/** The gate's frame uncertainty (engine.measure_value): entropy, mutual_info or variance[argmax probs]. */
+export function measureValue(measure, entropy, mutualInfo, variance, probs) {
+  if (measure === 'entropy') return entropy;
+  if (measure === 'mutual_info') return mutualInfo;
+  if (measure === 'variance') return variance[argmax(probs)];
+  throw new RangeError(`Unknown uncertainty measure: ${JSON.stringify(measure)}; valid: entropy, mutual_info, variance`);
+}
+
+/**
+ * What the decision logic needs from one frame's model outputs ({probs, entropy, mutual_info,
+ * variance, votes}): {probs, uncertainty, ok}. Non-finite probabilities or uncertainty make a
+ * failed frame (ok = false), as in engine.Engine.predict.
+ */
+export function observationFromOutputs(outputs, measure) {
+  const probs = Array.from(outputs.probs, Number);
+  if (!probs.every(Number.isFinite)) return { probs: null, uncertainty: Infinity, ok: false };
+  const u = Number(measureValue(measure, outputs.entropy, outputs.mutual_info, outputs.variance, probs));
+  if (!Number.isFinite(u)) return { probs: null, uncertainty: Infinity, ok: false };
+  return { probs, uncertainty: u, ok: true };
+}
+
+export const KIND_BEACON = 'beacon';
+export const KIND_STOP = 'stop';
+export const KIND_SILENCE = 'silence';
+
+/** The cue of a decision (beacon.cue_for): {kind, pan, heading_deg, rate_hz}. */
+export function cueFor(decision) {
+  if (decision.stop || decision.heading_deg === null || decision.pan === null) {
+    return { kind: KIND_STOP, pan: 0, heading_deg: 0, rate_hz: 1 };
+  }
+  return { kind: KIND_BEACON, pan: decision.pan, heading_deg: decision.heading_deg, rate_hz: decision.rate_hz };
+}
+
+export const HEAD_RADIUS_M = 0.0875;
+export const SPEED_OF_SOUND_MS = 343.0;
+
+/** Interaural time difference (s, > 0 = right ear leads) of a source at headingDeg (Woodworth). */
+export function itdSeconds(headingDeg) {
+  const phi = (Math.max(-90, Math.min(90, headingDeg)) * Math.PI) / 180;
+  return (HEAD_RADIUS_M / SPEED_OF_SOUND_MS) * (phi + Math.sin(phi));
+}
+
+/** Constant-power gains [L, R] for pan in [-1, 1] (L^2 + R^2 = 1): what StereoPannerNode applies to mono. */
+export function panGains(pan) {
+  if (!(pan >= -1 && pan <= 1)) throw new RangeError(`Invalid pan: ${pan}; valid: -1 <= pan <= 1`);
+  const theta = ((pan + 1) * Math.PI) / 4;
+  return [Math.cos(theta), Math.sin(theta)];
+}

@@ -1,0 +1,104 @@
+// What the screen shows: a big status line for the user (a polite screen-reader live region
+// that only changes when the advice changes, not on every frame) and the helper view for a
+// sighted companion: the camera with its 12 strips, the probability of each strip, the
+// decision, heading, uncertainty against the bundle's threshold, the audio levels, speed.
+
+import { N_BINS } from './actions.js';
+
+/** One short sentence for the user; changes only when the advice changes. Pure. */
+export function statusMessage(d) {
+  if (d.stop) {
+    if (d.reason === 'stale') return ['Stop. Camera or model stalled.', 'stop'];
+    if (d.reason === 'failed') return ['Stop. The model failed on this frame.', 'stop'];
+    return ['Stop. Not sure: scan slowly.', 'stop'];
+  }
+  const h = d.heading_deg;
+  const side = h < 0 ? 'left' : 'right';
+  if (Math.abs(h) < 7.5) return ['Go straight ahead.', 'go'];
+  if (Math.abs(h) < 22.5) return [`Bear slightly ${side}.`, 'go'];
+  return [`Turn ${side}.`, 'go'];
+}
+
+const fmt = (v, digits = 2) => (v === null || v === undefined || !Number.isFinite(v) ? '–' : v.toFixed(digits));
+
+export class HelperView {
+  constructor(doc) {
+    this.el = (id) => doc.getElementById(id);
+    this.lastStatus = null;
+    const strips = this.el('strips');
+    const grid = this.el('grid');
+    this.bars = [];
+    this.cells = [];
+    for (let k = 0; k <= N_BINS; k += 1) {
+      const bar = doc.createElement('div');
+      if (k === 0) bar.className = 'unknown';
+      strips.appendChild(bar);
+      this.bars.push(bar);
+      if (k > 0) {
+        const cell = doc.createElement('div');
+        grid.appendChild(cell);
+        this.cells.push(cell);
+      }
+    }
+    this.meta = null;
+  }
+
+  status(text, cls) {
+    if (text === this.lastStatus) return;
+    this.lastStatus = text;
+    const s = this.el('status');
+    s.textContent = text;
+    s.className = `status ${cls || ''}`;
+  }
+
+  bundle(meta) {
+    this.meta = meta;
+    const t = meta.raw.training || {};
+    this.el('bundle').textContent = `${meta.actions.n} actions, ${meta.input.size.join('×')} input, `
+      + `T=${meta.mc.samples}, ${meta.precision}, ${t.backbone || 'unknown backbone'}; `
+      + `gate: ${meta.calibration.uncertainty.measure} ≤ ${fmt(meta.calibration.uncertainty.threshold)}`;
+  }
+
+  offline(text) {
+    this.el('offline').textContent = text;
+  }
+
+  /** Show one frame's model outputs: probability per strip (an action's mass on each of its bins). */
+  outputs(out, meta) {
+    const groups = meta.actions.bins;
+    const perBin = new Array(N_BINS + 1).fill(0);
+    perBin[0] = out.probs[0];
+    groups.forEach((g, a) => g.forEach((k) => { perBin[k] = out.probs[a]; }));
+    let best = 0;
+    out.probs.forEach((p, a) => { if (p > out.probs[best]) best = a; });
+    this.bars.forEach((bar, k) => {
+      bar.style.height = `${Math.max(2, 100 * perBin[k])}%`;
+      bar.classList.toggle('on', k > 0 && groups[best].includes(k));
+    });
+    const label = Array.from(perBin, (p, k) => `${k === 0 ? 'unknown' : k} ${Math.round(100 * p)}%`).join(', ');
+    this.el('strips').setAttribute('aria-label', `Goal probability per strip: ${label}`);
+    const measure = meta.calibration.uncertainty.measure;
+    const u = measure === 'entropy' ? out.entropy : measure === 'mutual_info' ? out.mutual_info : out.variance[best];
+    this.el('uncertainty').textContent = `${measure} ${fmt(u)} (threshold ${fmt(meta.calibration.uncertainty.threshold)}), `
+      + `mutual info ${fmt(out.mutual_info, 3)}, top ${meta.actions.names[best]} ${Math.round(100 * out.probs[best])}%`;
+  }
+
+  /** Show a decision and update the status line when the advice changed. */
+  decision(d, [text, cls]) {
+    this.status(text, cls);
+    this.el('decision').textContent = `${d.gate} (${d.reason})${d.stop ? ' — stop cue' : ''}`;
+    this.el('heading').textContent = d.heading_deg === null ? '–' : `${fmt(d.heading_deg, 1)}° (pan ${fmt(d.pan)})`;
+    this.el('beacon').textContent = d.stop ? 'stop / scan cue' : `${fmt(d.rate_hz, 1)} pulses/s`;
+    const x = d.heading_deg === null ? null : d.learner_action;
+    this.cells.forEach((cell, i) => cell.classList.toggle('on', x !== null && this.meta?.actions.bins[x]?.includes(i + 1)));
+  }
+
+  levels([l, r]) {
+    this.el('levelL').value = l;
+    this.el('levelR').value = r;
+  }
+
+  speed(fps, ms) {
+    this.el('speed').textContent = `${fmt(fps, 1)} frames/s, model ${fmt(ms, 0)} ms/frame`;
+  }
+}

@@ -1,0 +1,403 @@
+"""The deployment bundle: ``model.onnx`` + ``bundle.json`` in one folder (numpy + json only).
+
+A bundle is what the runtime, a phone or a board runs. :func:`read_bundle` validates every
+field of ``bundle.json`` and the model file's size and SHA-256, and raises :class:`BundleError`
+with one line naming the field and the fix. :func:`write_bundle` writes a whole bundle
+atomically (into a temporary sibling folder, validated, then renamed into place), so a crash
+never leaves half a bundle. :func:`check_session` compares an opened onnxruntime session (passed
+in, never imported here) with the json: input name and dtype, output names, action count and
+the facts embedded in the graph's metadata.
+
+Schema (version 1), see docs/contracts.md section 3. Two fields depend on the model bytes and
+are filled in by :func:`write_bundle`: ``model_sha256`` and ``model_size`` (bytes). They are the
+only fields left out of the copy embedded in the ONNX metadata (``bundle_json``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from crossing_assist.actions import VALID_SPACES, ActionSpace, get_space
+
+SCHEMA_VERSION = 1
+BUNDLE_JSON = "bundle.json"
+MODEL_FILE = "model.onnx"
+INPUT_NAME = "frames"
+OUTPUT_NAMES = ("probs", "entropy", "mutual_info", "variance", "votes")
+UNCERTAINTY_MEASURES = ("entropy", "mutual_info", "variance")
+PRECISIONS = ("fp32", "int8")
+BYTE_FIELDS = ("model_sha256", "model_size")
+MIN_ONNX_BYTES = 64
+
+
+class BundleError(ValueError):
+    """A bundle that cannot be used; the message is one line naming the problem and the fix."""
+
+
+@dataclass(frozen=True)
+class ActionsSpec:
+    """The action space: ``n`` in 4/8/13, ``names[a]``, ``bins[a]`` (bins 1..12; ``()`` = unknown)."""
+
+    n: int
+    names: tuple[str, ...]
+    bins: tuple[tuple[int, ...], ...]
+
+    @property
+    def space(self) -> ActionSpace:
+        return get_space(self.n)
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    """Input of the graph: uint8 NHWC RGB frames, resized to ``size`` = (H, W) and normalised
+    with ``(x / 255 - mean) / std`` inside the graph."""
+
+    size: tuple[int, int]
+    mean: tuple[float, float, float]
+    std: tuple[float, float, float]
+    layout: str = "NHWC"
+    dtype: str = "uint8"
+    color: str = "RGB"
+
+
+@dataclass(frozen=True)
+class McSpec:
+    """MC dropout: ``samples`` (T) head samples per frame with drop probability ``p``."""
+
+    samples: int
+    p: float
+
+
+@dataclass(frozen=True)
+class ConformalSpec:
+    """Split-conformal sets ``{a : probs[a] >= threshold}`` cover the true action with
+    probability ``coverage`` (fitted on ``n_frames`` held-back frames; 0 = not calibrated, and
+    then ``threshold`` is 0: every action is in the set)."""
+
+    coverage: float
+    threshold: float
+    n_frames: int
+
+
+@dataclass(frozen=True)
+class UncertaintySpec:
+    """The gate's learner uncertainty: output ``measure``; ``threshold`` is its value where the
+    gate's coefficient should be about one half."""
+
+    measure: str
+    threshold: float
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Temperature (divides the logits inside the graph), conformal set, gate threshold."""
+
+    temperature: float
+    conformal: ConformalSpec
+    uncertainty: UncertaintySpec
+
+
+@dataclass(frozen=True)
+class Bundle:
+    """A validated bundle. ``dir`` is its folder; ``model_path`` its ONNX file."""
+
+    dir: Path
+    schema_version: int
+    model_file: str
+    actions: ActionsSpec
+    fov_deg: float
+    input: InputSpec
+    mc: McSpec
+    calibration: Calibration
+    precision: str
+    training: Mapping[str, Any]
+    metrics: Mapping[str, Any]
+    package_version: str
+    provenance: Mapping[str, Any]
+    model_sha256: str
+    model_size: int
+    raw: Mapping[str, Any] = field(repr=False, compare=False, default_factory=dict)
+
+    @property
+    def model_path(self) -> Path:
+        return self.dir / self.model_file
+
+    @property
+    def space(self) -> ActionSpace:
+        return self.actions.space
+
+
+# ----------------------------------------------------------------------------- validation helpers
+
+
+def _get(d: Mapping[str, Any], key: str, where: str) -> Any:
+    if not isinstance(d, Mapping):
+        raise BundleError(f"bundle.json: {where} must be an object; rewrite it with crossing-export")
+    if key not in d:
+        raise BundleError(f"bundle.json: missing field '{where}.{key}'".replace("'.", "'")
+                          + "; re-export the bundle with crossing-export")
+    return d[key]
+
+
+def _num(value: Any, name: str, lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise BundleError(f"bundle.json: {name} = {value!r} is not a finite number")
+    ok_lo = value > lo if lo_open else value >= lo
+    ok_hi = value < hi if hi_open else value <= hi
+    if not (ok_lo and ok_hi):
+        rng = f"{'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
+        raise BundleError(f"bundle.json: {name} = {value!r} is out of range; valid: {rng}")
+    return float(value)
+
+
+def _int(value: Any, name: str, lo: int, hi: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise BundleError(f"bundle.json: {name} = {value!r} must be an integer")
+    if value < lo or (hi is not None and value > hi):
+        valid = f"{lo}..{hi}" if hi is not None else f">= {lo}"
+        raise BundleError(f"bundle.json: {name} = {value} is out of range; valid: {valid}")
+    return value
+
+
+def _choice(value: Any, name: str, valid: tuple) -> Any:
+    if value not in valid:
+        raise BundleError(f"bundle.json: {name} = {value!r} unknown; valid: {', '.join(map(str, valid))}")
+    return value
+
+
+def _triple(value: Any, name: str, *, positive: bool) -> tuple[float, float, float]:
+    if not isinstance(value, list) or len(value) != 3:
+        raise BundleError(f"bundle.json: {name} must be a list of 3 numbers (R, G, B), got {value!r}")
+    lo = 0.0
+    return tuple(_num(v, f"{name}[{i}]", lo, 1e6, lo_open=positive) for i, v in enumerate(value))  # type: ignore
+
+
+def _parse_actions(d: Any) -> ActionsSpec:
+    n = _get(d, "n", "actions")
+    if isinstance(n, bool) or not isinstance(n, int) or n not in VALID_SPACES:
+        raise BundleError(f"bundle.json: actions.n = {n!r} invalid; valid: 4, 8, 13")
+    space = get_space(n)
+    names, bins = _get(d, "names", "actions"), _get(d, "bins", "actions")
+    if names != list(space.names):
+        raise BundleError(f"bundle.json: actions.names {names!r} disagree with the {n}-action space "
+                          f"{list(space.names)!r}; re-export the bundle")
+    if bins != [list(g) for g in space.groups]:
+        raise BundleError(f"bundle.json: actions.bins disagree with the {n}-action space "
+                          f"{[list(g) for g in space.groups]!r}; re-export the bundle")
+    return ActionsSpec(n=n, names=tuple(names), bins=tuple(tuple(g) for g in bins))
+
+
+def _parse_input(d: Any) -> InputSpec:
+    for key, want in (("layout", "NHWC"), ("dtype", "uint8"), ("color", "RGB")):
+        got = _get(d, key, "input")
+        if got != want:
+            raise BundleError(f"bundle.json: input.{key} = {got!r} unsupported; valid: {want!r}")
+    size = _get(d, "size", "input")
+    if (not isinstance(size, list) or len(size) != 2
+            or not all(isinstance(s, int) and not isinstance(s, bool) and 16 <= s <= 4096 for s in size)):
+        raise BundleError(f"bundle.json: input.size = {size!r} invalid; valid: [H, W] integers in 16..4096")
+    return InputSpec(size=(size[0], size[1]), mean=_triple(_get(d, "mean", "input"), "input.mean", positive=False),
+                     std=_triple(_get(d, "std", "input"), "input.std", positive=True))
+
+
+def _parse_calibration(d: Any) -> Calibration:
+    temp = _num(_get(d, "temperature", "calibration"), "calibration.temperature", 0.0, 100.0, lo_open=True)
+    c = _get(d, "conformal", "calibration")
+    conformal = ConformalSpec(
+        coverage=_num(_get(c, "coverage", "calibration.conformal"), "calibration.conformal.coverage",
+                      0.0, 1.0, lo_open=True, hi_open=True),
+        threshold=_num(_get(c, "threshold", "calibration.conformal"), "calibration.conformal.threshold", 0.0, 1.0),
+        n_frames=_int(_get(c, "n_frames", "calibration.conformal"), "calibration.conformal.n_frames", 0),
+    )
+    u = _get(d, "uncertainty", "calibration")
+    unc = UncertaintySpec(
+        measure=_choice(_get(u, "measure", "calibration.uncertainty"), "calibration.uncertainty.measure",
+                        UNCERTAINTY_MEASURES),
+        threshold=_num(_get(u, "threshold", "calibration.uncertainty"), "calibration.uncertainty.threshold",
+                       0.0, 1e6, lo_open=True),
+    )
+    return Calibration(temperature=temp, conformal=conformal, uncertainty=unc)
+
+
+def _obj(value: Any, name: str) -> Mapping[str, Any]:
+    if not isinstance(value, dict):
+        raise BundleError(f"bundle.json: {name} must be an object, got {type(value).__name__}")
+    return value
+
+
+def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_bytes: bool = True) -> Bundle:
+    """Validate a bundle.json dict; ``need_bytes=False`` accepts it without model_sha256/size
+    (the copy embedded in the ONNX metadata). Raises :class:`BundleError`."""
+    if not isinstance(meta, Mapping):
+        raise BundleError("bundle.json: the top level must be a JSON object; re-export the bundle")
+    version = _get(meta, "schema_version", "")
+    if isinstance(version, bool) or not isinstance(version, int):
+        raise BundleError(f"bundle.json: schema_version = {version!r} must be an integer")
+    if version != SCHEMA_VERSION:
+        fix = "upgrade crossing_assist" if version > SCHEMA_VERSION else "re-export the bundle"
+        raise BundleError(f"bundle.json: schema_version {version} unsupported (this package reads "
+                          f"{SCHEMA_VERSION}); {fix}")
+    model_file = _get(meta, "model_file", "")
+    if not isinstance(model_file, str) or not model_file.endswith(".onnx") or Path(model_file).name != model_file:
+        raise BundleError(f"bundle.json: model_file = {model_file!r} must be a plain file name ending in .onnx")
+    mc = _get(meta, "mc", "")
+    sha, size = meta.get("model_sha256", ""), meta.get("model_size", 0)
+    if need_bytes:
+        sha, size = _get(meta, "model_sha256", ""), _get(meta, "model_size", "")
+        if not isinstance(sha, str) or len(sha) != 64 or any(ch not in "0123456789abcdef" for ch in sha):
+            raise BundleError(f"bundle.json: model_sha256 = {sha!r} is not a lowercase hex SHA-256")
+        size = _int(size, "model_size", MIN_ONNX_BYTES)
+    return Bundle(
+        dir=Path(bundle_dir),
+        schema_version=version,
+        model_file=model_file,
+        actions=_parse_actions(_get(meta, "actions", "")),
+        fov_deg=_num(_get(meta, "fov_deg", ""), "fov_deg", 0.0, 180.0, lo_open=True, hi_open=True),
+        input=_parse_input(_get(meta, "input", "")),
+        mc=McSpec(samples=_int(_get(mc, "samples", "mc"), "mc.samples", 1, 1024),
+                  p=_num(_get(mc, "p", "mc"), "mc.p", 0.0, 1.0, hi_open=True)),
+        calibration=_parse_calibration(_get(meta, "calibration", "")),
+        precision=_choice(_get(meta, "precision", ""), "precision", PRECISIONS),
+        training=_obj(_get(meta, "training", ""), "training"),
+        metrics=_obj(_get(meta, "metrics", ""), "metrics"),
+        package_version=str(_get(meta, "package_version", "")),
+        provenance=_obj(_get(meta, "provenance", ""), "provenance"),
+        model_sha256=sha,
+        model_size=size,
+        raw=dict(meta),
+    )
+
+
+# ----------------------------------------------------------------------------- read / write
+
+
+def _check_model_file(path: Path, size: int, sha: str, *, verify_hash: bool) -> None:
+    if not path.is_file():
+        raise BundleError(f"bundle: model file {path} is missing; copy the whole bundle folder or re-export it")
+    actual = path.stat().st_size
+    if actual != size:
+        raise BundleError(f"bundle: {path.name} has {actual} bytes but bundle.json says {size} "
+                          "(truncated or replaced); copy the bundle again or re-export it")
+    with open(path, "rb") as f:
+        head = f.read(1)
+        # An ONNX ModelProto starts with field 1 (ir_version, varint): tag byte 0x08.
+        if head != b"\x08":
+            raise BundleError(f"bundle: {path.name} is not an ONNX model (bad first byte); re-export the bundle")
+        if verify_hash:
+            f.seek(0)
+            digest = hashlib.sha256()
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                digest.update(chunk)
+            if digest.hexdigest() != sha:
+                raise BundleError(f"bundle: {path.name} SHA-256 differs from bundle.json (corrupt or replaced); "
+                                  "copy the bundle again or re-export it")
+
+
+def read_bundle(bundle_dir: str | os.PathLike, *, verify_hash: bool = True) -> Bundle:
+    """Read and validate a bundle folder; raises :class:`BundleError` (one line) when unusable.
+
+    Checks every json field, that the action names/bins match :mod:`crossing_assist.actions`,
+    and that the model file exists with the recorded size, ONNX framing and SHA-256.
+    """
+    root = Path(bundle_dir)
+    if not root.is_dir():
+        raise BundleError(f"bundle: {root} is not a folder; pass the folder holding bundle.json and model.onnx")
+    jpath = root / BUNDLE_JSON
+    if not jpath.is_file():
+        raise BundleError(f"bundle: {jpath} is missing; pass a folder written by crossing-export")
+    try:
+        meta = json.loads(jpath.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise BundleError(f"bundle: {jpath} is not valid JSON ({exc.__class__.__name__}: "
+                          f"{str(exc).splitlines()[0]}); re-export the bundle") from None
+    bundle = parse_meta(meta, root)
+    _check_model_file(bundle.model_path, bundle.model_size, bundle.model_sha256, verify_hash=verify_hash)
+    return bundle
+
+
+def embedded_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
+    """The bundle.json dict without the fields that depend on the model bytes (for metadata_props)."""
+    return {k: v for k, v in meta.items() if k not in BYTE_FIELDS}
+
+
+def write_bundle(bundle_dir: str | os.PathLike, onnx_bytes: bytes, meta: Mapping[str, Any]) -> Path:
+    """Write ``model.onnx`` + ``bundle.json`` atomically and return the folder.
+
+    ``meta`` is the bundle.json dict; ``model_sha256`` and ``model_size`` are computed here. The
+    bundle is written to a temporary sibling folder, validated with :func:`read_bundle`, then
+    renamed into place (an existing bundle there is replaced; only whole bundles are visible).
+    """
+    root = Path(bundle_dir)
+    full = dict(embedded_meta(meta))
+    full["model_sha256"] = hashlib.sha256(onnx_bytes).hexdigest()
+    full["model_size"] = len(onnx_bytes)
+    parse_meta(full, root)  # refuse bad metadata before touching the disk
+    root.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.tmp-", dir=root.parent))
+    try:
+        with open(tmp / full["model_file"], "wb") as f:
+            f.write(onnx_bytes)
+            f.flush()
+            os.fsync(f.fileno())
+        with open(tmp / BUNDLE_JSON, "w", encoding="utf-8") as f:
+            json.dump(full, f, indent=2)
+            f.write("\n")
+            f.flush()
+            os.fsync(f.fileno())
+        read_bundle(tmp)
+        old = None
+        if root.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{root.name}.old-", dir=root.parent))
+            os.replace(root, old / root.name)
+        os.replace(tmp, root)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return root
+
+
+# ----------------------------------------------------------------------------- graph vs json
+
+
+def check_session(bundle: Bundle, session: Any) -> None:
+    """Check an onnxruntime ``InferenceSession`` of ``bundle.model_path`` against the json.
+
+    Compares the input name/dtype, output names, the action dimension where the graph states
+    it, and the bundle facts embedded in the model's metadata (actions, input size/mean/std,
+    mc, calibration). Raises :class:`BundleError` with one line on the first mismatch.
+    """
+    inputs = session.get_inputs()
+    if len(inputs) != 1 or inputs[0].name != INPUT_NAME or inputs[0].type != "tensor(uint8)":
+        got = [(i.name, i.type) for i in inputs]
+        raise BundleError(f"bundle: graph input {got} disagrees with the json (one uint8 input "
+                          f"'{INPUT_NAME}'); re-export the bundle")
+    outputs = {o.name: o for o in session.get_outputs()}
+    missing = [n for n in OUTPUT_NAMES if n not in outputs]
+    if missing:
+        raise BundleError(f"bundle: graph lacks outputs {missing}; re-export the bundle")
+    a_dim = outputs["probs"].shape[-1] if outputs["probs"].shape else None
+    if isinstance(a_dim, int) and a_dim != bundle.actions.n:
+        raise BundleError(f"bundle: graph has {a_dim} actions but bundle.json says {bundle.actions.n}; "
+                          "re-export the bundle")
+    props = dict(session.get_modelmeta().custom_metadata_map)
+    if "bundle_json" not in props:
+        raise BundleError("bundle: the graph has no 'bundle_json' metadata; re-export the bundle")
+    try:
+        graph_meta = json.loads(props["bundle_json"])
+    except json.JSONDecodeError:
+        raise BundleError("bundle: the graph's 'bundle_json' metadata is not JSON; re-export the bundle") from None
+    mine = embedded_meta(bundle.raw)
+    for key in ("schema_version", "actions", "input", "mc", "calibration", "precision"):
+        if graph_meta.get(key) != mine.get(key):
+            raise BundleError(f"bundle: bundle.json '{key}' = {json.dumps(mine.get(key))} disagrees with the "
+                              f"graph's {json.dumps(graph_meta.get(key))}; re-export the bundle")

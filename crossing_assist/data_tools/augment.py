@@ -1,0 +1,149 @@
+"""Augmentations whose labels stay exact: mirroring and yaw (a pure camera rotation).
+
+Camera model
+    A pinhole camera with horizontal field of view ``fov_deg`` (90° by default, the thesis's
+    region in front of the user), square pixels and the principal point at the image centre.
+    In pixel-index coordinates (pixel ``i`` covers ``[i - 0.5, i + 0.5]``) the intrinsics are
+    ``fx = fy = (W / 2) / tan(fov / 2)``, ``cx = W / 2 - 0.5``, ``cy = H / 2 - 0.5``, so a goal at
+    fraction ``x`` of the width has heading ``atan((2x - 1) tan(fov / 2))``, exactly
+    :func:`crossing_assist.actions.x_to_heading`.
+
+Yaw
+    Turning the camera right by ``psi`` (degrees) maps old pixels to new pixels by the
+    homography ``K R K^-1`` with ``R = [[cos psi, 0, -sin psi], [0, 1, 0], [sin psi, 0, cos psi]]``;
+    a goal with heading ``h`` gets heading ``h - psi`` (it moves left). Output pixels whose ray
+    falls outside the original photo (or behind the camera) are black and ``False`` in the
+    returned mask. A goal that leaves the frame becomes ``unknown`` (``out_of_frame="unknown"``)
+    or the edge bin 1 / 12 on the side it left by (``"edge"``, as the thesis's experts labelled
+    a goal just outside the frame); in both cases ``far_x`` becomes None.
+
+    Frames labelled with a bin but no ``far_x`` (human votes) move the bin's centre; the label
+    is then exact only up to the strip's width.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from crossing_assist.actions import (
+    DEFAULT_FOV_DEG, N_BINS, UNKNOWN, bin_center_x, heading_to_x, mirror_bin, mirror_x,
+    parse_label, x_to_bin, x_to_heading,
+)
+
+OUT_OF_FRAME_MODES = ("unknown", "edge")
+
+
+def _check_image(image: np.ndarray) -> np.ndarray:
+    image = np.asarray(image)
+    if image.ndim not in (2, 3) or image.shape[0] < 1 or image.shape[1] < 1:
+        raise ValueError(f"Invalid image: expected H×W or H×W×C, got shape {image.shape}")
+    return image
+
+
+def mirror(image: np.ndarray, far_x: float | None, label: int) -> tuple[np.ndarray, float | None, int]:
+    """Flip an H×W(×C) frame left-right: ``far_x -> 1 - far_x``, bin ``k -> 13 - k``.
+
+    Returns a new contiguous array; unknown stays unknown.
+    """
+    image = _check_image(image)
+    label = parse_label(label)
+    return np.ascontiguousarray(image[:, ::-1]), (None if far_x is None else mirror_x(far_x)), mirror_bin(label)
+
+
+def intrinsics(width: int, height: int, fov_deg: float = DEFAULT_FOV_DEG) -> np.ndarray:
+    """3×3 pinhole matrix K (pixel-index coordinates, square pixels) for a W×H frame."""
+    if not 0 < fov_deg < 180:
+        raise ValueError(f"Invalid field of view: {fov_deg} degrees; valid: 0 < fov < 180")
+    f = (width / 2) / math.tan(math.radians(fov_deg) / 2)
+    return np.array([[f, 0, width / 2 - 0.5], [0, f, height / 2 - 0.5], [0, 0, 1]], dtype=np.float64)
+
+
+def yaw_rotation(psi_deg: float) -> np.ndarray:
+    """3×3 rotation taking old camera coordinates (x right, y down, z forward) to those of a
+    camera turned right by ``psi_deg``."""
+    c, s = math.cos(math.radians(psi_deg)), math.sin(math.radians(psi_deg))
+    return np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]], dtype=np.float64)
+
+
+def yaw_homography(width: int, height: int, psi_deg: float, fov_deg: float = DEFAULT_FOV_DEG) -> np.ndarray:
+    """``K R K^-1``: maps homogeneous old pixel coordinates to the turned camera's pixels."""
+    k = intrinsics(width, height, fov_deg)
+    return k @ yaw_rotation(psi_deg) @ np.linalg.inv(k)
+
+
+def yaw_x(x: float, psi_deg: float, fov_deg: float = DEFAULT_FOV_DEG) -> float | None:
+    """Goal position after turning right by ``psi_deg``; None when it leaves the view.
+
+    Values outside [0, 1] are returned as None too (the goal is outside the frame).
+    """
+    h = x_to_heading(x, fov_deg) - float(psi_deg)
+    if not -90.0 < h < 90.0:
+        return None
+    x_new = heading_to_x(h, fov_deg)
+    return x_new if 0.0 <= x_new <= 1.0 else None
+
+
+def yaw_label(far_x: float | None, label: int, psi_deg: float, fov_deg: float = DEFAULT_FOV_DEG,
+              out_of_frame: str = "unknown") -> tuple[float | None, int]:
+    """The ``(far_x, label)`` of a frame re-rendered as if the user turned right by ``psi_deg``."""
+    if out_of_frame not in OUT_OF_FRAME_MODES:
+        raise ValueError(f"Unknown out_of_frame: {out_of_frame!r}; valid: {', '.join(OUT_OF_FRAME_MODES)}")
+    label = parse_label(label)
+    if label == UNKNOWN:
+        return None, UNKNOWN
+    x = far_x if far_x is not None else bin_center_x(label)
+    x_new = yaw_x(x, psi_deg, fov_deg)
+    if x_new is None:
+        if out_of_frame == "unknown":
+            return None, UNKNOWN
+        went_left = x_to_heading(x, fov_deg) - psi_deg < 0
+        return None, 1 if went_left else N_BINS
+    return (x_new if far_x is not None else None), x_to_bin(x_new)
+
+
+def _yaw_maps(width: int, height: int, psi_deg: float, fov_deg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Source coordinates (map_x, map_y, float32 H×W) of each output pixel and the valid mask."""
+    k = intrinsics(width, height, fov_deg)
+    u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
+    rays_new = np.stack([u, v, np.ones_like(u)], axis=-1) @ np.linalg.inv(k).T   # H×W×3
+    rays_old = rays_new @ yaw_rotation(psi_deg)                                 # R^T applied per ray
+    z = rays_old[..., 2]
+    ahead = z > 1e-9
+    zsafe = np.where(ahead, z, 1.0)
+    src = (rays_old / zsafe[..., None]) @ k.T
+    sx, sy = src[..., 0], src[..., 1]
+    valid = ahead & (sx >= -0.5) & (sx <= width - 0.5) & (sy >= -0.5) & (sy <= height - 0.5)
+    map_x = np.where(valid, np.clip(sx, 0, width - 1), -1).astype(np.float32)
+    map_y = np.where(valid, np.clip(sy, 0, height - 1), -1).astype(np.float32)
+    return map_x, map_y, valid
+
+
+def yaw(image: np.ndarray, far_x: float | None, label: int, psi_deg: float,
+        fov_deg: float = DEFAULT_FOV_DEG, out_of_frame: str = "unknown",
+        ) -> tuple[np.ndarray, float | None, int, np.ndarray]:
+    """Re-render an H×W(×C) frame as if the user had turned right by ``psi_deg`` degrees.
+
+    Returns ``(image, far_x, label, valid)``: the warped frame (same shape and dtype, black
+    where nothing was seen), the moved goal (None when unknown, off-frame or not measured),
+    its bin 0..12, and an H×W bool mask of pixels that come from the original photo.
+    """
+    image = _check_image(image)
+    new_x, new_label = yaw_label(far_x, label, psi_deg, fov_deg, out_of_frame)
+    h, w = image.shape[:2]
+    map_x, map_y, valid = _yaw_maps(w, h, float(psi_deg), fov_deg)
+    warped = cv2.remap(image, map_x, map_y, interpolation=cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    if warped.ndim < image.ndim:
+        warped = warped[..., None]
+    return warped, new_x, new_label, valid
+
+
+def random_yaw(image: np.ndarray, far_x: float | None, label: int, rng: np.random.Generator,
+               max_deg: float = 15.0, fov_deg: float = DEFAULT_FOV_DEG, out_of_frame: str = "unknown",
+               ) -> tuple[np.ndarray, float | None, int, np.ndarray, float]:
+    """:func:`yaw` by an angle drawn uniformly from ``[-max_deg, max_deg]``; returns it last."""
+    psi = float(rng.uniform(-max_deg, max_deg))
+    return (*yaw(image, far_x, label, psi, fov_deg, out_of_frame), psi)

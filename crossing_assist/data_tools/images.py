@@ -1,0 +1,42 @@
+"""Reading and writing RGB images (OpenCV underneath, RGB order everywhere in the package)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from crossing_assist.data_tools.manifest import atomic_write_bytes
+
+
+class ImageError(ValueError):
+    """An image that cannot be read or written; the message names the path."""
+
+
+def load_rgb(path: str | os.PathLike) -> np.ndarray:
+    """Read an image file as an H×W×3 uint8 RGB array; ImageError naming the path if unreadable."""
+    path = Path(path)
+    if not path.is_file():
+        raise ImageError(f"{path}: image not found")
+    data = np.fromfile(str(path), dtype=np.uint8)
+    img = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+    if img is None:
+        raise ImageError(f"{path}: not a readable image (empty, truncated or an unknown format)")
+    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
+def save_rgb(path: str | os.PathLike, image: np.ndarray, *, quality: int = 92) -> Path:
+    """Write an H×W×3 uint8 RGB array atomically; the format follows the suffix (.jpg, .png)."""
+    path = Path(path)
+    image = np.asarray(image)
+    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+        raise ImageError(f"{path}: expected an H×W×3 uint8 RGB array, got {image.dtype} {image.shape}")
+    params = [cv2.IMWRITE_JPEG_QUALITY, int(quality)] if path.suffix.lower() in (".jpg", ".jpeg") else []
+    ok, buf = cv2.imencode(path.suffix or ".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR), params)
+    if not ok:
+        raise ImageError(f"{path}: OpenCV cannot encode images with suffix {path.suffix!r}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(path, buf.tobytes())
+    return path

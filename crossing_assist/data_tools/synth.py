@@ -1,0 +1,234 @@
+"""``crossing-data synth``: synthetic labelled frames and a synthetic first-person crossing clip.
+
+Frames: each frame is its own random street corner (:mod:`synth_scene`), seen by a phone at
+chest height roughly facing the crossing; a fraction ``unknown_fraction`` shows no crossing
+(a blank wall, or the user facing along the road), labelled ``unknown``. Frame ``i`` of seed
+``s`` depends only on ``(s, i)``: the same command gives the same bytes, and more frames extend
+the same sequence. Every row is flagged ``synthetic`` (plus ``marking=…``, ``lighting=…``,
+``blocked`` when an occluder hides the goal); its source is its own scene, so splits made
+from it are leakage-free.
+
+Clip: one corner; the user starts facing along the road (no crossing in view), turns
+towards the crossing (the goal sweeps across the frame from the right and overshoots),
+aligns, waits while a car passes, and walks across with a slow veer and step sway. A JSON
+sidecar records the command and the per-frame ground truth.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from crossing_assist.actions import DEFAULT_FOV_DEG, format_label
+from crossing_assist.data_tools.images import save_rgb
+from crossing_assist.data_tools.manifest import Row, atomic_write_text, write_manifest
+from crossing_assist.data_tools.synth_scene import Camera, Occluder, Scene, goal_label, render, sample_scene
+
+
+class SynthError(ValueError):
+    """Bad synthesis settings or an output that cannot be written."""
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    out_dir: Path
+    frames: int = 100
+    seed: int = 0
+    width: int = 224
+    height: int = 168
+    fov_deg: float = DEFAULT_FOV_DEG
+    unknown_fraction: float = 0.15
+    val_fraction: float = 0.2
+    supersample: int = 2
+    progress: bool = True
+
+
+@dataclass(frozen=True)
+class ClipConfig:
+    out_path: Path
+    seed: int = 0
+    seconds: float = 16.0
+    fps: float = 15.0
+    width: int = 320
+    height: int = 240
+    fov_deg: float = DEFAULT_FOV_DEG
+    supersample: int = 2
+    command: str = ""
+    progress: bool = True
+
+
+def _check_size(width: int, height: int, fov: float) -> None:
+    if not (16 <= width <= 4096 and 16 <= height <= 4096):
+        raise SynthError(f"size {width}x{height} invalid; valid: 16..4096 pixels a side")
+    if not 10 <= fov <= 150:
+        raise SynthError(f"fov {fov} invalid; valid: 10..150 degrees")
+
+
+# ---------------------------------------------------------------- labelled frames
+
+
+def sample_view(scene: Scene, rng: np.random.Generator, fov_deg: float, away: bool) -> Camera:
+    """A phone pose at the near kerb: facing the crossing (yaw within ±18° of it) or, with
+    ``away``, facing along the road so the goal is out of view."""
+    if away:
+        side = 1.0 if rng.random() < 0.5 else -1.0
+        yaw = scene.theta + side * float(rng.uniform(fov_deg / 2 + 25, fov_deg / 2 + 70))
+    else:
+        yaw = scene.theta + float(np.clip(rng.normal(0, 9), -18, 18))
+    return Camera(yaw=yaw, pitch=float(rng.uniform(3, 20)), roll=float(rng.normal(0, 2.5)),
+                  height=float(rng.uniform(1.2, 1.6)), fov_deg=fov_deg)
+
+
+def synth_frame(seed: int, index: int, cfg: SynthConfig) -> tuple[np.ndarray, Row]:
+    """Frame ``index`` of ``seed``: (H×W×3 uint8 RGB, its manifest row with image ``images/…``)."""
+    rng = np.random.default_rng([seed, index])
+    no_crossing = rng.random() < cfg.unknown_fraction
+    wall = no_crossing and rng.random() < 0.4
+    scene = sample_scene(rng)
+    if wall:
+        scene = replace(scene, has_road=False)
+    cam = sample_view(scene, rng, cfg.fov_deg, away=no_crossing and not wall)
+    image = render(scene, cam, cfg.width, cfg.height, rng=rng, supersample=cfg.supersample)
+    far_x, label, blocked = goal_label(scene, cam, cfg.width, cfg.height)
+    flags = ["synthetic", f"marking={scene.marking if scene.has_road else 'none'}", f"lighting={scene.lighting}"]
+    if wall:
+        flags.append("view=wall")
+    elif no_crossing:
+        flags.append("view=away")
+    if blocked:
+        flags.append("blocked")
+    split = "val" if rng.random() < cfg.val_fraction else "train"
+    name = f"images/synth_s{seed}_{index:06d}.jpg"
+    return image, Row(name, label, far_x, f"synth:s{seed}:{index}", split, {}, tuple(flags))
+
+
+def synth_dataset(cfg: SynthConfig) -> Path:
+    """Render ``cfg.frames`` frames into the dataset folder ``cfg.out_dir``; returns the manifest."""
+    _check_size(cfg.width, cfg.height, cfg.fov_deg)
+    if cfg.frames < 1:
+        raise SynthError(f"frames={cfg.frames} invalid; expected >= 1")
+    for name, v in (("unknown_fraction", cfg.unknown_fraction), ("val_fraction", cfg.val_fraction)):
+        if not 0 <= v <= 1:
+            raise SynthError(f"{name}={v} invalid; valid: 0..1")
+    out = Path(cfg.out_dir)
+    rows = []
+    for i in tqdm(range(cfg.frames), desc="synth", unit="frame", disable=not cfg.progress):
+        image, row = synth_frame(cfg.seed, i, cfg)
+        save_rgb(out / row.image, image, quality=90)
+        rows.append(row)
+    return write_manifest(out, rows)
+
+
+# ---------------------------------------------------------------- the clip
+
+
+def _ease(t: float) -> float:
+    t = min(1.0, max(0.0, t))
+    return t * t * (3 - 2 * t)
+
+
+def clip_scene(seed: int) -> Scene:
+    """The corner of the clip: a zebra crossing of a 7-10 m road, nothing blocking it."""
+    rng = np.random.default_rng([seed, 1_000_003])
+    scene = sample_scene(rng)
+    return replace(scene, has_road=True, marking="zebra", road_width=float(rng.uniform(7, 10)),
+                   near=float(rng.uniform(0.6, 1.2)), offset=float(rng.uniform(-0.8, 0.8)),
+                   theta=float(rng.uniform(-10, 10)), occluders=(),
+                   lighting=str(rng.choice(["day", "overcast", "sunny"])))
+
+
+def clip_pose(scene: Scene, t: float, seconds: float, fov_deg: float) -> tuple[Camera, str]:
+    """Camera at time ``t`` s of the clip, and the phase name (away/turn/align/walk)."""
+    f = t / seconds
+    start, overshoot = scene.theta - 125.0, scene.theta + 14.0
+    sway = 1.5 * math.sin(2 * math.pi * 0.4 * t)
+    along = 0.0
+    lateral = 0.0
+    if f < 0.16:
+        phase, yaw = "away", start + sway
+    elif f < 0.42:
+        phase, yaw = "turn", start + (overshoot - start) * _ease((f - 0.16) / 0.26) + 0.5 * sway
+    elif f < 0.56:
+        phase, yaw = "align", overshoot + (scene.theta - 1.5 - overshoot) * _ease((f - 0.42) / 0.08) + 0.3 * sway
+    else:
+        phase = "walk"
+        w = (f - 0.56) / 0.44
+        veer = 9.0 * math.sin(math.pi * min(1.0, w * 1.6)) - 4.0 * _ease((w - 0.6) / 0.4)
+        step = 2.5 * math.sin(2 * math.pi * 0.9 * t)
+        yaw = scene.theta + veer + step
+        along = (scene.near + scene.road_width - 1.8) * w
+        lateral = 0.35 * math.sin(math.pi * w) * (1 if veer >= 0 else -1)
+    base = along * scene.n + (scene.offset * 0.0 + lateral) * scene.u
+    bob = 0.03 * math.sin(2 * math.pi * 1.8 * t) if phase == "walk" else 0.0
+    cam = Camera(x=float(base[0]), z=float(base[2]), yaw=yaw, pitch=9.0 + 1.5 * math.sin(0.7 * t),
+                 roll=1.2 * math.sin(1.1 * t), height=1.4 + bob, fov_deg=fov_deg)
+    return cam, phase
+
+
+def _passing_car(scene: Scene, t: float, seconds: float) -> tuple[Occluder, ...]:
+    """A car crossing the view on the far lane during the align phase."""
+    t0, t1 = 0.40 * seconds, 0.56 * seconds
+    if not t0 <= t <= t1:
+        return ()
+    b0 = scene.offset + 14.0 - 28.0 * (t - t0) / (t1 - t0)
+    return (Occluder(scene.near + scene.road_width * 0.72, b0, b0 + 4.3, 1.5, (0.7, 0.1, 0.1)),)
+
+
+def synth_clip(cfg: ClipConfig) -> tuple[Path, Path]:
+    """Render the clip to ``cfg.out_path`` (mp4v, atomic) and its JSON ground truth beside it."""
+    _check_size(cfg.width, cfg.height, cfg.fov_deg)
+    out = Path(cfg.out_path)
+    if out.suffix.lower() != ".mp4":
+        raise SynthError(f"--out {out} invalid for --video; expected a file name ending in .mp4")
+    if not (2 <= cfg.seconds <= 600 and 1 <= cfg.fps <= 60):
+        raise SynthError(f"seconds={cfg.seconds} fps={cfg.fps} invalid; valid: 2..600 s at 1..60 fps")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    scene = clip_scene(cfg.seed)
+    n = int(round(cfg.seconds * cfg.fps))
+    tmp = out.with_name(f".{out.stem}.tmp.mp4")
+    writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), cfg.fps, (cfg.width, cfg.height))
+    if not writer.isOpened():
+        raise SynthError(f"OpenCV cannot write mp4v video to {tmp}")
+    truth: dict[str, list] = {"t": [], "far_x": [], "label": [], "phase": [], "blocked": [], "goal_azimuth_deg": []}
+    try:
+        for i in tqdm(range(n), desc="synth clip", unit="frame", disable=not cfg.progress):
+            t = i / cfg.fps
+            cam, phase = clip_pose(scene, t, cfg.seconds, cfg.fov_deg)
+            sc = replace(scene, occluders=_passing_car(scene, t, cfg.seconds))
+            rng = np.random.default_rng([cfg.seed, 2_000_003, i])
+            frame = render(sc, cam, cfg.width, cfg.height, rng=rng, supersample=cfg.supersample, noise=0.3)
+            writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+            far_x, label, blocked = goal_label(sc, cam, cfg.width, cfg.height)
+            c = cam.rotation().T @ (scene.goal() - cam.position())
+            truth["t"].append(round(t, 4))
+            truth["far_x"].append(None if far_x is None else round(far_x, 6))
+            truth["label"].append(format_label(label))
+            truth["phase"].append(phase)
+            truth["blocked"].append(blocked)
+            truth["goal_azimuth_deg"].append(round(math.degrees(math.atan2(c[0], c[2])), 3))
+    finally:
+        writer.release()
+    if not tmp.is_file() or tmp.stat().st_size == 0:
+        raise SynthError(f"OpenCV wrote no video to {tmp}")
+    os.replace(tmp, out)
+    meta = {
+        "synthetic": True,
+        "description": "procedural street corner (crossing_assist.data_tools.synth), not real footage",
+        "command": cfg.command or f"crossing-data synth --video --out {out.name} --seed {cfg.seed}",
+        "seed": cfg.seed, "fps": cfg.fps, "size": [cfg.width, cfg.height], "fov_deg": cfg.fov_deg,
+        "n_frames": n, "codec": "mp4v",
+        "fields": {"far_x": "goal position, fraction of width, null when not in view",
+                   "label": "bin 1..12 or unknown", "phase": "away | turn | align | walk",
+                   "blocked": "a car hides the goal", "goal_azimuth_deg": "goal bearing from the optical axis, + right"},
+        **truth,
+    }
+    side = out.with_suffix(".json")
+    atomic_write_text(side, json.dumps(meta, indent=1) + "\n")
+    return out, side

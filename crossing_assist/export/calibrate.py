@@ -1,0 +1,178 @@
+"""Calibration stored in the bundle (numpy only): temperature, conformal threshold, gate threshold.
+
+All three are fitted on a *calibration* part of the labelled validation data and measured on
+the other part; :func:`split_by_source` cuts the data by its leakage unit (photographer, video,
+place), so the two parts never share a source, let alone a frame.
+
+* Temperature ``tau`` minimises the negative log-likelihood of the MC-averaged probabilities
+  ``mean_t softmax(logits_t / tau)`` (the bundle's ``probs``), by golden-section search on
+  ``log tau`` in [0.05, 20].
+* Split-conformal threshold (Vovk; Angelopoulos & Bates 2021, "LAC" scores): with ``n``
+  calibration frames and target coverage ``1 - alpha``, the threshold is the
+  ``k = ceil((n + 1)(1 - alpha))``-th largest probability of the true action. The set
+  ``{a : probs[a] >= threshold}`` then holds the true action with probability >= 1 - alpha on
+  exchangeable new frames (and < 1 - alpha + 1/(n + 1) on average).
+* Gate threshold: the gate's coefficient ``1 - tanh(c U)`` should be about one half where the
+  learner is right about half the time. We fit ``P(correct | U) = sigmoid(a + b U)`` by
+  logistic regression on the calibration frames and take the ``U`` where it crosses 0.5,
+  clipped to the 5..95 % range of the observed ``U``; when ``U`` carries no signal (``b >= 0``)
+  or the crossing lies outside that range, the clip decides (5 % when the learner is mostly
+  wrong, 95 % when mostly right).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+TEMP_RANGE = (0.05, 20.0)
+
+
+def softmax_mc(logits: np.ndarray, temperature: float = 1.0) -> np.ndarray:
+    """Mean over samples of ``softmax(logits / temperature)``: logits [T, N, A] -> probs [N, A]."""
+    z = np.asarray(logits, dtype=np.float64) / temperature
+    z = z - z.max(-1, keepdims=True)
+    p = np.exp(z)
+    p /= p.sum(-1, keepdims=True)
+    return p.mean(0)
+
+
+def nll(logits: np.ndarray, labels: np.ndarray, temperature: float = 1.0) -> float:
+    """Mean negative log-likelihood (nats) of ``labels`` [N] under the MC-averaged probabilities."""
+    p = softmax_mc(logits, temperature)
+    return float(-np.log(np.maximum(p[np.arange(len(labels)), labels], 1e-12)).mean())
+
+
+def fit_temperature(logits: np.ndarray, labels: np.ndarray, *, iters: int = 60) -> float:
+    """Temperature (> 0) minimising :func:`nll` of MC logits [T, N, A] on action labels [N]."""
+    labels = np.asarray(labels, dtype=np.int64)
+    logits = np.asarray(logits)
+    if logits.ndim != 3 or logits.shape[1] != len(labels) or len(labels) == 0:
+        raise ValueError(f"logits must be [T, N, A] with N = len(labels) = {len(labels)} > 0, got {logits.shape}")
+    lo, hi = math.log(TEMP_RANGE[0]), math.log(TEMP_RANGE[1])
+    g = (math.sqrt(5) - 1) / 2
+    a, b = hi - g * (hi - lo), lo + g * (hi - lo)
+    fa, fb = nll(logits, labels, math.exp(a)), nll(logits, labels, math.exp(b))
+    for _ in range(iters):
+        if fa < fb:
+            hi, b, fb = b, a, fa
+            a = hi - g * (hi - lo)
+            fa = nll(logits, labels, math.exp(a))
+        else:
+            lo, a, fa = a, b, fb
+            b = lo + g * (hi - lo)
+            fb = nll(logits, labels, math.exp(b))
+    return float(math.exp((lo + hi) / 2))
+
+
+def conformal_threshold(probs: np.ndarray, labels: np.ndarray, coverage: float) -> float:
+    """Split-conformal threshold for sets ``{a : probs[a] >= t}`` at the given coverage.
+
+    probs [N, A] (calibration frames), labels [N] action indices, 0 < coverage < 1. Returns
+    0.0 (every action in every set) when there are too few frames for the coverage
+    (``ceil((n + 1) coverage) > n``).
+    """
+    if not 0.0 < coverage < 1.0:
+        raise ValueError(f"Invalid coverage: {coverage}; valid: 0 < coverage < 1")
+    probs = np.asarray(probs, dtype=np.float64)
+    labels = np.asarray(labels, dtype=np.int64)
+    n = len(labels)
+    k = math.ceil((n + 1) * coverage)
+    if n == 0 or k > n:
+        return 0.0
+    true_p = np.sort(probs[np.arange(n), labels])[::-1]  # descending
+    return float(true_p[k - 1])
+
+
+def _logistic(u: np.ndarray, y: np.ndarray, iters: int = 50) -> tuple[float, float]:
+    """Newton's method for P(y=1|u) = sigmoid(a + b u) (small ridge for separable data)."""
+    x = np.stack([np.ones_like(u), u], 1)
+    w = np.zeros(2)
+    ridge = 1e-3 * np.eye(2)
+    for _ in range(iters):
+        p = 1 / (1 + np.exp(-np.clip(x @ w, -30, 30)))
+        grad = x.T @ (p - y) + ridge @ w
+        hess = (x * (p * (1 - p))[:, None]).T @ x + ridge
+        step = np.linalg.solve(hess, grad)
+        w -= step
+        if np.abs(step).max() < 1e-9:
+            break
+    return float(w[0]), float(w[1])
+
+
+def uncertainty_threshold(uncertainty: np.ndarray, correct: np.ndarray) -> float:
+    """The uncertainty where the fitted P(correct | U) is 0.5, clipped to U's 5..95 % quantiles.
+
+    uncertainty [N] (e.g. entropy in nats), correct [N] bool (argmax == label). Always > 0.
+    """
+    u = np.asarray(uncertainty, dtype=np.float64)
+    y = np.asarray(correct, dtype=np.float64)
+    if len(u) == 0 or len(u) != len(y):
+        raise ValueError(f"uncertainty and correct must be equally long and non-empty ({len(u)}, {len(y)})")
+    lo, hi = np.quantile(u, [0.05, 0.95])
+    scale = max(float(u.std()), 1e-12)
+    a, b = _logistic((u - u.mean()) / scale, y)
+    if b >= 0:
+        t = lo if y.mean() < 0.5 else hi
+    else:
+        t = float(u.mean() + scale * (-a / b))
+    return float(max(min(max(t, lo), hi), 1e-6))
+
+
+def split_by_source(sources: list[str] | np.ndarray, frac: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """Split frames into (calibration, evaluation) index arrays without sharing a source.
+
+    Whole sources are assigned, largest first, to whichever part is further below its target
+    share (``frac`` of the frames for calibration). With a single source the frames are cut
+    into two contiguous blocks in their given order (neighbouring frames stay together).
+    """
+    sources = np.asarray(sources).astype(str)
+    n = len(sources)
+    if n < 2:
+        raise ValueError(f"need at least 2 labelled frames to calibrate and measure, got {n}")
+    names, counts = np.unique(sources, return_counts=True)
+    if len(names) == 1:
+        cut = int(round(n * frac))
+        cut = min(max(cut, 1), n - 1)
+        return np.arange(cut), np.arange(cut, n)
+    order = np.argsort(-counts, kind="stable")
+    cal, n_cal, n_eval = [], 0, 0
+    for i in order:
+        placed = n_cal + n_eval + counts[i]
+        if frac * placed - n_cal >= (1 - frac) * placed - n_eval:  # calibration is further behind
+            cal.append(names[i])
+            n_cal += counts[i]
+        else:
+            n_eval += counts[i]
+    if n_eval == 0:  # every source went to calibration: move the smallest one back
+        cal.remove(names[order[-1]])
+    elif not cal:
+        cal.append(names[order[-1]])
+    mask = np.isin(sources, cal)
+    return np.flatnonzero(mask), np.flatnonzero(~mask)
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """What goes into ``bundle.json``'s ``calibration`` plus how it was measured."""
+
+    temperature: float
+    coverage: float
+    threshold: float
+    n_frames: int
+    measure: str
+    uncertainty_threshold: float
+
+    def to_json(self) -> dict:
+        return {"temperature": self.temperature,
+                "conformal": {"coverage": self.coverage, "threshold": self.threshold, "n_frames": self.n_frames},
+                "uncertainty": {"measure": self.measure, "threshold": self.uncertainty_threshold}}
+
+
+def uncalibrated(n_actions: int, measure: str = "entropy") -> CalibrationResult:
+    """Honest defaults when no labelled data is given: temperature 1, every action in every
+    conformal set (threshold 0), gate threshold at half the maximum of the measure."""
+    max_u = {"entropy": math.log(n_actions), "mutual_info": math.log(n_actions), "variance": 0.25}[measure]
+    return CalibrationResult(1.0, 0.9, 0.0, 0, measure, max_u / 2)

@@ -1,0 +1,107 @@
+"""``crossing-export --run RUN_DIR --out BUNDLE_DIR [--samples 16] [--p 0.5] [--calib-data DIR] [--int8]``.
+
+The parser is generated from :class:`~crossing_assist.export.exporter.ExportConfig`'s
+defaults; user errors print one ``error: ...`` line to stderr and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import fields
+from typing import Sequence
+
+HELP = {
+    "run": "run folder (uses weights/best.pt) or a .pt checkpoint",
+    "out": "bundle folder to write (replaced atomically if it exists)",
+    "samples": "MC dropout samples T folded into the batch",
+    "p": "drop probability of the sampled layers (default: the checkpoint's, 0.5 in the thesis)",
+    "calib_data": "dataset folder (manifest.csv) with labelled frames to calibrate on",
+    "calib_split": "split of --calib-data to use (cut by source into calibration / evaluation parts)",
+    "calib_frac": "share of the frames (whole sources) used to calibrate; the rest measures",
+    "coverage": "target coverage of the conformal action sets",
+    "measure": "the gate's uncertainty measure: entropy | mutual_info",
+    "int8": "quantise the convolutions to int8 (static QDQ, calibrated on real frames)",
+    "int8_frames": "calibration frames for the int8 ranges",
+    "parity_frames": "frames for the T=1, p=0 onnxruntime vs PyTorch parity check",
+    "parity_tol": "largest allowed |probs| difference in the parity check",
+    "batch": "frames per batch",
+    "threads": "CPU threads for PyTorch",
+    "progress": "progress bars",
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from crossing_assist.export.exporter import ExportConfig  # noqa: F401  (torch loaded lazily below)
+
+    p = argparse.ArgumentParser(prog="crossing-export",
+                                description="Export a trained run to a calibrated one-pass MC-dropout ONNX bundle.")
+    for f in _fields():
+        flag = "--" + f.name.replace("_", "-")
+        if f.name in ("run", "out"):
+            p.add_argument(flag, required=True, help=HELP[f.name])
+        elif f.name == "progress":
+            p.add_argument("--quiet", dest="progress", action="store_false", help="no progress bars")
+        elif f.type in (bool, "bool"):
+            p.add_argument(flag, action="store_true", help=HELP[f.name])
+        else:
+            kind = {"int": int, "float": float, "float | None": float}.get(str(f.type), str)
+            p.add_argument(flag, type=kind, default=f.default, help=f"{HELP[f.name]} (default: {f.default})")
+    return p
+
+
+def _fields():
+    from crossing_assist.export.exporter import ExportConfig
+
+    return fields(ExportConfig)
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    from crossing_assist.bundle import BundleError
+    from crossing_assist.export.exporter import ExportError
+
+    errs: list[type[BaseException]] = [BundleError, ExportError, FileNotFoundError]
+    for mod, name in (("crossing_assist.data_tools.manifest", "ManifestError"),
+                      ("crossing_assist.data_tools.images", "ImageError"),
+                      ("crossing_assist.models.checkpoint", "CheckpointError"),
+                      ("crossing_assist.models.backbones", "BackboneError")):
+        try:
+            errs.append(getattr(__import__(mod, fromlist=[name]), name))
+        except (ImportError, AttributeError):
+            pass
+    return tuple(errs)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``crossing-export``."""
+    args = build_parser().parse_args(argv)
+    from crossing_assist.export.exporter import ExportConfig, export_bundle
+
+    errors = _user_errors()
+    try:
+        cfg = ExportConfig(**{f.name: getattr(args, f.name) for f in _fields()})
+        res = export_bundle(cfg, log=lambda m: print(m, file=sys.stderr))
+    except errors as exc:
+        print(f"error: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}", file=sys.stderr)
+        return 2
+    for note in res.notes:
+        print(f"note: {note}", file=sys.stderr)
+    ev = res.metrics.get("evaluation_part")
+    if ev:
+        c = res.calibration
+        print(f"held-out part: accuracy {ev['accuracy']:.3f} (majority {ev['majority_accuracy']:.3f}), "
+              f"conformal coverage {ev['coverage']:.3f} (target {c.coverage:.2f}), mean set size "
+              f"{ev['mean_set_size']:.2f}; temperature {c.temperature:.3f}, {c.measure} threshold "
+              f"{c.uncertainty_threshold:.3f}", file=sys.stderr)
+    q = res.metrics.get("int8_vs_fp32")
+    if q:
+        print(f"int8 vs fp32: size {q['size_int8'] / 1e6:.1f} / {q['size_fp32'] / 1e6:.1f} MB "
+              f"({q['size_ratio']:.2f}x), {q['ms_int8']:.1f} / {q['ms_fp32']:.1f} ms a frame, accuracy "
+              f"{q['accuracy_int8']:.3f} / {q['accuracy_fp32']:.3f}", file=sys.stderr)
+    print(f"bundle written: {res.path} ({res.size / 1e6:.1f} MB, {res.calibration.n_frames} calibration frames, "
+          f"parity {res.parity_max_abs:.1e})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

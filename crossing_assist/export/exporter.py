@@ -1,0 +1,329 @@
+"""The export pipeline behind ``crossing-export``: checkpoint -> calibrated, checked bundle.
+
+Steps (:func:`export_bundle`):
+
+1. load the run's ``weights/best.pt`` (or a ``.pt`` file);
+2. with ``calib_data``: read the labelled split, cut it by source into a calibration part
+   and an evaluation part (:func:`~crossing_assist.export.calibrate.split_by_source`);
+   fit the temperature on PyTorch MC logits of the calibration part;
+3. export the MC graph with that temperature (and, with ``int8``, quantise its convolutions
+   on calibration frames);
+4. run the shipped graph through onnxruntime on the calibration part to fit the conformal and
+   gate thresholds, and on the evaluation part to measure them;
+5. parity: a deterministic (T=1, p=0) export must match PyTorch to ``parity_tol``;
+6. write ``model.onnx`` + ``bundle.json`` atomically, with the same facts in the graph's
+   metadata.
+"""
+
+from __future__ import annotations
+
+import math
+import shlex
+import sys
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+import torch
+
+import crossing_assist
+from crossing_assist.actions import get_space
+from crossing_assist.bundle import SCHEMA_VERSION, read_bundle, write_bundle
+from crossing_assist.export import calibrate as cal
+from crossing_assist.export.evaluate import conformal_report, predict_bundle
+from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
+
+PARITY_TOL = 1e-4
+
+
+class ExportError(ValueError):
+    """A user-facing export failure (one line)."""
+
+
+@dataclass(frozen=True)
+class ExportConfig:
+    """Options of ``crossing-export`` (the CLI is generated from these defaults)."""
+
+    run: str
+    out: str
+    samples: int = 16
+    p: float | None = None          # None: the checkpoint's own p (0.5 by default)
+    calib_data: str | None = None   # dataset folder (manifest.csv) with labelled frames
+    calib_split: str = "val"
+    calib_frac: float = 0.5         # share of the frames (whole sources) used to calibrate
+    coverage: float = 0.9
+    measure: str = "entropy"
+    int8: bool = False
+    int8_frames: int = 128
+    parity_frames: int = 16
+    parity_tol: float = PARITY_TOL
+    batch: int = 32
+    threads: int = 2
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.samples >= 1, f"--samples {self.samples}; valid: >= 1"),
+            (self.p is None or 0.0 <= self.p < 1.0, f"--p {self.p}; valid: 0 <= p < 1"),
+            (0.0 < self.coverage < 1.0, f"--coverage {self.coverage}; valid: 0 < coverage < 1"),
+            (0.0 < self.calib_frac < 1.0, f"--calib-frac {self.calib_frac}; valid: 0 < frac < 1"),
+            (self.measure in ("entropy", "mutual_info"), f"--measure {self.measure!r}; valid: entropy, mutual_info"),
+            (not self.int8 or self.calib_data, "--int8 needs --calib-data (real frames to calibrate the int8 ranges)"),
+        ]
+        for ok, msg in checks:
+            if not ok:
+                raise ExportError(f"Invalid {msg}")
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    path: Path
+    size: int
+    parity_max_abs: float
+    calibration: cal.CalibrationResult
+    metrics: dict = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+
+
+# ----------------------------------------------------------------------------- data
+
+
+@dataclass(frozen=True)
+class Labelled:
+    """Labelled frames of one split: raw RGB images, action labels, bins, far_x, sources."""
+
+    images: list
+    actions: np.ndarray
+    far_x: np.ndarray
+    sources: np.ndarray
+
+    def take(self, idx: np.ndarray) -> "Labelled":
+        return Labelled([self.images[i] for i in idx], self.actions[idx], self.far_x[idx], self.sources[idx])
+
+
+def load_labelled(data_dir: str, split: str, n_actions: int, progress: bool = True) -> Labelled:
+    """Read a dataset split (manifest.csv) as raw frames + action labels."""
+    from tqdm import tqdm
+
+    from crossing_assist.data_tools.images import load_rgb
+    from crossing_assist.data_tools.manifest import read_manifest
+
+    ds = read_manifest(data_dir).split(split)
+    if len(ds.rows) < 2:
+        raise ExportError(f"Invalid --calib-data {data_dir}: split {split!r} has {len(ds.rows)} frames; need >= 2")
+    images = [load_rgb(ds.image_path(r)) for r in tqdm(ds.rows, desc="frames", disable=not progress, unit="img")]
+    actions = get_space(n_actions).bins_to_actions(ds.labels())
+    return Labelled(images, actions, ds.far_x(), np.asarray([r.source for r in ds.rows]))
+
+
+def _batched(images: Sequence[np.ndarray], batch: int):
+    """Consecutive runs of same-shape frames, at most ``batch`` long."""
+    i = 0
+    while i < len(images):
+        j = i + 1
+        while j < len(images) and j - i < batch and images[j].shape == images[i].shape:
+            j += 1
+        yield np.stack(images[i:j])
+        i = j
+
+
+@torch.no_grad()
+def torch_logits(graph: BundleGraph, images: Sequence[np.ndarray], batch: int, progress: bool) -> np.ndarray:
+    """PyTorch logits [T, N, A] of the graph's policy (same preprocessing as the ONNX graph)."""
+    from tqdm import tqdm
+
+    out = [graph.logits(torch.from_numpy(x)) for x in
+           tqdm(list(_batched(images, batch)), desc="torch logits", disable=not progress, unit="batch")]
+    return torch.cat(out, 1).numpy()
+
+
+# ----------------------------------------------------------------------------- pipeline
+
+
+def _load_policy(run: str):
+    from crossing_assist.models.checkpoint import CheckpointError, load_policy
+
+    path = Path(run)
+    ckpt = path if path.suffix == ".pt" else path / "weights" / "best.pt"
+    try:
+        return load_policy(ckpt), ckpt
+    except CheckpointError as exc:
+        raise ExportError(str(exc)) from None
+
+
+def _spec(config: dict, samples: int, p: float, temperature: float = 1.0) -> GraphSpec:
+    return GraphSpec(size=tuple(int(s) for s in config["input_size"]), mean=tuple(config["mean"]),
+                     std=tuple(config["std"]), samples=samples, p=p, temperature=temperature)
+
+
+def parity_check(policy, spec: GraphSpec, frames: np.ndarray) -> float:
+    """Max |probs| difference between the deterministic (T=1, p=0) ONNX graph under
+    onnxruntime and PyTorch, on ``frames`` [N, H, W, 3] uint8."""
+    import onnxruntime as ort
+
+    det = GraphSpec(size=spec.size, mean=spec.mean, std=spec.std, samples=1, p=0.0, temperature=spec.temperature)
+    sess = ort.InferenceSession(model_bytes(export_graph(policy, det)))
+    got = sess.run(["probs"], {"frames": frames})[0]
+    with torch.no_grad():
+        want = BundleGraph(policy, det)(torch.from_numpy(frames))[0].numpy()
+    return float(np.abs(got - want).max())
+
+
+def _probe_frames(data: Labelled | None, spec: GraphSpec, n: int) -> np.ndarray:
+    if data is not None:
+        first = data.images[0].shape
+        same = [im for im in data.images if im.shape == first][:n]
+        return np.stack(same)
+    rng = np.random.default_rng(0)
+    h, w = spec.size
+    return rng.integers(0, 256, (4, h + 16, w + 24, 3), dtype=np.uint8)
+
+
+def _meta(policy, ckpt: Path, spec: GraphSpec, calib: cal.CalibrationResult, precision: str,
+          metrics: dict, cfg: ExportConfig) -> dict:
+    c = policy.config
+    space = get_space(policy.n_actions)
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "model_file": "model.onnx",
+        "actions": {"n": space.n, "names": list(space.names), "bins": [list(g) for g in space.groups]},
+        "fov_deg": float(c.get("fov_deg", 90.0)),
+        "input": {"layout": "NHWC", "dtype": "uint8", "color": "RGB", "size": list(spec.size),
+                  "mean": list(spec.mean), "std": list(spec.std), "resize": "bilinear, antialiased"},
+        "mc": {"samples": spec.samples, "p": spec.p},
+        "calibration": calib.to_json(),
+        "precision": precision,
+        "training": {"backbone": c.get("backbone"), "head": c.get("head"),
+                     "weights_source": c.get("weights_source"), "licence": c.get("licence"),
+                     "data": c.get("data"), "counts": c.get("counts", {}),
+                     "majority_action": c.get("majority_action"), "checkpoint": str(ckpt)},
+        "metrics": metrics,
+        "package_version": crossing_assist.__version__,
+        "provenance": {"command": " ".join(shlex.quote(a) for a in sys.argv) if sys.argv else "",
+                       "created": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+                       "calib_data": cfg.calib_data, "calib_split": cfg.calib_split},
+    }
+
+
+def _measure(probs_out: dict, data: Labelled, threshold: float, n_actions: int, majority: int | None) -> dict:
+    from crossing_assist.models.metrics import compute_metrics
+
+    m = compute_metrics(probs_out["probs"], data.actions, n_actions, data.far_x, majority=majority)
+    keep = ("n", "accuracy", "bin_mae", "majority_accuracy", "majority_bin_mae", "balanced_accuracy",
+            "top3_accuracy", "nll", "ece", "far_x_error")
+    out = {k: m[k] for k in keep if k in m}
+    rep = conformal_report(probs_out["probs"], data.actions, threshold)
+    out.update({"coverage": rep["coverage"], "mean_set_size": rep["mean_size"], "empty_sets": rep["empty"]})
+    return out
+
+
+def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> ExportResult:
+    """Run the whole pipeline (module docstring) and return where the bundle went."""
+    torch.set_num_threads(max(1, cfg.threads))
+    policy, ckpt = _load_policy(cfg.run)
+    n = policy.n_actions
+    p = float(policy.config.get("p", 0.5)) if cfg.p is None else cfg.p
+    majority = policy.config.get("majority_action")
+    data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress) if cfg.calib_data else None
+    calib, metrics, notes = cal.uncalibrated(n, cfg.measure), {}, []
+    if data is not None:
+        i_cal, i_eval = cal.split_by_source(data.sources, cfg.calib_frac)
+        part_cal, part_eval = data.take(i_cal), data.take(i_eval)
+        log(f"calibration: {len(i_cal)} frames from {sorted(set(part_cal.sources.tolist()))}; "
+            f"evaluation: {len(i_eval)} frames from {sorted(set(part_eval.sources.tolist()))}")
+        logits = torch_logits(BundleGraph(policy, _spec(policy.config, cfg.samples, p)), part_cal.images,
+                              cfg.batch, cfg.progress)
+        temperature = cal.fit_temperature(logits, part_cal.actions)
+        log(f"temperature {temperature:.3f} (calibration NLL {cal.nll(logits, part_cal.actions):.4f} -> "
+            f"{cal.nll(logits, part_cal.actions, temperature):.4f})")
+    else:
+        temperature = 1.0
+        notes.append("not calibrated: no --calib-data (temperature 1, every action in every conformal set)")
+    spec = _spec(policy.config, cfg.samples, p, temperature)
+    t0 = time.time()
+    model = export_graph(policy, spec)
+    log(f"exported the graph in {time.time() - t0:.1f} s")
+    precision, fp32_model = "fp32", model
+    if cfg.int8:
+        from crossing_assist.export.quantize import quantize_convs
+
+        rng = np.random.default_rng(0)
+        pick = rng.permutation(len(part_cal.images))[: cfg.int8_frames]
+        t0 = time.time()
+        model = quantize_convs(model, [part_cal.images[i] for i in sorted(pick)])
+        log(f"quantised the convolutions to int8 in {time.time() - t0:.1f} s")
+        precision = "int8"
+    parity = parity_check(policy, spec, _probe_frames(data, spec, cfg.parity_frames))
+    log(f"parity (T=1, p=0) onnxruntime vs PyTorch: max |probs diff| = {parity:.2e} (tolerance {cfg.parity_tol:g})")
+    if parity > cfg.parity_tol:
+        raise ExportError(f"parity check failed: max |probs diff| {parity:.2e} > {cfg.parity_tol:g}; "
+                          "the ONNX graph does not reproduce the PyTorch model")
+    # Write once (uncalibrated thresholds) so that the shipped graph is what we measure.
+    out = Path(cfg.out)
+    meta = _meta(policy, ckpt, spec, cal.CalibrationResult(temperature, cfg.coverage, 0.0, 0, cfg.measure,
+                                                           calib.uncertainty_threshold), precision, {}, cfg)
+    if data is not None:
+        set_metadata(model, meta)
+        write_bundle(out, model_bytes(model), meta)
+        got_cal = predict_bundle(out, part_cal.images, batch=cfg.batch, progress=cfg.progress)
+        correct = got_cal["probs"].argmax(1) == part_cal.actions
+        calib = cal.CalibrationResult(
+            temperature=temperature, coverage=cfg.coverage,
+            threshold=cal.conformal_threshold(got_cal["probs"], part_cal.actions, cfg.coverage),
+            n_frames=len(part_cal.actions), measure=cfg.measure,
+            uncertainty_threshold=cal.uncertainty_threshold(got_cal[cfg.measure], correct))
+        got_eval = predict_bundle(out, part_eval.images, batch=cfg.batch, progress=cfg.progress)
+        metrics = {"calibration_part": _measure(got_cal, part_cal, calib.threshold, n, majority),
+                   "evaluation_part": _measure(got_eval, part_eval, calib.threshold, n, majority),
+                   "evaluation_sources": sorted(set(part_eval.sources.tolist())),
+                   "checkpoint": policy_metrics(ckpt)}
+        if cfg.int8:
+            metrics["int8_vs_fp32"] = compare_precisions(out, fp32_model, part_eval, cfg.batch)
+    metrics["parity_max_abs"] = parity
+    meta = _meta(policy, ckpt, spec, calib, precision, metrics, cfg)
+    set_metadata(model, meta)
+    data_bytes = model_bytes(model)
+    write_bundle(out, data_bytes, meta)
+    read_bundle(out)
+    return ExportResult(out, len(data_bytes), parity, calib, metrics, tuple(notes))
+
+
+def policy_metrics(ckpt: Path) -> dict:
+    """The checkpoint's own recorded metrics (``metrics.val``), for the comparison in bundle.json."""
+    from crossing_assist.models.checkpoint import load_checkpoint
+
+    m = load_checkpoint(ckpt).get("metrics", {})
+    return {k: v for k, v in (m.get("val") or {}).items() if isinstance(v, (int, float)) and not
+            (isinstance(v, float) and math.isnan(v))}
+
+
+def _latency_ms(sess: Any, frame: np.ndarray, repeats: int = 10) -> float:
+    sess.run(None, {"frames": frame})
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        sess.run(None, {"frames": frame})
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times) * 1000)
+
+
+def compare_precisions(bundle_dir: Path, fp32_model: Any, data: Labelled, batch: int) -> dict:
+    """Size (bytes), single-frame latency (ms, median of 10, default session options) and
+    evaluation-part accuracy of the int8 bundle against its fp32 graph."""
+    import onnxruntime as ort
+
+    bundle = read_bundle(bundle_dir)
+    b32 = model_bytes(fp32_model)
+    s32 = ort.InferenceSession(b32)
+    s8 = ort.InferenceSession(str(bundle.model_path))
+    acc = {}
+    for name, sess in (("fp32", s32), ("int8", s8)):
+        probs = predict_bundle(bundle, data.images, batch=batch, session=sess)["probs"]
+        acc[name] = float((probs.argmax(1) == data.actions).mean())
+    frame = data.images[0][None]
+    return {"size_fp32": len(b32), "size_int8": bundle.model_size, "size_ratio": bundle.model_size / len(b32),
+            "ms_fp32": _latency_ms(s32, frame), "ms_int8": _latency_ms(s8, frame),
+            "accuracy_fp32": acc["fp32"], "accuracy_int8": acc["int8"], "n": int(len(data.actions))}

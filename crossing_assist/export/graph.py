@@ -1,0 +1,150 @@
+"""The bundle's ONNX graph: raw uint8 frames in, MC-dropout summaries out, in ONE pass.
+
+Layout of :class:`BundleGraph` (docs/contracts.md section 3):
+
+    frames uint8 [N, H, W, 3] RGB (N, H, W dynamic)
+      -> float, /255, NCHW, bilinear resize (antialiased) to ``size``, (x - mean) / std
+      -> policy(x, samples=T, mc=p > 0): the backbone and the head's deterministic part run
+         once; the T dropout samples are folded into the batch inside the head with explicit
+         ``rand_like(x) >= p`` masks (exported as RandomUniformLike, which onnxruntime's graph
+         optimiser keeps, unlike Dropout nodes)
+      -> logits [T, N, A] / temperature -> per-sample softmax
+      -> probs [N, A] (mean), entropy [N], mutual_info [N], variance [N, A], votes [N, A]
+
+:func:`mc_summaries` is the same tail in plain torch, used for the PyTorch reference.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import warnings
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from crossing_assist.bundle import INPUT_NAME, OUTPUT_NAMES, SCHEMA_VERSION, embedded_meta
+
+OPSET = 18
+MAX_SIDE = 8192
+
+
+@dataclass(frozen=True)
+class GraphSpec:
+    """What the graph bakes in. ``size`` = (H, W) the policy sees; ``mean``/``std`` per RGB
+    channel on the 0..1 scale; ``samples`` = T; ``p`` = drop probability of the sampled layers
+    (0 = deterministic); ``temperature`` divides the logits (> 0)."""
+
+    size: tuple[int, int]
+    mean: tuple[float, float, float]
+    std: tuple[float, float, float]
+    samples: int = 16
+    p: float = 0.5
+    temperature: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.samples < 1:
+            raise ValueError(f"Invalid samples: {self.samples}; valid: >= 1")
+        if not 0.0 <= self.p < 1.0:
+            raise ValueError(f"Invalid p: {self.p}; valid: 0 <= p < 1")
+        if not self.temperature > 0:
+            raise ValueError(f"Invalid temperature: {self.temperature}; valid: > 0")
+
+
+def mc_summaries(logits: torch.Tensor, temperature: float = 1.0) -> tuple[torch.Tensor, ...]:
+    """Summaries of T samples of logits ``[T, N, A]``.
+
+    Returns ``probs`` [N, A] (mean softmax), ``entropy`` [N] (nats, of ``probs``),
+    ``mutual_info`` [N] (entropy minus the mean per-sample entropy, clipped at 0),
+    ``variance`` [N, A] (population variance of the per-sample probabilities) and
+    ``votes`` [N, A] (fraction of samples whose argmax is each action).
+    """
+    logp = torch.log_softmax(logits / temperature, dim=-1)
+    p_s = logp.exp()
+    probs = p_s.mean(0)
+    entropy = -(probs * torch.log(probs.clamp_min(1e-30))).sum(-1)
+    expected = -(p_s * logp).sum(-1).mean(0)
+    mutual_info = (entropy - expected).clamp_min(0.0)
+    variance = (p_s - probs.unsqueeze(0)).square().mean(0)
+    n_actions = logits.shape[-1]
+    top = p_s.argmax(-1, keepdim=True)  # [T, N, 1]
+    arange = torch.arange(n_actions, device=logits.device).view(1, 1, n_actions)
+    votes = (top == arange).to(probs.dtype).mean(0)
+    return probs, entropy, mutual_info, variance, votes
+
+
+class BundleGraph(nn.Module):
+    """Wraps a policy (``forward(x, samples, mc) -> logits [T, N, A]``, ``head.p`` settable)
+    into the bundle's graph. The policy is deep-copied, put in eval mode (BatchNorm uses its
+    running statistics) and its head's drop probability set to ``spec.p``."""
+
+    def __init__(self, policy: nn.Module, spec: GraphSpec):
+        super().__init__()
+        self.spec = spec
+        self.policy = copy.deepcopy(policy).eval()
+        self.policy.head.p = spec.p
+        for prm in self.policy.parameters():
+            prm.requires_grad_(False)
+        self.register_buffer("mean", torch.tensor(spec.mean, dtype=torch.float32).view(1, 3, 1, 1))
+        self.register_buffer("std", torch.tensor(spec.std, dtype=torch.float32).view(1, 3, 1, 1))
+
+    def preprocess(self, frames: torch.Tensor) -> torch.Tensor:
+        """uint8 [N, H, W, 3] RGB -> normalised float [N, 3, h, w] at ``spec.size``."""
+        x = frames.permute(0, 3, 1, 2).to(torch.float32) / 255.0
+        x = F.interpolate(x, size=tuple(self.spec.size), mode="bilinear", align_corners=False, antialias=True)
+        return (x - self.mean) / self.std
+
+    def logits(self, frames: torch.Tensor) -> torch.Tensor:
+        """Raw (untempered) logits [T, N, A] of the T samples."""
+        return self.policy(self.preprocess(frames), samples=self.spec.samples, mc=self.spec.p > 0)
+
+    def forward(self, frames: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        return mc_summaries(self.logits(frames), self.spec.temperature)
+
+
+def export_graph(policy: nn.Module, spec: GraphSpec, *, example_hw: tuple[int, int] | None = None) -> Any:
+    """Export ``BundleGraph(policy, spec)`` to an in-memory ``onnx.ModelProto`` (weights embedded,
+    no external data), with N, H and W dynamic."""
+    import onnx  # noqa: F401  (fail early with a clear ImportError when missing)
+
+    graph = BundleGraph(policy, spec).eval()
+    h, w = example_hw or (spec.size[0] + 8, spec.size[1] + 12)
+    example = torch.zeros(2, h, w, 3, dtype=torch.uint8)
+    dims = {0: torch.export.Dim("N", min=1, max=4096),
+            1: torch.export.Dim("H", min=8, max=MAX_SIDE), 2: torch.export.Dim("W", min=8, max=MAX_SIDE)}
+    with warnings.catch_warnings(), torch.no_grad():
+        warnings.simplefilter("ignore")
+        program = torch.onnx.export(
+            graph, (example,), input_names=[INPUT_NAME], output_names=list(OUTPUT_NAMES),
+            dynamic_shapes={"frames": dims}, dynamo=True, external_data=False,
+            opset_version=OPSET, verbose=False, optimize=True,
+        )
+    model = program.model_proto
+    ops = {n.op_type for n in model.graph.node}
+    if spec.p > 0 and spec.samples > 1 and "RandomUniformLike" not in ops and "RandomUniform" not in ops:
+        raise RuntimeError("the exported graph has no random op: the policy's head does not sample "
+                           "rand_like dropout masks when mc=True; MC dropout would silently vanish")
+    return model
+
+
+def set_metadata(model: Any, meta: Mapping[str, Any]) -> None:
+    """Store the bundle facts in ``model.metadata_props`` (``bundle_json``, ``schema_version``)."""
+    props = {"bundle_json": json.dumps(embedded_meta(meta), sort_keys=True), "schema_version": str(SCHEMA_VERSION)}
+    keep = [p for p in model.metadata_props if p.key not in props]
+    del model.metadata_props[:]
+    for p in keep:
+        model.metadata_props.append(p)
+    for key, value in props.items():
+        entry = model.metadata_props.add()
+        entry.key, entry.value = key, value
+
+
+def model_bytes(model: Any) -> bytes:
+    """Serialise a ModelProto to one self-contained byte string (refuses > 2 GB / external data)."""
+    for init in model.graph.initializer:
+        if init.data_location == 1:  # onnx.TensorProto.EXTERNAL
+            raise RuntimeError(f"initializer {init.name} uses external data; the bundle must be one file")
+    return model.SerializeToString()

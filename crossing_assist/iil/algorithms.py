@@ -1,0 +1,170 @@
+"""The registry: each algorithm is a named combination of mixing, sampling, aggregation and
+learner. ``create(name, env, ...) -> Setup``; ``list_algorithms()``.
+
+| name | who acts (mixing) | when the expert is asked (sampling) | aggregated |
+|---|---|---|---|
+| supervised | expert only | full horizon | expert labels |
+| forward | learner for trained time blocks | full horizon | expert labels of this episode's block |
+| smile | expert w.p. (1-a)^(i-1), else mixture of past policies | full horizon | this episode's labels (new policy) |
+| dagger | expert w.p. p^(i-1) | full horizon | expert labels at every step |
+| aggrevate | expert w.p. p^(i-1) until t_s | random switch, explore, expert | cost-to-go weighted expert labels |
+| dropout-dagger | learner iff MC-dropout U_L < threshold (and close to the expert) | full horizon | expert labels at every step |
+| upms | rational mixing | rational sampling (E') | expert labels where it acted |
+| upms-ne | rational mixing | full horizon | expert labels where it acted |
+| upms-sl | rational mixing | rational sampling | + the learner's own labels |
+| upms-ne-sl | rational mixing | full horizon | + the learner's own labels |
+| ensemble-dagger | learner iff ensemble variance < threshold and close to the expert | full horizon | expert labels at every step |
+| hg-dagger | expert gates by its rule (U_T < threshold) | full horizon | expert labels where it acted |
+| thrifty-dagger | novelty/risk gate, thresholds refit per episode | full horizon | expert labels where it acted |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Callable
+
+from .aggregation import CostToGo, ExpertLabels, SelfLabelling
+from .learner_variants import ForwardLearner, SmileLearner, ThriftyLearner
+from .learners import EnsembleLearner, LearnerConfig, NetLearner
+from .loop import Setup
+from .mixing import (BetaDecay, ExpertGate, ExpertOnly, GeometricMixture, LearnerThreshold, PerStepSchedule,
+                     RationalMixing, ThriftyGate)
+from .sampling import FullHorizon, RandomSwitch, RationalSampling
+
+THESIS_ALGORITHMS = ("supervised", "dagger", "aggrevate", "dropout-dagger", "upms", "upms-ne", "upms-sl", "upms-ne-sl")
+
+
+@dataclass(frozen=True)
+class AlgoParams:
+    """Hyper-parameters of the strategies. Uncertainty thresholds are in each agent's own
+    units (the value where UPMS's coefficient is 1/2); ``None`` means the environment's
+    default (``env.unwrapped.iil_defaults``)."""
+
+    dagger_p: float = 0.5
+    smile_alpha: float = 0.3
+    expert_threshold: float | None = None
+    learner_threshold: float | None = None
+    ensemble_threshold: float | None = None
+    max_discrepancy: float | None = None
+    hg_threshold: float | None = None
+    thrifty_rate: float = 0.1
+    forward_block: int | None = None
+
+    def resolved(self, env) -> "AlgoParams":
+        """Fill ``None`` fields from the environment's defaults."""
+        defaults = getattr(env.unwrapped, "iil_defaults", {})
+        return AlgoParams(**{f.name: (getattr(self, f.name) if getattr(self, f.name) is not None
+                                      else defaults.get(f.name)) for f in fields(self)})
+
+
+Builder = Callable[..., Setup]
+_REGISTRY: dict[str, Builder] = {}
+
+
+def register(name: str) -> Callable[[Builder], Builder]:
+    def deco(fn: Builder) -> Builder:
+        if name in _REGISTRY:
+            raise ValueError(f"Algorithm {name!r} is already registered")
+        _REGISTRY[name] = fn
+        return fn
+    return deco
+
+
+def list_algorithms() -> list[str]:
+    return list(_REGISTRY)
+
+
+def create(name: str, env, *, horizon: int, episodes: int, seed: int,
+           params: AlgoParams = AlgoParams(), cfg: LearnerConfig = LearnerConfig()) -> Setup:
+    """Build algorithm ``name`` for ``env`` (its action space and defaults)."""
+    if name not in _REGISTRY:
+        raise ValueError(f"Unknown algorithm: {name!r}; valid: {', '.join(_REGISTRY)}")
+    p = params.resolved(env)
+    return _REGISTRY[name](env=env, horizon=horizon, episodes=episodes, seed=seed, p=p, cfg=cfg)
+
+
+def _net(env, cfg, seed):
+    return NetLearner(env.action_space, cfg, seed)
+
+
+@register("supervised")
+def _supervised(env, horizon, episodes, seed, p, cfg):
+    return Setup("supervised", ExpertOnly(), FullHorizon(), ExpertLabels("all"), _net(env, cfg, seed))
+
+
+@register("forward")
+def _forward(env, horizon, episodes, seed, p, cfg):
+    block = p.forward_block or max(1, -(-horizon // episodes))
+    return Setup("forward", PerStepSchedule(block), FullHorizon(), ExpertLabels("block", block),
+                 ForwardLearner(env.action_space, cfg, seed, block))
+
+
+@register("smile")
+def _smile(env, horizon, episodes, seed, p, cfg):
+    return Setup("smile", GeometricMixture(p.smile_alpha), FullHorizon(), ExpertLabels("all"),
+                 SmileLearner(env.action_space, cfg, seed, p.smile_alpha))
+
+
+@register("dagger")
+def _dagger(env, horizon, episodes, seed, p, cfg):
+    return Setup("dagger", BetaDecay(p.dagger_p), FullHorizon(), ExpertLabels("all"), _net(env, cfg, seed))
+
+
+@register("aggrevate")
+def _aggrevate(env, horizon, episodes, seed, p, cfg):
+    return Setup("aggrevate", BetaDecay(p.dagger_p), RandomSwitch(), CostToGo(), _net(env, cfg, seed))
+
+
+@register("dropout-dagger")
+def _dropout_dagger(env, horizon, episodes, seed, p, cfg):
+    return Setup("dropout-dagger", LearnerThreshold(p.learner_threshold, p.max_discrepancy), FullHorizon(),
+                 ExpertLabels("all"), _net(env, cfg, seed))
+
+
+def _upms(name, env, seed, p, cfg, explore: bool, self_label: bool) -> Setup:
+    sampling = RationalSampling(p.expert_threshold) if explore else FullHorizon()
+    agg = SelfLabelling(ExpertLabels("acting")) if self_label else ExpertLabels("acting")
+    return Setup(name, RationalMixing(p.expert_threshold, p.learner_threshold), sampling, agg, _net(env, cfg, seed))
+
+
+@register("upms")
+def _upms_full(env, horizon, episodes, seed, p, cfg):
+    return _upms("upms", env, seed, p, cfg, explore=True, self_label=False)
+
+
+@register("upms-ne")
+def _upms_ne(env, horizon, episodes, seed, p, cfg):
+    return _upms("upms-ne", env, seed, p, cfg, explore=False, self_label=False)
+
+
+@register("upms-sl")
+def _upms_sl(env, horizon, episodes, seed, p, cfg):
+    return _upms("upms-sl", env, seed, p, cfg, explore=True, self_label=True)
+
+
+@register("upms-ne-sl")
+def _upms_ne_sl(env, horizon, episodes, seed, p, cfg):
+    return _upms("upms-ne-sl", env, seed, p, cfg, explore=False, self_label=True)
+
+
+@register("ensemble-dagger")
+def _ensemble_dagger(env, horizon, episodes, seed, p, cfg):
+    return Setup("ensemble-dagger", LearnerThreshold(p.ensemble_threshold, p.max_discrepancy), FullHorizon(),
+                 ExpertLabels("all"), EnsembleLearner(env.action_space, cfg, seed))
+
+
+@register("hg-dagger")
+def _hg_dagger(env, horizon, episodes, seed, p, cfg):
+    return Setup("hg-dagger", ExpertGate(p.hg_threshold), FullHorizon(), ExpertLabels("acting"), _net(env, cfg, seed))
+
+
+@register("thrifty-dagger")
+def _thrifty(env, horizon, episodes, seed, p, cfg):
+    learner = ThriftyLearner(env.action_space, cfg, seed, target_rate=p.thrifty_rate)
+    gate = ThriftyGate(handback_distance=p.max_discrepancy or 0.0)
+
+    def sync() -> None:
+        gate.novelty_threshold, gate.risk_threshold = learner.novelty_threshold, learner.risk_threshold
+
+    return Setup("thrifty-dagger", gate, FullHorizon(), ExpertLabels("acting"), learner, after_fit=sync,
+                 risk=learner.risk)

@@ -1,0 +1,117 @@
+"""``crossing-iil``: run interactive imitation learning benchmarks and report them.
+
+    crossing-iil list
+    crossing-iil run --env crossing --algo dagger upms --episodes 10 --horizon 512 --seeds 1 2 3 --out runs/iil
+    crossing-iil report runs/iil --out docs/iil
+
+``--algo`` takes names, ``thesis`` (the thesis's eight) or ``all``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import fields, replace
+from pathlib import Path
+from typing import Sequence
+
+from .algorithms import THESIS_ALGORITHMS, AlgoParams, list_algorithms
+from .envs import ENV_NAMES
+from .learners import LearnerConfig
+from .report import ReportError, write_report
+from .runner import RunConfig, RunError, run
+
+
+def _algos(names: list[str]) -> list[str]:
+    out: list[str] = []
+    for n in names:
+        for part in n.split(","):
+            if part == "thesis":
+                out += list(THESIS_ALGORITHMS)
+            elif part == "all":
+                out += list_algorithms()
+            elif part in list_algorithms():
+                out.append(part)
+            else:
+                raise RunError(f"unknown algorithm {part!r}; valid: {', '.join(list_algorithms())}, thesis, all")
+    return list(dict.fromkeys(out))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="crossing-iil", description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="cmd", required=True)
+    sub.add_parser("list", help="list environments and algorithms")
+    r = sub.add_parser("run", help="run algorithms x seeds on an environment (resumable per episode)")
+    r.add_argument("--env", required=True, choices=ENV_NAMES)
+    r.add_argument("--algo", nargs="+", required=True, help="names, 'thesis' or 'all'")
+    r.add_argument("--episodes", type=int, default=10)
+    r.add_argument("--horizon", type=int, default=512)
+    r.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    r.add_argument("--out", type=Path, required=True)
+    d = LearnerConfig()
+    r.add_argument("--lr", type=float, default=d.lr, help="AdaGrad learning rate")
+    r.add_argument("--epochs", type=int, default=d.epochs, help="passes over D after each episode")
+    r.add_argument("--mc-samples", type=int, default=d.mc_samples)
+    r.add_argument("--ensemble", type=int, default=d.ensemble)
+    r.add_argument("--expert-threshold", type=float, default=None, help="U_T where alpha = 1/2")
+    r.add_argument("--learner-threshold", type=float, default=None, help="U_L where alpha = 1/2")
+    r.add_argument("--threads", type=int, default=1, help="torch CPU threads (1 is fastest for this small net)")
+    r.add_argument("--quiet", action="store_true")
+    rep = sub.add_parser("report", help="Table 3 (markdown/CSV) and Figures 4.4-4.7 from run folders")
+    rep.add_argument("dirs", type=Path, nargs="+")
+    rep.add_argument("--out", type=Path, default=None, help="default: DIRS[0]/report")
+    return p
+
+
+def _cmd_run(a: argparse.Namespace) -> int:
+    import torch  # noqa: PLC0415
+    from tqdm import tqdm  # noqa: PLC0415
+
+    if a.episodes < 1 or a.horizon < 1:
+        raise RunError(f"--episodes={a.episodes} and --horizon={a.horizon} must both be >= 1")
+    torch.set_num_threads(max(1, a.threads))
+    algos = _algos(a.algo)
+    learner = LearnerConfig(lr=a.lr, epochs=a.epochs, mc_samples=a.mc_samples, ensemble=a.ensemble)
+    params = AlgoParams(expert_threshold=a.expert_threshold, learner_threshold=a.learner_threshold)
+    configs = [RunConfig(env=a.env, algo=al, seed=s, episodes=a.episodes, horizon=a.horizon,
+                         learner=learner, params=params) for al in algos for s in a.seeds]
+    bar = tqdm(total=len(configs) * a.episodes * a.horizon, unit="step", disable=a.quiet, file=sys.stderr)
+    for cfg in configs:
+        bar.set_description(f"{cfg.algo} seed {cfg.seed}")
+
+        def show(row, cfg=cfg):
+            bar.set_postfix(ep=int(row["episode"]), reward=f"{row['reward']:.0f}", queries=int(row["queries"]),
+                            oob=int(row["out_of_bounds"]))
+        folder = run(cfg, a.out, progress=bar.update, on_episode=show)
+    bar.close()
+    print(f"done: {len(configs)} run(s) in {a.out} (last: {folder})")
+    return 0
+
+
+def _cmd_report(a: argparse.Namespace) -> int:
+    out = a.out or (a.dirs[0] / "report")
+    paths = write_report(a.dirs, out)
+    print(f"report: {len(paths)} files in {out} ({paths[0].name}, {paths[1].name}, {len(paths) - 2} figures)")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    try:
+        if a.cmd == "list":
+            print("environments:", ", ".join(ENV_NAMES))
+            print("algorithms:", ", ".join(list_algorithms()))
+            print("thesis:", ", ".join(THESIS_ALGORITHMS))
+            return 0
+        return _cmd_run(a) if a.cmd == "run" else _cmd_report(a)
+    except (RunError, ReportError, FileNotFoundError, ImportError, RuntimeError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted; run the same command again to continue from the last finished episode",
+              file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

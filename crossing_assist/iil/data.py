@@ -1,0 +1,83 @@
+"""Aggregated data (the ``D`` of Algorithm 4.1) and the per-episode trace the loop records."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass
+class Aggregate:
+    """Growing training set. ``obs``: list of H x W x 3 uint8 frames; ``labels``: int actions or
+    float vectors; ``weights``: sample weights (>= 0); ``episodes``/``steps``: where each came
+    from (1-based episode, 0-based step); ``self_labelled``: True for the learner's own labels."""
+
+    obs: list = field(default_factory=list)
+    labels: list = field(default_factory=list)
+    weights: list = field(default_factory=list)
+    episodes: list = field(default_factory=list)
+    steps: list = field(default_factory=list)
+    self_labelled: list = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.labels)
+
+    def add(self, obs: np.ndarray, label, weight: float, episode: int, step: int, self_label: bool) -> None:
+        self.obs.append(np.asarray(obs))
+        self.labels.append(label)
+        self.weights.append(float(weight))
+        self.episodes.append(int(episode))
+        self.steps.append(int(step))
+        self.self_labelled.append(bool(self_label))
+
+    def arrays(self, episode: int | None = None) -> dict[str, np.ndarray]:
+        """Stacked arrays (all, or one episode's): obs N x H x W x 3, labels N[, d], weights N, ..."""
+        idx = [k for k, e in enumerate(self.episodes) if episode is None or e == episode]
+        if not idx:
+            return {}
+        return {
+            "obs": np.stack([self.obs[k] for k in idx]),
+            "labels": np.asarray([self.labels[k] for k in idx]),
+            "weights": np.asarray([self.weights[k] for k in idx], dtype=np.float32),
+            "episodes": np.asarray([self.episodes[k] for k in idx], dtype=np.int64),
+            "steps": np.asarray([self.steps[k] for k in idx], dtype=np.int64),
+            "self_labelled": np.asarray([self.self_labelled[k] for k in idx], dtype=bool),
+        }
+
+    def save_episode(self, path: Path, episode: int) -> None:
+        """Write one episode's samples to ``path`` (compressed npz, atomic)."""
+        arrs = self.arrays(episode)
+        tmp = path.with_name(path.name + ".tmp.npz")
+        np.savez_compressed(tmp, **arrs) if arrs else np.savez_compressed(tmp, empty=np.zeros(0))
+        tmp.replace(path)
+
+    def load_episode(self, path: Path) -> None:
+        """Append the samples of an npz written by :meth:`save_episode`."""
+        with np.load(path) as z:
+            if "empty" in z.files:
+                return
+            for k in range(len(z["labels"])):
+                lab = z["labels"][k]
+                self.add(z["obs"][k], lab.item() if lab.ndim == 0 else lab, float(z["weights"][k]),
+                         int(z["episodes"][k]), int(z["steps"][k]), bool(z["self_labelled"][k]))
+
+
+@dataclass
+class Step:
+    """One step of an episode as the loop saw it. ``expert_action`` is None when the expert
+    gave none; ``actor`` is ``expert``/``learner``/``explorer``; ``reward`` excludes the
+    out-of-bounds penalty, which ``out_of_bounds`` flags."""
+
+    t: int
+    obs: np.ndarray
+    expert_action: object
+    u_expert: float
+    learner_action: object
+    u_learner: float
+    actor: str
+    action: object
+    reward: float
+    out_of_bounds: bool
+    expert_acted: bool

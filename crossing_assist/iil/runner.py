@@ -1,0 +1,164 @@
+"""Runs: one (environment, algorithm, seed) per folder, resumable after every episode.
+
+Folder ``OUT/<env>/<algo>/seed<k>/``:
+
+* ``config.json`` - the resolved :class:`RunConfig`, the strategies, environment facts
+  (frame source) and package versions;
+* ``episodes.csv`` - one row an episode (see :func:`crossing_assist.iil.loop.run_episode`);
+* ``data/ep<i>.npz`` - the samples episode ``i`` aggregated;
+* ``state.pt`` - learner weights, optimiser and the run's rng state after the last episode.
+
+Everything is written atomically; a run whose folder already holds ``k`` finished episodes
+with the same configuration continues at episode ``k + 1`` and gives the same numbers as an
+uninterrupted run (same rng streams).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import platform
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+from .algorithms import AlgoParams, create
+from .data import Aggregate
+from .envs import make_env
+from .experts import OracleExpert
+from .learners import LearnerConfig
+from .loop import aggregate_and_learn, run_episode
+
+
+class RunError(ValueError):
+    """A run cannot start or continue (bad folder, mismatching configuration)."""
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    env: str
+    algo: str
+    seed: int
+    episodes: int = 10
+    horizon: int = 512
+    learner: LearnerConfig = field(default_factory=LearnerConfig)
+    params: AlgoParams = field(default_factory=AlgoParams)
+    expert_scale: float = 1.0
+
+    def folder(self, out: Path) -> Path:
+        return Path(out) / self.env / self.algo / f"seed{self.seed}"
+
+
+def versions() -> dict:
+    out = {"python": platform.python_version(), "numpy": np.__version__, "torch": torch.__version__}
+    for mod in ("gymnasium", "gym_duckietown", "pyglet", "crossing_assist"):
+        m = sys.modules.get(mod)
+        if m is None:
+            try:
+                m = __import__(mod)
+            except Exception:  # noqa: BLE001 - optional packages
+                continue
+        out[mod] = getattr(m, "__version__", "?")
+    return out
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _write_csv(path: Path, rows: list[dict]) -> None:
+    keys: list[str] = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=keys)
+    w.writeheader()
+    w.writerows(rows)
+    _atomic_write(path, buf.getvalue())
+
+
+def read_episodes(path: Path) -> list[dict]:
+    """Rows of an ``episodes.csv`` with numbers parsed (empty cells -> nan)."""
+    with Path(path).open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    def num(v):
+        try:
+            return float(v) if v not in ("", None) else math.nan
+        except ValueError:
+            return v
+    return [{k: num(v) for k, v in r.items()} for r in rows]
+
+
+def _config_json(cfg: RunConfig) -> dict:
+    return json.loads(json.dumps(asdict(cfg)))
+
+
+def run(cfg: RunConfig, out: Path, *, progress: Callable[[int], None] | None = None,
+        on_episode: Callable[[dict], None] | None = None, env=None) -> Path:
+    """Run (or continue) ``cfg`` under ``out``; returns the run folder."""
+    folder = cfg.folder(out)
+    (folder / "data").mkdir(parents=True, exist_ok=True)
+    env = env or make_env(cfg.env)
+    setup = create(cfg.algo, env, horizon=cfg.horizon, episodes=cfg.episodes, seed=cfg.seed,
+                   params=cfg.params, cfg=cfg.learner)
+    want = _config_json(cfg)
+    meta_path = folder / "config.json"
+    if meta_path.exists():
+        have = json.loads(meta_path.read_text())["run"]
+        diff = [k for k in want if k != "episodes" and want[k] != have.get(k)]
+        if diff:
+            raise RunError(f"{folder}: holds a run with a different {diff[0]} ({have.get(diff[0])!r} vs "
+                           f"{want[diff[0]]!r}); use another --out or delete the folder")
+    meta = {"run": want, "strategies": setup.describe(), "versions": versions(),
+            "env": {"name": cfg.env, "source": getattr(env.unwrapped, "source", cfg.env)},
+            "command": " ".join(sys.argv)}
+    _atomic_write(meta_path, json.dumps(meta, indent=2, default=str))
+    rng = np.random.default_rng(cfg.seed)
+    data, rows = Aggregate(), []
+    done = _resume(folder, setup, data, rng, rows)
+    expert = OracleExpert(env, cfg.expert_scale)
+    for i in range(done + 1, cfg.episodes + 1):
+        res = run_episode(env, expert, setup, i, cfg.horizon, rng, progress)
+        row = {"episode": i, **res.metrics, **aggregate_and_learn(res, setup, data, i, rng)}
+        data.save_episode(folder / "data" / f"ep{i}.npz", i)
+        rows.append(row)
+        _save_state(folder / "state.pt", setup, rng, i)
+        _write_csv(folder / "episodes.csv", rows)
+        if on_episode:
+            on_episode(row)
+    return folder
+
+
+def _save_state(path: Path, setup, rng: np.random.Generator, episode: int) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save({"episode": episode, "learner": setup.learner.state_dict(),
+                "rng": json.dumps(rng.bit_generator.state)}, tmp)
+    os.replace(tmp, path)
+
+
+def _resume(folder: Path, setup, data: Aggregate, rng: np.random.Generator, rows: list[dict]) -> int:
+    state_path, csv_path = folder / "state.pt", folder / "episodes.csv"
+    if not (state_path.exists() and csv_path.exists()):
+        return 0
+    try:
+        state = torch.load(state_path, weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - any unreadable checkpoint
+        raise RunError(f"{state_path}: unreadable run state ({exc}); delete the folder to start again") from None
+    done = int(state["episode"])
+    rows.extend(r for r in read_episodes(csv_path) if r["episode"] <= done)
+    for i in range(1, done + 1):
+        data.load_episode(folder / "data" / f"ep{i}.npz")
+    setup.learner.load_state_dict(state["learner"])
+    if setup.after_fit:
+        setup.after_fit()
+    rng.bit_generator.state = json.loads(state["rng"])
+    return done

@@ -1,0 +1,137 @@
+"""Frozen-backbone feature cache: compute once, train the head (and any unfrozen blocks) on it.
+
+A cache entry is a folder ``<cache_dir>/<key>/`` holding ``feats.npy`` (float16,
+M x C x h x w, the output of the backbone's frozen blocks), ``labels.npy`` (int64 bins 0..12),
+``far_x.npy`` (float64, nan when unknown), ``row.npy`` (index of the dataset row each sample
+came from), ``variant.npy`` (index into the variant list) and ``meta.json``. The key hashes
+everything that changes the features: backbone name, weights source *and* file fingerprint,
+number of frozen blocks, input size, mean/std, the variants (mirroring, yaw angles, FOV) and
+the dataset rows (image paths, labels, file sizes and mtimes). ``meta.json`` is written last
+(atomically), so a half-written entry is never used.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from ..data_tools.manifest import Dataset
+from .backbones import Backbone
+from .data import Variant, load_variants, normalise
+
+
+@dataclass(frozen=True)
+class FeatureSet:
+    """Cached samples: ``feats`` M x C x h x w (float16, memory-mapped), ``labels`` (M,) bins,
+    ``far_x`` (M,) in [0, 1] or nan, ``row`` (M,) dataset row index, ``variant`` (M,)."""
+
+    feats: np.ndarray
+    labels: np.ndarray
+    far_x: np.ndarray
+    row: np.ndarray
+    variant: np.ndarray
+    path: Path
+
+    def __len__(self) -> int:
+        return int(self.labels.shape[0])
+
+
+def _dataset_fingerprint(ds: Dataset) -> str:
+    h = hashlib.sha256()
+    for r in ds.rows:
+        p = ds.image_path(r)
+        st = os.stat(p)
+        h.update(f"{r.image}|{r.label}|{r.far_x}|{st.st_size}|{st.st_mtime_ns}\n".encode())
+    return h.hexdigest()
+
+
+def cache_key(backbone: Backbone, frozen_blocks: int, size: tuple[int, int],
+              variants: tuple[Variant, ...], fov_deg: float, ds: Dataset) -> str:
+    """A hex digest naming the cache entry (see the module docstring for what it covers)."""
+    f = backbone.facts
+    spec = {
+        "backbone": f.name, "weights": f.weights_source, "frozen_blocks": frozen_blocks,
+        "weights_fingerprint": _weights_fingerprint(backbone, frozen_blocks),
+        "size": list(size), "mean": list(f.mean), "std": list(f.std),
+        "variants": [[v.mirrored, v.yaw_deg] for v in variants], "fov_deg": fov_deg,
+        "data": _dataset_fingerprint(ds), "version": 1,
+    }
+    return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:24]
+
+
+def _weights_fingerprint(backbone: Backbone, frozen_blocks: int) -> str:
+    h = hashlib.sha256()
+    for block in backbone.blocks[:frozen_blocks]:
+        for t in block.state_dict().values():
+            h.update(t.detach().cpu().numpy().tobytes()[:4096])
+    return h.hexdigest()[:16]
+
+
+def _open(path: Path) -> FeatureSet:
+    load = lambda n, **kw: np.load(path / n, **kw)  # noqa: E731
+    return FeatureSet(load("feats.npy", mmap_mode="r"), load("labels.npy"), load("far_x.npy"),
+                      load("row.npy"), load("variant.npy"), path)
+
+
+@torch.no_grad()
+def compute_features(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: tuple[int, int],
+                     variants: tuple[Variant, ...], fov_deg: float, cache_dir: Path,
+                     batch_size: int = 32, progress: bool = True, desc: str = "features") -> FeatureSet:
+    """Features of blocks ``[0, frozen_blocks)`` for every row x variant, cached on disk."""
+    key = cache_key(backbone, frozen_blocks, size, variants, fov_deg, ds)
+    path = Path(cache_dir) / key
+    if (path / "meta.json").is_file():
+        return _open(path)
+    tmp = Path(cache_dir) / f"{key}.tmp{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    backbone.eval()
+    n = len(ds.rows) * len(variants)
+    probe = backbone.forward_until(torch.zeros(1, 3, *size), frozen_blocks)
+    feats = np.lib.format.open_memmap(tmp / "feats.npy", mode="w+", dtype=np.float16,
+                                      shape=(n, *probe.shape[1:]))
+    labels, far_x, rows, vids = [], [], [], []
+    buf: list[np.ndarray] = []
+    done = 0
+
+    def flush() -> None:
+        nonlocal done
+        x = torch.from_numpy(normalise(np.stack(buf), backbone.facts.mean, backbone.facts.std))
+        out = backbone.forward_until(x, frozen_blocks)
+        feats[done:done + len(buf)] = out.numpy().astype(np.float16)
+        done += len(buf)
+        buf.clear()
+
+    for i, row in enumerate(tqdm(ds.rows, desc=desc, disable=not progress, unit="img")):
+        for j, (img, fx, lab) in enumerate(load_variants(ds, row, size, variants, fov_deg)):
+            buf.append(img)
+            labels.append(lab)
+            far_x.append(fx)
+            rows.append(i)
+            vids.append(j)
+            if len(buf) >= batch_size:
+                flush()
+    if buf:
+        flush()
+    feats.flush()
+    del feats
+    np.save(tmp / "labels.npy", np.asarray(labels, np.int64))
+    np.save(tmp / "far_x.npy", np.asarray(far_x, np.float64))
+    np.save(tmp / "row.npy", np.asarray(rows, np.int64))
+    np.save(tmp / "variant.npy", np.asarray(vids, np.int64))
+    meta = {"key": key, "n": n, "backbone": backbone.facts.name, "frozen_blocks": frozen_blocks,
+            "size": list(size), "variants": [v.tag for v in variants], "root": str(ds.root)}
+    (tmp / "meta.json").write_text(json.dumps(meta, indent=1))
+    try:
+        os.replace(tmp, path)
+    except OSError:  # another process finished the same entry first
+        shutil.rmtree(tmp, ignore_errors=True)
+    return _open(path)

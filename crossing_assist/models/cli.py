@@ -1,0 +1,147 @@
+"""``crossing-train`` and ``crossing-eval``: parse, build a frozen config, call the library."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import fields
+from typing import Callable, Sequence
+
+from .config import TrainConfig
+
+_DEFAULTS = {f.name: f.default for f in fields(TrainConfig) if f.name not in ("data", "out")}
+
+
+def _user_errors() -> tuple[type[BaseException], ...]:
+    from ..bundle import BundleError
+    from ..data_tools.images import ImageError
+    from ..data_tools.manifest import ManifestError
+    from .backbones import BackboneError
+    from .checkpoint import CheckpointError
+    from .config import ConfigError
+    from .heads import HeadError
+
+    return (ConfigError, ManifestError, ImageError, BackboneError, CheckpointError, HeadError, BundleError,
+            FileNotFoundError, NotADirectoryError)
+
+
+def _run(func: Callable[[], int]) -> int:
+    try:
+        return func()
+    except _user_errors() as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted (resume with --resume)", file=sys.stderr)
+        return 130
+
+
+def _size(text: str) -> tuple[int, int]:
+    """``224`` -> (224, 224); ``224x298`` -> (H=224, W=298)."""
+    try:
+        parts = [int(p) for p in text.lower().split("x")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid size {text!r}; expected H or HxW, e.g. 224x298") from None
+    if len(parts) == 1:
+        parts *= 2
+    if len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"invalid size {text!r}; expected H or HxW, e.g. 224x298")
+    return parts[0], parts[1]
+
+
+def _floats(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid list {text!r}; expected numbers like 8,16") from None
+
+
+def train_parser() -> argparse.ArgumentParser:
+    d = _DEFAULTS
+    p = argparse.ArgumentParser(prog="crossing-train", description="Train a crossing policy (frozen backbone, cached features).")
+    p.add_argument("--data", required=True, help="dataset folder (manifest.csv)")
+    p.add_argument("--out", required=True, help="run folder, e.g. runs/lite0_spatial")
+    p.add_argument("--backbone", default=d["backbone"])
+    p.add_argument("--weights", default=d["weights"], help="imagenet | none | PATH to a state dict")
+    p.add_argument("--head", default=d["head"], help="spatial | thesis")
+    p.add_argument("--actions", type=int, default=d["actions"], help="4 | 8 | 13")
+    p.add_argument("--epochs", type=int, default=d["epochs"])
+    p.add_argument("--batch-size", type=int, default=d["batch_size"])
+    p.add_argument("--optimizer", default=d["optimizer"], help="rmsprop | adamw")
+    p.add_argument("--lr", type=float, default=d["lr"])
+    p.add_argument("--weight-decay", type=float, default=d["weight_decay"])
+    p.add_argument("--p", type=float, default=d["p"], help="MC dropout probability of the head")
+    p.add_argument("--no-mirror", dest="mirror", action="store_false", help="do not add mirrored frames")
+    p.add_argument("--yaw", type=_floats, default=d["yaw"], help="fixed yaw angles in degrees, e.g. 8,16 (each +-)")
+    p.add_argument("--fov", dest="fov_deg", type=float, default=d["fov_deg"], help="camera field of view (deg)")
+    p.add_argument("--input-size", type=_size, default=d["input_size"], help="H or HxW, e.g. 224x298 (4:3)")
+    p.add_argument("--four-three", action="store_true", help="shortcut for --input-size 224x298")
+    p.add_argument("--unfreeze", type=int, default=d["unfreeze"], help="train the last N backbone blocks")
+    p.add_argument("--balance", default=d["balance"], help="none | weights | sampler")
+    p.add_argument("--smoothing", type=float, default=d["smoothing"], help="label mass given to neighbouring bins")
+    p.add_argument("--select-on", default=d["select_on"], help="val | holdout | last: which set picks best.pt")
+    p.add_argument("--holdout", default="", help="comma-separated train sources held out for selection")
+    p.add_argument("--seed", type=int, default=d["seed"])
+    p.add_argument("--threads", type=int, default=d["threads"])
+    p.add_argument("--cache-dir", default=d["cache_dir"])
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out from weights/last.pt")
+    return p
+
+
+def train_main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``crossing-train``."""
+    a = train_parser().parse_args(argv)
+
+    def go() -> int:
+        from .train import train
+
+        cfg = TrainConfig(
+            data=a.data, out=a.out, backbone=a.backbone, weights=a.weights, head=a.head, actions=a.actions,
+            epochs=a.epochs, batch_size=a.batch_size, optimizer=a.optimizer, lr=a.lr,
+            weight_decay=a.weight_decay, p=a.p, mirror=a.mirror, yaw=tuple(a.yaw), fov_deg=a.fov_deg,
+            input_size=(224, 298) if a.four_three else a.input_size, unfreeze=a.unfreeze, balance=a.balance,
+            smoothing=a.smoothing, select_on=a.select_on,
+            holdout=tuple(s.strip() for s in a.holdout.split(",") if s.strip()), seed=a.seed,
+            threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
+        out = train(cfg, resume=a.resume)
+        best = out / "weights" / "best.pt"
+        print(f"trained {cfg.epochs} epochs -> {best} ({best.stat().st_size / 1e6:.1f} MB)")
+        return 0
+
+    return _run(go)
+
+
+def eval_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="crossing-eval", description="Evaluate a run (or a bundle) on a dataset split.")
+    p.add_argument("--run", help="run folder (uses weights/best.pt) or a .pt checkpoint")
+    p.add_argument("--bundle", help="bundle folder (model.onnx + bundle.json) instead of --run")
+    p.add_argument("--data", required=True, help="dataset folder (manifest.csv)")
+    p.add_argument("--split", default="val", help="val | test | train")
+    p.add_argument("--out", help="output folder (default RUN/eval_SPLIT or BUNDLE/eval_SPLIT)")
+    p.add_argument("--samples", type=int, default=1, help="MC dropout samples for checkpoints (1 = deterministic)")
+    p.add_argument("--examples", type=int, default=12, help="frames on the example sheet")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--cache-dir", default=_DEFAULTS["cache_dir"])
+    p.add_argument("--quiet", action="store_true")
+    return p
+
+
+def eval_main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``crossing-eval``."""
+    a = eval_parser().parse_args(argv)
+
+    def go() -> int:
+        from .config import ConfigError
+        from .evaluate import EvalConfig, evaluate
+
+        if bool(a.run) == bool(a.bundle):
+            raise ConfigError("Invalid arguments: give exactly one of --run DIR and --bundle DIR")
+        cfg = EvalConfig(run=a.run, bundle=a.bundle, data=a.data, split=a.split, out=a.out, samples=a.samples,
+                         examples=a.examples, threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
+        out, m = evaluate(cfg)
+        print(f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f}), "
+              f"bin MAE {m['bin_mae']:.3f} -> {out / 'metrics.json'}")
+        return 0
+
+    return _run(go)

@@ -1,0 +1,87 @@
+"""Training configuration: one frozen dataclass holds every default (the CLI is built from it)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+
+from ..actions import VALID_SPACES
+from .backbones import list_backbones
+from .heads import HEAD_KINDS
+
+OPTIMIZERS = ("rmsprop", "adamw")
+SELECT_ON = ("val", "holdout", "last")
+BALANCE = ("none", "weights", "sampler")
+
+
+class ConfigError(ValueError):
+    """An invalid training option (one line, names the option and the valid values)."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything that defines a training run. Defaults follow the thesis's recipe (frozen
+    backbone, RMSprop lr 2e-4 rho 0.9 eps 1e-8, cross-entropy, mirrored data) with the
+    ``spatial`` head and EfficientNet-Lite0."""
+
+    data: str
+    out: str
+    backbone: str = "efficientnet_lite0"
+    weights: str = "imagenet"
+    head: str = "spatial"
+    actions: int = 13
+    epochs: int = 30
+    batch_size: int = 64
+    optimizer: str = "rmsprop"
+    lr: float = 2e-4
+    weight_decay: float = 0.0
+    p: float = 0.5                      # MC dropout probability of the head
+    mirror: bool = True
+    yaw: tuple[float, ...] = ()         # fixed yaw angles (degrees), each used as +-angle
+    fov_deg: float = 90.0
+    input_size: tuple[int, int] | None = None   # (H, W); None = the backbone's own
+    unfreeze: int = 0                   # last backbone blocks trained (0 = frozen backbone)
+    balance: str = "none"               # none | weights (class-weighted loss) | sampler
+    smoothing: float = 0.0              # label mass moved to the neighbouring bins
+    select_on: str = "val"              # val | holdout | last: which set picks best.pt
+    holdout: tuple[str, ...] = ()       # train sources held out for model selection
+    seed: int = 0
+    threads: int = 2
+    cache_dir: str = "runs/.cache"
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        check = [
+            (self.backbone in list_backbones(), f"backbone {self.backbone!r}; valid: {', '.join(list_backbones())}"),
+            (self.head in HEAD_KINDS, f"head {self.head!r}; valid: {', '.join(HEAD_KINDS)}"),
+            (self.actions in VALID_SPACES, f"actions {self.actions}; valid: 4, 8, 13"),
+            (self.epochs >= 1, f"epochs {self.epochs}; valid: >= 1"),
+            (self.batch_size >= 1, f"batch_size {self.batch_size}; valid: >= 1"),
+            (self.optimizer in OPTIMIZERS, f"optimizer {self.optimizer!r}; valid: {', '.join(OPTIMIZERS)}"),
+            (self.lr > 0, f"lr {self.lr}; valid: > 0"),
+            (0 <= self.p < 1, f"p {self.p}; valid: 0 <= p < 1"),
+            (self.unfreeze >= 0, f"unfreeze {self.unfreeze}; valid: >= 0"),
+            (self.balance in BALANCE, f"balance {self.balance!r}; valid: {', '.join(BALANCE)}"),
+            (0 <= self.smoothing < 1, f"smoothing {self.smoothing}; valid: 0 <= s < 1"),
+            (self.select_on in SELECT_ON, f"select_on {self.select_on!r}; valid: {', '.join(SELECT_ON)}"),
+            (self.select_on != "holdout" or bool(self.holdout), "select_on holdout needs --holdout SOURCE"),
+            (all(0 < abs(a) < 45 for a in self.yaw), f"yaw {self.yaw}; valid: angles with 0 < |a| < 45"),
+            (self.threads >= 1, f"threads {self.threads}; valid: >= 1"),
+            (self.input_size is None or min(self.input_size) >= 16, f"input_size {self.input_size}; valid: >= 16 px"),
+        ]
+        for ok, msg in check:
+            if not ok:
+                raise ConfigError(f"Invalid {msg}")
+
+    def to_dict(self) -> dict:
+        """Plain types (tuples as lists) for args.yaml."""
+        d = asdict(self)
+        for k, v in d.items():
+            if isinstance(v, tuple):
+                d[k] = list(v)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TrainConfig":
+        names = {f.name for f in fields(cls)}
+        kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items() if k in names}
+        return cls(**kw)

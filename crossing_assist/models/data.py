@@ -1,0 +1,76 @@
+"""Frames -> normalised tensors, and the fixed augmentation *variants* of each frame.
+
+A variant is ``(mirrored, yaw_deg)``: the frame flipped left-right (bin k -> 13 - k) and/or
+re-rendered as if the camera had turned by ``yaw_deg`` (an exact homography; the label moves
+predictably, goals turned out of the frame become ``unknown``). Variants are fixed (not
+random per epoch) so that frozen-backbone features can be computed once and cached.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..actions import UNKNOWN
+from ..data_tools import augment
+from ..data_tools.images import load_rgb
+from ..data_tools.manifest import Dataset, Row
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One fixed augmentation: flip first (if ``mirrored``), then yaw by ``yaw_deg`` (right +)."""
+
+    mirrored: bool = False
+    yaw_deg: float = 0.0
+
+    @property
+    def tag(self) -> str:
+        return f"{'m' if self.mirrored else 'o'}{self.yaw_deg:+g}"
+
+
+def make_variants(mirror: bool, yaw_angles: tuple[float, ...] = ()) -> tuple[Variant, ...]:
+    """Identity (+ mirrored) x (0 and +-each yaw angle); identity first."""
+    flips = (False, True) if mirror else (False,)
+    angles = (0.0,) + tuple(s * float(a) for a in yaw_angles for s in (1, -1) if a)
+    return tuple(Variant(f, a) for f in flips for a in angles)
+
+
+def resize_rgb(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """H x W x 3 uint8 -> size (H, W) x 3 uint8; area filter when shrinking, bilinear else."""
+    h, w = size
+    if image.shape[:2] == (h, w):
+        return image
+    shrink = image.shape[0] > h or image.shape[1] > w
+    return cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+
+
+def normalise(images: np.ndarray, mean: tuple[float, ...], std: tuple[float, ...]) -> np.ndarray:
+    """N x H x W x 3 uint8 RGB -> N x 3 x H x W float32, ``(x / 255 - mean) / std``."""
+    x = images.astype(np.float32) / 255.0
+    x = (x - np.asarray(mean, np.float32)) / np.asarray(std, np.float32)
+    return np.ascontiguousarray(x.transpose(0, 3, 1, 2))
+
+
+def apply_variant(image: np.ndarray, far_x: float | None, label: int, v: Variant,
+                  fov_deg: float) -> tuple[np.ndarray, float | None, int]:
+    """The variant of a (resized) frame with its moved goal and bin (0 = unknown)."""
+    if v.mirrored:
+        image, far_x, label = augment.mirror(image, far_x, label)
+    if v.yaw_deg:
+        image, far_x, label, _ = augment.yaw(image, far_x, label, v.yaw_deg, fov_deg=fov_deg,
+                                             out_of_frame="unknown")
+    return image, far_x, label
+
+
+def load_variants(ds: Dataset, row: Row, size: tuple[int, int], variants: tuple[Variant, ...],
+                  fov_deg: float) -> list[tuple[np.ndarray, float, int]]:
+    """Every variant of one row: (image size x 3 uint8, far_x or nan, bin)."""
+    base = resize_rgb(load_rgb(ds.image_path(row)), size)
+    out = []
+    for v in variants:
+        img, fx, lab = apply_variant(base, row.far_x, row.label, v, fov_deg)
+        out.append((img, np.nan if fx is None or lab == UNKNOWN else float(fx), int(lab)))
+    return out

@@ -1,0 +1,155 @@
+"""``crossing-eval``: metrics.json and plots for a checkpoint (or a bundle) on a dataset split.
+
+Writes into ``out``: ``metrics.json`` (see :func:`crossing_assist.models.metrics.compute_metrics`,
+plus where the numbers came from), ``confusion_matrix.png``, ``reliability.png`` and
+``examples.png`` (frames with the true strip, the top-3 predicted strips and the activation
+map of the predicted action: the thesis's Figures 3.4-3.6).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..actions import get_space
+from ..data_tools.images import load_rgb
+from ..data_tools.manifest import Dataset, atomic_write_text, read_manifest
+from .cache import compute_features
+from .checkpoint import load_checkpoint, load_policy
+from .config import ConfigError
+from .data import make_variants, normalise, resize_rgb
+from .plots import plot_confusion, plot_examples, plot_reliability
+from .policy import Policy
+from .train import Split, predict_split
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """One evaluation: exactly one of ``run`` (folder or .pt) and ``bundle``."""
+
+    data: str
+    run: str | None = None
+    bundle: str | None = None
+    split: str = "val"
+    out: str | None = None
+    samples: int = 1
+    examples: int = 12
+    threads: int = 2
+    cache_dir: str = "runs/.cache"
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        if (self.run is None) == (self.bundle is None):
+            raise ConfigError("Invalid arguments: give exactly one of --run and --bundle")
+        if self.samples < 1:
+            raise ConfigError(f"Invalid samples {self.samples}; valid: >= 1")
+        if self.examples < 0:
+            raise ConfigError(f"Invalid examples {self.examples}; valid: >= 0")
+
+
+def _checkpoint_path(run: str) -> Path:
+    p = Path(run)
+    if p.is_dir():
+        p = p / "weights" / "best.pt"
+    if not p.is_file():
+        raise ConfigError(f"Invalid --run: {p} not found (expected a run folder with weights/best.pt or a .pt file)")
+    return p
+
+
+def _split(cfg: EvalConfig) -> Dataset:
+    ds = read_manifest(cfg.data)
+    part = ds.split(cfg.split)
+    if len(part) == 0:
+        raise ConfigError(f"Invalid --split {cfg.split}: {cfg.data} has no {cfg.split} rows")
+    return part
+
+
+def _example_indices(pred: np.ndarray, labels: np.ndarray, k: int) -> np.ndarray:
+    """Up to k frames, half errors and half correct, spread evenly over the split."""
+    wrong, right = np.flatnonzero(pred != labels), np.flatnonzero(pred == labels)
+    take = lambda a, m: a[np.linspace(0, len(a) - 1, min(m, len(a))).astype(int)] if len(a) else a  # noqa: E731
+    idx = np.concatenate([take(wrong, k // 2), take(right, k - min(k // 2, len(wrong)))])
+    return np.sort(idx[:k]).astype(int)
+
+
+@torch.no_grad()
+def activation_maps(policy: Policy, images: list[np.ndarray], actions: np.ndarray) -> list[np.ndarray]:
+    """Per frame, the head's activation map of ``actions[i]`` (spatial: 1 x 12 column shares;
+    thesis heads: h x w score / CAM map)."""
+    policy.eval()
+    size = tuple(policy.config["input_size"])
+    x = torch.from_numpy(normalise(np.stack([resize_rgb(i, size) for i in images]),
+                                   policy.config["mean"], policy.config["std"]))
+    feats = policy.backbone.forward_features(x)
+    head = policy.head
+    maps = head.column_maps(feats)[:, :, None, :] if hasattr(head, "column_maps") else head.score_maps(feats)
+    return [maps[i, int(a)].numpy() for i, a in enumerate(actions)]
+
+
+def _eval_checkpoint(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, Policy]:
+    path = _checkpoint_path(cfg.run)
+    policy = load_policy(path)
+    ck = load_checkpoint(path)
+    c = policy.config
+    start = int(c.get("frozen_blocks", len(policy.backbone.blocks)))
+    fs = compute_features(policy.backbone, start, part, tuple(c["input_size"]), make_variants(False),
+                          float(c["fov_deg"]), Path(cfg.cache_dir), progress=cfg.progress, desc=f"features {cfg.split}")
+    split = Split(torch.from_numpy(np.array(fs.feats)), fs.labels, fs.far_x)
+    probs = predict_split(policy, split, start, samples=cfg.samples)
+    info = {"source": "checkpoint", "checkpoint": str(path), "epoch": int(ck.get("epoch", 0)),
+            "samples": cfg.samples, "majority_from": "train" if "majority_action" in c else "eval labels",
+            "backbone": c["backbone"], "head": c["head"]}
+    return probs, info, policy
+
+
+def _eval_bundle(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, int]:
+    try:
+        from ..export.evaluate import predict_bundle
+    except ImportError:
+        raise ConfigError("Invalid --bundle: bundle evaluation is not available (crossing_assist.export.evaluate"
+                          " is missing from this install)") from None
+    from ..bundle import read_bundle
+
+    bundle = read_bundle(cfg.bundle)
+    images = [load_rgb(part.image_path(r)) for r in part.rows]
+    out = predict_bundle(cfg.bundle, images, progress=cfg.progress)
+    info = {"source": "bundle", "bundle": str(cfg.bundle), "majority_from": "eval labels",
+            "samples": int(bundle.mc.samples)}
+    return np.asarray(out["probs"], dtype=np.float64), info, int(bundle.actions.n)
+
+
+def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
+    """Run the evaluation; returns (output folder, metrics dict)."""
+    from .metrics import compute_metrics
+
+    torch.set_num_threads(cfg.threads)
+    part = _split(cfg)
+    policy = None
+    if cfg.run is not None:
+        probs, info, policy = _eval_checkpoint(cfg, part)
+        n_actions, majority = policy.n_actions, policy.config.get("majority_action")
+        default_out = _checkpoint_path(cfg.run).parent.parent / f"eval_{cfg.split}"
+    else:
+        probs, info, n_actions = _eval_bundle(cfg, part)
+        majority = None
+        default_out = Path(cfg.bundle) / f"eval_{cfg.split}"
+    labels = get_space(n_actions).bins_to_actions(part.labels())
+    m = compute_metrics(probs, labels, n_actions, part.far_x(), majority=majority)
+    m.update({"split": cfg.split, "data": str(cfg.data), **info})
+    out = Path(cfg.out) if cfg.out else default_out
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "metrics.json", json.dumps(m, indent=1, allow_nan=True))
+    plot_confusion(np.array(m["confusion"]), m["names"], out / "confusion_matrix.png",
+                   f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f})")
+    plot_reliability(m["reliability"], m["ece"], out / "reliability.png")
+    if cfg.examples:
+        pred = probs.argmax(1)
+        idx = _example_indices(pred, labels, cfg.examples)
+        images = [load_rgb(part.image_path(part.rows[i])) for i in idx]
+        maps = activation_maps(policy, images, pred[idx]) if policy is not None else [None] * len(idx)
+        plot_examples(images, probs[idx], labels[idx], n_actions, maps, out / "examples.png")
+    return out, m

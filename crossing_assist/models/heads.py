@@ -1,0 +1,158 @@
+"""Policy heads with export-safe MC dropout.
+
+Every head splits into a deterministic ``trunk`` (run once per frame) and a stochastic
+``tail``: the T Monte-Carlo samples are folded into the batch *after* the trunk, so T samples
+cost almost nothing over one. Dropout masks are explicit (``torch.rand_like(x) >= p``, scaled
+by ``1 / (1 - p)``), which exports to ONNX as ``RandomUniformLike`` and is never removed by
+export or graph optimisation (``nn.Dropout`` is; see ``DESIGN.md``).
+
+Kinds
+    ``spatial`` (default): 1x1 conv + ReLU, mean over feature-map *rows only* (the horizontal
+    axis is the task), columns resampled to 12 (one per bin, whatever the input width), then
+    dropout -> linear -> ReLU -> dropout -> linear to the actions.
+    ``thesis``: the thesis's head, 3x3x32 conv (ReLU) -> dropout -> 1x1x|A| conv -> ReLU ->
+    global mean; the softmax is applied to these pooled scores by the loss / the consumer.
+    ``thesis_fc``: the thesis's ResNet-50 head, global mean -> dropout -> fully connected.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from ..actions import N_BINS
+
+HEAD_KINDS = ("spatial", "thesis", "thesis_fc")
+
+
+class HeadError(ValueError):
+    """Invalid head kind or argument."""
+
+
+def mc_dropout(x: torch.Tensor, p: float, active: bool) -> torch.Tensor:
+    """Explicit-mask dropout: ``x * (rand_like(x) >= p) / (1 - p)`` when active, else ``x``."""
+    if not active or p <= 0.0:
+        return x
+    keep = (torch.rand_like(x) >= p).to(x.dtype)
+    return x * keep * (1.0 / (1.0 - p))
+
+
+class Head(nn.Module):
+    """Base class. ``forward(features N x C x h x w, samples, mc) -> logits (samples, N, A)``.
+
+    ``mc=None`` means ``mc = self.training``; with ``mc`` False every sample is identical.
+    ``p`` (dropout probability, 0 <= p < 1) is a plain settable attribute.
+    """
+
+    kind = "base"
+
+    def __init__(self, in_channels: int, n_actions: int, p: float):
+        super().__init__()
+        if not 0.0 <= float(p) < 1.0:
+            raise HeadError(f"Invalid dropout p: {p}; valid: 0 <= p < 1")
+        self.in_channels = int(in_channels)
+        self.n_actions = int(n_actions)
+        self.p = float(p)
+
+    def trunk(self, features: torch.Tensor) -> torch.Tensor:  # deterministic, once per frame
+        raise NotImplementedError
+
+    def tail(self, z: torch.Tensor, mc: bool) -> torch.Tensor:  # stochastic, per sample
+        raise NotImplementedError
+
+    def forward(self, features: torch.Tensor, samples: int = 1, mc: bool | None = None) -> torch.Tensor:
+        mc = self.training if mc is None else bool(mc)
+        z = self.trunk(features)
+        n = z.shape[0]
+        if samples > 1:
+            z = z.unsqueeze(0).expand(samples, *z.shape).reshape(samples * n, *z.shape[1:])
+        logits = self.tail(z, mc)
+        return logits.reshape(samples, n, self.n_actions)
+
+
+class SpatialHead(Head):
+    """Keeps the horizontal axis: per-column features (12 columns) feed an MLP."""
+
+    kind = "spatial"
+
+    def __init__(self, in_channels: int, n_actions: int, p: float = 0.5, width: int = 128,
+                 hidden: int = 256, columns: int = N_BINS):
+        super().__init__(in_channels, n_actions, p)
+        self.columns = int(columns)
+        self.reduce = nn.Conv2d(in_channels, width, 1)
+        self.fc1 = nn.Linear(width * self.columns, hidden)
+        self.fc2 = nn.Linear(hidden, n_actions)
+
+    def trunk(self, features: torch.Tensor) -> torch.Tensor:
+        z = F.relu(self.reduce(features)).mean(2, keepdim=True)          # N x W x 1 x w
+        z = F.interpolate(z, size=(1, self.columns), mode="bilinear", align_corners=False)
+        return z.flatten(1)                                               # N x (width * 12)
+
+    def tail(self, z: torch.Tensor, mc: bool) -> torch.Tensor:
+        z = F.relu(self.fc1(mc_dropout(z, self.p, mc)))
+        return self.fc2(mc_dropout(z, self.p, mc))
+
+    def column_maps(self, features: torch.Tensor) -> torch.Tensor:
+        """Class activation along the width: N x A x 12 (each column's share of the logit)."""
+        z = self.trunk(features).reshape(features.shape[0], -1, self.columns)   # N x W x 12
+        h = F.relu(self.fc1(z.flatten(1)))                                        # N x hidden
+        # Gradient-free attribution: occlude one column at a time and record the logit drop.
+        base = self.fc2(h)
+        drops = []
+        for c in range(self.columns):
+            zc = z.clone()
+            zc[:, :, c] = 0
+            drops.append(base - self.fc2(F.relu(self.fc1(zc.flatten(1)))))
+        return torch.stack(drops, -1)
+
+
+class ThesisHead(Head):
+    """3x3x32 conv (ReLU) -> dropout -> 1x1x|A| conv -> ReLU -> global mean."""
+
+    kind = "thesis"
+
+    def __init__(self, in_channels: int, n_actions: int, p: float = 0.5):
+        super().__init__(in_channels, n_actions, p)
+        self.conv = nn.Conv2d(in_channels, 32, 3, padding=1)
+        self.score = nn.Conv2d(32, n_actions, 1)
+
+    def trunk(self, features: torch.Tensor) -> torch.Tensor:
+        return F.relu(self.conv(features))
+
+    def tail(self, z: torch.Tensor, mc: bool) -> torch.Tensor:
+        return F.relu(self.score(mc_dropout(z, self.p, mc))).mean((2, 3))
+
+    def score_maps(self, features: torch.Tensor) -> torch.Tensor:
+        """Class activation maps N x A x h x w (the scores before pooling)."""
+        return F.relu(self.score(self.trunk(features)))
+
+
+class ThesisFCHead(Head):
+    """The thesis's ResNet-50 head: global mean -> dropout -> fully connected."""
+
+    kind = "thesis_fc"
+
+    def __init__(self, in_channels: int, n_actions: int, p: float = 0.5):
+        super().__init__(in_channels, n_actions, p)
+        self.fc = nn.Linear(in_channels, n_actions)
+
+    def trunk(self, features: torch.Tensor) -> torch.Tensor:
+        return features.mean((2, 3))
+
+    def tail(self, z: torch.Tensor, mc: bool) -> torch.Tensor:
+        return self.fc(mc_dropout(z, self.p, mc))
+
+    def score_maps(self, features: torch.Tensor) -> torch.Tensor:
+        """Classic CAM: N x A x h x w, the FC weights applied at every position."""
+        return torch.einsum("nchw,ac->nahw", features, self.fc.weight)
+
+
+_KINDS = {"spatial": SpatialHead, "thesis": ThesisHead, "thesis_fc": ThesisFCHead}
+
+
+def create_head(kind: str, in_channels: int, n_actions: int, *, p: float = 0.5) -> Head:
+    """Build head ``kind`` (``spatial`` | ``thesis`` | ``thesis_fc``) on C = ``in_channels``."""
+    if kind not in _KINDS:
+        raise HeadError(f"Unknown head: {kind!r}; valid: {', '.join(HEAD_KINDS)}")
+    return _KINDS[kind](in_channels, n_actions, p=p)

@@ -1,0 +1,310 @@
+"""The training loop (one readable loop, top to bottom) for ``crossing-train``.
+
+The backbone's first ``len(blocks) - unfreeze`` blocks are frozen: their output is computed
+once per (frame, variant) and cached (:mod:`.cache`), so an epoch costs only the trainable
+part. Frozen batch-norm statistics stay fixed (eval mode). Run folder::
+
+    OUT/args.yaml  results.csv  results.png  weights/last.pt  weights/best.pt
+
+``last.pt`` (written atomically at the end of every epoch) carries the optimizer state and
+the best score so far, so ``--resume`` after a kill continues at the next epoch and the run
+ends with the same number of epochs as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+import yaml
+from tqdm import tqdm
+
+from ..actions import UNKNOWN, get_space
+from ..data_tools.manifest import Dataset, atomic_write_text, read_manifest
+from .backbones import create_backbone
+from .cache import FeatureSet, compute_features
+from .checkpoint import load_checkpoint, save_checkpoint
+from .config import ConfigError, TrainConfig
+from .data import make_variants
+from .heads import create_head
+from .metrics import compute_metrics
+from .policy import Policy, policy_config
+
+RESULT_FIELDS = ("epoch", "train_loss", "sel_accuracy", "sel_bin_mae", "sel_nll",
+                 "val_accuracy", "val_bin_mae", "val_nll", "seconds")
+
+
+@dataclass(frozen=True)
+class Split:
+    """Cached samples of one set, labels already mapped to actions."""
+
+    feats: torch.Tensor          # M x C x h x w float16
+    actions: np.ndarray          # (M,) int64
+    far_x: np.ndarray            # (M,) float64
+
+
+def _split_sets(cfg: TrainConfig, ds: Dataset) -> tuple[Dataset, Dataset | None, Dataset | None]:
+    """(train, selection, val); the selection set is val, held-out train sources, or none."""
+    train = ds.split("train")
+    hold = set(cfg.holdout)
+    unknown = hold - {r.source for r in train.rows}
+    if unknown:
+        raise ConfigError(f"Invalid holdout: {', '.join(sorted(unknown))} not among train sources "
+                          f"({', '.join(train.sources())})")
+    sel = Dataset(ds.root, tuple(r for r in train.rows if r.source in hold)) if hold else None
+    train = Dataset(ds.root, tuple(r for r in train.rows if r.source not in hold))
+    val = ds.split("val")
+    val = val if len(val) else None
+    if len(train) == 0:
+        raise ConfigError(f"Invalid data: {ds.root} has no train rows (after holding out {sorted(hold)})")
+    if cfg.select_on == "val":
+        if val is None:
+            raise ConfigError(f"Invalid select_on val: {ds.root} has no val rows; use --select-on last or --holdout")
+        sel = val
+    elif cfg.select_on == "last":
+        sel = sel if hold else None
+    return train, sel, val
+
+
+def _to_split(fs: FeatureSet, n_actions: int) -> Split:
+    feats = torch.from_numpy(np.array(fs.feats))  # copy into memory (the file is read-only)
+    return Split(feats, get_space(n_actions).bins_to_actions(fs.labels), fs.far_x)
+
+
+def _targets(actions: torch.Tensor, n: int, smoothing: float) -> torch.Tensor:
+    """Soft targets: 1 - s on the true action, s shared by its known neighbours (a +- 1)."""
+    t = F.one_hot(actions, n).float()
+    if smoothing <= 0:
+        return t
+    left = torch.where(actions > 1, actions - 1, actions)
+    right = torch.where((actions > 0) & (actions < n - 1), actions + 1, actions)
+    known = (actions != UNKNOWN).float()[:, None]
+    nb = 0.5 * (F.one_hot(left, n).float() + F.one_hot(right, n).float())
+    return t * (1 - smoothing * known) + smoothing * known * nb
+
+
+def _class_weights(actions: np.ndarray, n: int) -> torch.Tensor:
+    """Inverse-frequency weights (mean 1 over present classes; absent classes 0)."""
+    counts = np.bincount(actions, minlength=n).astype(np.float64)
+    w = np.where(counts > 0, 1.0 / np.maximum(counts, 1), 0.0)
+    w *= (counts > 0).sum() / max(w.sum(), 1e-12)
+    return torch.tensor(w, dtype=torch.float32)
+
+
+def _epoch_order(train: Split, cfg: TrainConfig, epoch: int) -> np.ndarray:
+    """Sample order of one epoch; deterministic in (seed, epoch) so a resumed run matches."""
+    rng = np.random.default_rng([cfg.seed, epoch])
+    m = len(train.actions)
+    if cfg.balance != "sampler":
+        return rng.permutation(m)
+    counts = np.bincount(train.actions)
+    w = 1.0 / counts[train.actions]
+    return rng.choice(m, size=m, replace=True, p=w / w.sum())
+
+
+@torch.no_grad()
+def predict_split(policy: Policy, split: Split, start: int, batch_size: int = 256,
+                  samples: int = 1) -> np.ndarray:
+    """Mean softmax (N x A) over ``samples`` (MC dropout when samples > 1) from cached feats."""
+    policy.eval()
+    out = []
+    for i in range(0, len(split.actions), batch_size):
+        x = split.feats[i:i + batch_size].float()
+        logits = policy.forward_from(x, start, samples=samples, mc=samples > 1)
+        out.append(logits.softmax(-1).mean(0))
+    return torch.cat(out).numpy()
+
+
+def _train_mode(policy: Policy, start: int) -> None:
+    """Head and unfrozen blocks train; every batch norm keeps its statistics (eval mode)."""
+    policy.train()
+    for m in policy.modules():
+        if isinstance(m, torch.nn.modules.batchnorm._BatchNorm):
+            m.eval()
+    for i, block in enumerate(policy.backbone.blocks):
+        block.requires_grad_(i >= start)
+
+
+def _build(cfg: TrainConfig) -> tuple[Policy, int]:
+    backbone = create_backbone(cfg.backbone, weights=cfg.weights)
+    n_blocks = len(backbone.blocks)
+    if cfg.unfreeze > n_blocks:
+        raise ConfigError(f"Invalid unfreeze {cfg.unfreeze}: {cfg.backbone} has {n_blocks} blocks")
+    kind = "thesis_fc" if cfg.head == "thesis" and cfg.backbone == "resnet50" else cfg.head
+    head = create_head(kind, backbone.num_features, cfg.actions, p=cfg.p)
+    conf = policy_config(backbone, kind, cfg.actions, p=cfg.p, input_size=cfg.input_size, fov_deg=cfg.fov_deg,
+                         frozen_blocks=n_blocks - cfg.unfreeze, data=str(cfg.data))
+    return Policy(backbone, head, conf), n_blocks - cfg.unfreeze
+
+
+def _optimizer(cfg: TrainConfig, policy: Policy) -> torch.optim.Optimizer:
+    params = [p for p in policy.parameters() if p.requires_grad]
+    if cfg.optimizer == "rmsprop":
+        return torch.optim.RMSprop(params, lr=cfg.lr, alpha=0.9, eps=1e-8, weight_decay=cfg.weight_decay)
+    return torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
+
+
+def _score(m: dict | None) -> tuple[float, float]:
+    """Higher is better: accuracy, then lower bin MAE."""
+    if m is None:
+        return (0.0, 0.0)
+    mae = m["bin_mae"]
+    return (m["accuracy"], -(mae if not math.isnan(mae) else 99.0))
+
+
+def _write_results(path: Path, rows: list[dict]) -> None:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=RESULT_FIELDS)
+    w.writeheader()
+    w.writerows(rows)
+    atomic_write_text(path, buf.getvalue())
+
+
+def _read_results(path: Path, upto: int) -> list[dict]:
+    if not path.is_file():
+        return []
+    with open(path, newline="") as fh:
+        return [r for r in csv.DictReader(fh) if int(r["epoch"]) <= upto]
+
+
+def _metrics_or_none(policy: Policy, split: Split | None, start: int, n: int, majority: int) -> dict | None:
+    if split is None:
+        return None
+    return compute_metrics(predict_split(policy, split, start), split.actions, n, split.far_x, majority=majority)
+
+
+def _fmt(v: float | None) -> str:
+    return "" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.4f}"
+
+
+def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
+    """Train per ``cfg`` into ``cfg.out``; returns the run folder. Raises ConfigError /
+    ManifestError / CheckpointError / BackboneError with one clear line on bad input."""
+    torch.set_num_threads(cfg.threads)
+    torch.manual_seed(cfg.seed)     # head initialisation (the run's own generator state)
+    out = Path(cfg.out)
+    last_path, best_path = out / "weights" / "last.pt", out / "weights" / "best.pt"
+    state = None
+    if resume:
+        if not last_path.is_file():
+            raise ConfigError(f"Invalid --resume: {last_path} not found (start without --resume)")
+        state = load_checkpoint(last_path)
+        cfg = TrainConfig.from_dict({**state["train_config"], "progress": cfg.progress, "threads": cfg.threads})
+    elif last_path.is_file():
+        raise ConfigError(f"Invalid --out: {out} already holds a run; pass --resume or pick a new --out")
+    ds = read_manifest(cfg.data)
+    train_ds, sel_ds, val_ds = _split_sets(cfg, ds)
+    policy, start = _build(cfg)
+    size = tuple(policy.config["input_size"])
+    variants = make_variants(cfg.mirror, cfg.yaw)
+    cache = Path(cfg.cache_dir)
+    fs = lambda d, v, name: compute_features(policy.backbone, start, d, size, v, cfg.fov_deg, cache,  # noqa: E731
+                                             progress=cfg.progress, desc=f"features {name}")
+    tr = _to_split(fs(train_ds, variants, "train"), cfg.actions)
+    plain = make_variants(False)
+    val = _to_split(fs(val_ds, plain, "val"), cfg.actions) if val_ds is not None else None
+    sel = val if sel_ds is val_ds else (_to_split(fs(sel_ds, plain, "holdout"), cfg.actions) if sel_ds else None)
+    majority = int(np.bincount(tr.actions, minlength=cfg.actions).argmax())
+    policy.config["counts"] = {"train": int(len(train_ds)), "train_samples": int(len(tr.actions)),
+                               "val": int(len(val_ds or ())), "holdout": int(len(sel_ds or ())) if cfg.holdout else 0}
+    policy.config["majority_action"] = majority
+    _train_mode(policy, start)
+    opt = _optimizer(cfg, policy)
+    first_epoch, best = 1, None
+    if state is not None:
+        policy.load_state_dict(state["state_dict"])
+        opt.load_state_dict(state["optimizer"])
+        first_epoch = int(state["epoch"]) + 1
+        best = state.get("best_score")
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "args.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+    rows = _read_results(out / "results.csv", first_epoch - 1)
+    weights = _class_weights(tr.actions, cfg.actions) if cfg.balance == "weights" else None
+    bar = tqdm(range(first_epoch, cfg.epochs + 1), desc="train", disable=not cfg.progress,
+               initial=first_epoch - 1, total=cfg.epochs, unit="epoch")
+    for epoch in bar:
+        t0 = time.time()
+        loss = _run_epoch(policy, opt, tr, start, cfg, epoch, weights)
+        m_sel = _metrics_or_none(policy, sel, start, cfg.actions, majority)
+        m_val = m_sel if sel is val else _metrics_or_none(policy, val, start, cfg.actions, majority)
+        row = {"epoch": epoch, "train_loss": f"{loss:.5f}", "seconds": f"{time.time() - t0:.2f}"}
+        for prefix, m in (("sel", m_sel), ("val", m_val)):
+            for k in ("accuracy", "bin_mae", "nll"):
+                row[f"{prefix}_{k}"] = _fmt(m[k]) if m else ""
+        rows.append(row)
+        is_best = cfg.select_on == "last" or best is None or list(_score(m_sel)) > list(best)
+        if is_best:
+            best = list(_score(m_sel))
+            save_checkpoint(best_path, policy, {"metrics": {"selection": _slim(m_sel), "val": _slim(m_val)},
+                                                "epoch": epoch, "train_config": cfg.to_dict()})
+        save_checkpoint(last_path, policy, {"metrics": {"selection": _slim(m_sel), "val": _slim(m_val)},
+                                            "epoch": epoch, "train_config": cfg.to_dict(),
+                                            "optimizer": opt.state_dict(), "best_score": best})
+        _write_results(out / "results.csv", rows)
+        bar.set_postfix(loss=row["train_loss"], acc=row["sel_accuracy"], mae=row["sel_bin_mae"])
+    _plot_results(out)
+    return out
+
+
+def _slim(m: dict | None) -> dict:
+    keys = ("n", "accuracy", "bin_mae", "balanced_accuracy", "top3_accuracy", "nll", "ece",
+            "majority_accuracy", "majority_bin_mae", "far_x_error")
+    return {k: m[k] for k in keys if m and k in m}
+
+
+def _run_epoch(policy: Policy, opt: torch.optim.Optimizer, tr: Split, start: int, cfg: TrainConfig,
+               epoch: int, weights: torch.Tensor | None) -> float:
+    """One pass over the cached training samples; returns the mean loss."""
+    _train_mode(policy, start)
+    torch.manual_seed(cfg.seed * 100003 + epoch)      # dropout masks, reproducible on resume
+    order = _epoch_order(tr, cfg, epoch)
+    total, count = 0.0, 0
+    steps = range(0, len(order), cfg.batch_size)
+    for i in tqdm(steps, desc=f"epoch {epoch}", leave=False, disable=not cfg.progress):
+        idx = torch.from_numpy(order[i:i + cfg.batch_size])
+        x = tr.feats[idx].float()
+        y = torch.from_numpy(tr.actions[idx.numpy()])
+        logits = policy.forward_from(x, start, samples=1, mc=True)[0]
+        target = _targets(y, cfg.actions, cfg.smoothing)
+        logp = logits.log_softmax(-1)
+        per = -(target * (logp if weights is None else logp * weights)).sum(-1)
+        loss = per.mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        total += float(loss.detach()) * len(idx)
+        count += len(idx)
+    return total / max(count, 1)
+
+
+def _plot_results(out: Path) -> None:
+    """results.png: train loss and selection/val accuracy per epoch."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with open(out / "results.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    ep = [int(r["epoch"]) for r in rows]
+    num = lambda k: [float(r[k]) if r[k] else np.nan for r in rows]  # noqa: E731
+    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.5))
+    a.plot(ep, num("train_loss"))
+    a.set(xlabel="epoch", ylabel="train loss", title="loss")
+    for k, lab in (("sel_accuracy", "selection"), ("val_accuracy", "val")):
+        b.plot(ep, num(k), label=lab)
+    b.set(xlabel="epoch", ylabel="accuracy", title="accuracy")
+    b.legend()
+    fig.tight_layout()
+    tmp = out / ".results.png.tmp.png"
+    fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    os.replace(tmp, out / "results.png")

@@ -1,0 +1,177 @@
+"""The decision logic: filter + gate + freshness, one deterministic step at a time.
+
+:class:`Decider` is the whole state machine the phone app ports (docs/readme_runtime.md,
+"Decision logic"; vectors in android_demo/test_vectors.json). Its inputs are the model outputs
+of a frame (an :class:`Observation`), the time ``t`` in seconds and the yaw rate in degrees per
+second (positive = the user turns right); its output is a :class:`Decision`. Its only state is
+the belief, the hold, and three times; nothing depends on wall clocks or randomness.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from crossing_assist.actions import DEFAULT_FOV_DEG, ActionSpace, get_space, heading_to_pan
+from crossing_assist.runtime import belief as bf
+from crossing_assist.runtime.gate import GATE_STOP, GateConfig, alpha, mix
+
+REASON_OK = "ok"
+REASON_UNCERTAIN = "uncertain"
+REASON_STALE = "stale"
+REASON_FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class Observation:
+    """A frame's model outputs: ``probs`` (A,) over the bundle's actions, ``uncertainty`` = the
+    bundle's measure (``calibration.uncertainty.measure``); ``ok=False`` = inference failed."""
+
+    probs: np.ndarray | None
+    uncertainty: float
+    ok: bool = True
+
+
+@dataclass(frozen=True)
+class DecisionConfig:
+    """Everything the decision logic depends on. ``threshold`` is the bundle's
+    ``calibration.uncertainty.threshold`` for ``measure``; ``watchdog_s``: longest time without
+    a successful frame before the beacon stops; pulse rates in Hz."""
+
+    n_actions: int = 13
+    fov_deg: float = DEFAULT_FOV_DEG
+    measure: str = "entropy"
+    threshold: float = 1.2
+    watchdog_s: float = 0.5
+    rate_min_hz: float = 2.0
+    rate_max_hz: float = 6.0
+    filter: bf.FilterConfig = field(default_factory=bf.FilterConfig)
+    gate: GateConfig = field(default_factory=GateConfig)
+
+    def __post_init__(self) -> None:
+        get_space(self.n_actions)
+        if not float(self.threshold) > 0:
+            raise ValueError(f"Invalid threshold: {self.threshold}; valid: > 0")
+        if not float(self.watchdog_s) > 0:
+            raise ValueError(f"Invalid watchdog_s: {self.watchdog_s}; valid: > 0")
+        if not 0 < self.rate_min_hz <= self.rate_max_hz:
+            raise ValueError(f"Invalid pulse rates: {self.rate_min_hz}..{self.rate_max_hz} Hz; valid: 0 < min <= max")
+
+    @property
+    def learner_threshold(self) -> float:
+        """Threshold (nats) for the belief's entropy: the bundle's, when its measure is entropy."""
+        return self.threshold if self.measure == "entropy" else self.gate.belief_entropy_threshold
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One decision. ``heading_deg``/``pan`` are None and ``stop`` is True when the beacon is
+    off (the stop/scan cue plays); ``pan`` in [-1, 1] (-1 = left); ``rate_hz`` = pulse rate."""
+
+    t: float
+    gate: str
+    reason: str
+    stop: bool
+    heading_deg: float | None
+    pan: float | None
+    rate_hz: float
+    frame_weight: float
+    learner_action: int
+    learner_heading: float | None
+    learner_u: float
+    alpha_learner: float
+    hold_heading: float | None
+    hold_u: float
+    alpha_hold: float
+    weight_learner: float
+    belief: np.ndarray = field(repr=False)
+
+    def to_json(self) -> dict:
+        """Plain-JSON dict (floats kept at full precision; belief as a list)."""
+        out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "belief"}
+        out["belief"] = [float(v) for v in self.belief]
+        for k, v in out.items():
+            if isinstance(v, float) and not math.isfinite(v):
+                out[k] = None
+        return out
+
+
+def frame_weight(obs: Observation, c_frame: float) -> float:
+    """Evidence weight of a frame before time scaling: ``max(0, 1 - 2 tanh(c U))`` (0 at and
+    beyond the threshold), 0 for failed frames and when ``argmax probs`` is unknown."""
+    if not obs.ok or obs.probs is None or not math.isfinite(obs.uncertainty):
+        return 0.0
+    if int(np.argmax(obs.probs)) == 0:
+        return 0.0
+    return max(0.0, 1.0 - 2.0 * math.tanh(c_frame * max(obs.uncertainty, 0.0)))
+
+
+class Decider:
+    """The stateful decision step. Call :meth:`step` with non-decreasing ``t``."""
+
+    def __init__(self, cfg: DecisionConfig) -> None:
+        self.cfg = cfg
+        self.space: ActionSpace = get_space(cfg.n_actions)
+        self.c_frame = cfg.gate.saturation / cfg.threshold
+        self.c_learner = cfg.gate.saturation / cfg.learner_threshold
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the start: uniform belief, no hold, no frame seen."""
+        self.belief = bf.uniform_belief()
+        self.t_prev: float | None = None
+        self.t_last_ok: float | None = None
+        self.hold_heading: float | None = None
+        self.hold_t = 0.0
+        self.hold_turned = 0.0
+
+    def step(self, t: float, obs: Observation | None, yaw_rate_dps: float = 0.0) -> Decision:
+        """Advance to time ``t`` (s) with this frame's outputs (``None`` = no new frame: a tick)."""
+        cfg = self.cfg
+        dt = 0.0 if self.t_prev is None else max(0.0, t - self.t_prev)
+        self.t_prev = t if self.t_prev is None else max(t, self.t_prev)
+        psi = yaw_rate_dps * dt
+        self.belief = bf.predict(self.belief, dt, yaw_rate_dps, cfg.fov_deg, cfg.filter)
+        if self.hold_heading is not None:
+            self.hold_heading -= psi
+            self.hold_turned += abs(psi)
+        w = 0.0
+        if obs is not None and obs.ok:
+            w = frame_weight(obs, self.c_frame)
+            since = cfg.filter.tau_evidence_s if self.t_last_ok is None else t - self.t_last_ok
+            w *= min(1.0, max(0.0, since) / cfg.filter.tau_evidence_s)
+            if w > 0.0:
+                q = bf.bin_likelihood(obs.probs, self.space)
+                self.belief = bf.update(self.belief, q, w, cfg.filter.eps)
+            self.t_last_ok = t
+        a_l, h_l = bf.belief_heading(self.belief, self.space, cfg.fov_deg)
+        u_l = bf.belief_entropy(self.belief, self.space) if h_l is not None else math.inf
+        al_l = alpha(u_l, self.c_learner)
+        if self.hold_heading is not None and abs(self.hold_heading) < 90.0:
+            u_f = (t - self.hold_t) / cfg.gate.hold_time_s + self.hold_turned / cfg.gate.hold_turn_deg
+        else:
+            u_f = math.inf
+        al_f = alpha(u_f, cfg.gate.saturation)
+        h_f = self.hold_heading if math.isfinite(u_f) else None
+        m = mix(h_l, al_l, h_f, al_f, cfg.gate)
+        if obs is not None and not obs.ok:
+            reason = REASON_FAILED
+        elif self.t_last_ok is None or t - self.t_last_ok > cfg.watchdog_s:
+            reason = REASON_STALE
+        else:
+            reason = REASON_UNCERTAIN if m.state == GATE_STOP else REASON_OK
+            if h_l is not None and al_l >= cfg.gate.alpha_min:  # refresh the hold from fresh evidence
+                self.hold_heading, self.hold_t, self.hold_turned = h_l, t, 0.0
+        stop = reason != REASON_OK
+        heading = None if stop else m.heading_deg
+        q = (m.confidence - cfg.gate.alpha_min) / (1.0 - cfg.gate.alpha_min)
+        rate = cfg.rate_min_hz + min(1.0, max(0.0, q)) * (cfg.rate_max_hz - cfg.rate_min_hz)
+        return Decision(
+            t=float(t), gate=GATE_STOP if stop else m.state, reason=reason, stop=stop,
+            heading_deg=heading, pan=None if heading is None else heading_to_pan(heading, cfg.fov_deg / 2),
+            rate_hz=rate, frame_weight=w, learner_action=a_l, learner_heading=h_l, learner_u=u_l,
+            alpha_learner=al_l, hold_heading=h_f, hold_u=u_f, alpha_hold=al_f,
+            weight_learner=m.weight_learner, belief=self.belief.copy(),
+        )

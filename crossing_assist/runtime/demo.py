@@ -1,0 +1,151 @@
+"""``crossing-demo``: run a bundle on a video (or camera) and hear/see what the beacon does.
+
+    crossing-demo                              # embedded bundle + embedded sample clip
+    crossing-demo street.mp4 --bundle runs/x/bundle --out demo_out
+    crossing-demo --camera 0 --live            # live: camera -> headphones (Ctrl-C to stop)
+    crossing-demo street.mp4 --live            # play a video's beacon in real time
+
+Offline it writes ``beacon.wav`` (on the video's timeline), ``annotated.mp4``, ``trace.jsonl``
+(one decision a line) and, with ffmpeg, ``annotated_with_audio.mp4``; then prints a summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+ASSETS = Path(__file__).resolve().parents[1] / "assets"
+DEFAULT_BUNDLE = ASSETS / "default_bundle"
+DEFAULT_CLIP = ASSETS / "sample_clip.mp4"
+DEFAULT_OUT = Path("crossing_demo_out")
+
+
+class DemoError(RuntimeError):
+    """A user-facing problem; printed as one ``error:`` line."""
+
+
+@dataclass(frozen=True)
+class DemoConfig:
+    """Resolved command line."""
+
+    video: Path | None
+    camera: int | None
+    bundle: Path
+    out_dir: Path
+    live: bool
+    annotate: bool
+    progress: bool
+    audio_device: str | None
+    max_seconds: float | None
+    watchdog_s: float
+
+
+def parse_args(argv: list[str] | None) -> DemoConfig:
+    """Parse the command line into a :class:`DemoConfig` (defaults: embedded assets)."""
+    ap = argparse.ArgumentParser(prog="crossing-demo", description=__doc__.split("\n\n")[0])
+    ap.add_argument("video", nargs="?", type=Path, help="video file (default: the embedded sample clip)")
+    ap.add_argument("--camera", type=int, metavar="N", help="use camera N instead of a video")
+    ap.add_argument("--bundle", type=Path, default=None, help="bundle folder (default: the embedded bundle)")
+    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default: ./{DEFAULT_OUT})")
+    ap.add_argument("--live", action="store_true", help="play the beacon on the audio device in real time")
+    ap.add_argument("--no-video", action="store_true", help="skip annotated.mp4 (faster)")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    ap.add_argument("--audio-device", default=None, help="sounddevice output device (index or name)")
+    ap.add_argument("--max-seconds", type=float, default=None, help="stop a live run after this long")
+    ap.add_argument("--watchdog", type=float, default=0.5, help="seconds without a fresh decision before "
+                    "the beacon stops (default 0.5)")
+    a = ap.parse_args(argv)
+    if a.video is not None and a.camera is not None:
+        raise DemoError("give a VIDEO or --camera N, not both")
+    if a.camera is not None and not a.live:
+        raise DemoError("--camera needs --live (the camera has no end for an offline run)")
+    if not a.watchdog > 0:
+        raise DemoError(f"--watchdog {a.watchdog} invalid; valid: > 0 seconds")
+    video, bundle = a.video, a.bundle
+    missing = []
+    if video is None and a.camera is None:
+        video = DEFAULT_CLIP
+        if not DEFAULT_CLIP.is_file():
+            missing.append(f"the embedded sample clip {DEFAULT_CLIP} (pass a VIDEO)")
+    if bundle is None:
+        bundle = DEFAULT_BUNDLE
+        if not (DEFAULT_BUNDLE / "bundle.json").is_file():
+            missing.append(f"the embedded default bundle {DEFAULT_BUNDLE} (pass --bundle DIR from crossing-export)")
+    if missing:
+        raise DemoError(" and ".join(missing) + (" is" if len(missing) == 1 else " are") + " missing")
+    if video is not None and not video.is_file():
+        raise DemoError(f"video {video} does not exist")
+    dev = a.audio_device
+    return DemoConfig(video=video, camera=a.camera, bundle=bundle, out_dir=a.out, live=a.live,
+                      annotate=not a.no_video, progress=not a.quiet,
+                      audio_device=int(dev) if dev is not None and dev.isdigit() else dev,
+                      max_seconds=a.max_seconds, watchdog_s=a.watchdog)
+
+
+def run_live_demo(cfg: DemoConfig) -> None:
+    """Live: frames -> decisions -> headphones; trace.jsonl in the output folder."""
+    from crossing_assist.runtime.audio import LiveAudio
+    from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
+    from crossing_assist.runtime.engine import Engine
+    from crossing_assist.runtime.live import LiveConfig, run_live
+    from crossing_assist.runtime.offline import trace_record
+    from crossing_assist.runtime.pipeline import Pipeline
+    from crossing_assist.runtime.sources import CameraSource, VideoSource
+
+    engine = Engine(cfg.bundle)
+    beacon = BeaconConfig()
+    player = CuePlayer(beacon)
+    source = CameraSource(cfg.camera) if cfg.camera is not None else VideoSource(cfg.video)
+    pipeline = Pipeline(engine, engine.decision_config(watchdog_s=cfg.watchdog_s), beacon)
+    cfg.out_dir.mkdir(parents=True, exist_ok=True)
+    trace_path = cfg.out_dir / "trace.jsonl"
+    with LiveAudio(player, device=cfg.audio_device), open(trace_path, "w", encoding="utf-8") as trace:
+        print("live: playing the beacon; Ctrl-C to stop", file=sys.stderr)
+        try:
+            n = run_live(source, pipeline, player,
+                         LiveConfig(watchdog_s=cfg.watchdog_s, pace=cfg.camera is None,
+                                    frozen_check=cfg.camera is not None, max_seconds=cfg.max_seconds),
+                         on_step=lambda i, s: trace.write(json.dumps(trace_record(i, s)) + "\n"),
+                         video_time=cfg.camera is None)
+        except KeyboardInterrupt:
+            n = -1
+    print(f"live run ended{'' if n < 0 else f' after {n} frames'}; trace: {trace_path}")
+
+
+def run(cfg: DemoConfig) -> None:
+    """Run the demo described by ``cfg``."""
+    if cfg.live:
+        run_live_demo(cfg)
+        return
+    from crossing_assist.runtime.offline import OfflineConfig, run_offline
+
+    summary = run_offline(OfflineConfig(video=cfg.video, bundle=cfg.bundle, out_dir=cfg.out_dir,
+                                        annotate=cfg.annotate, progress=cfg.progress))
+    print(f"crossing-demo: {cfg.video} with bundle {cfg.bundle}")
+    for line in summary.lines():
+        print("  " + line)
+    print(f"outputs are in {cfg.out_dir.resolve()}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point; returns the exit status (0 ok, 2 user error)."""
+    from crossing_assist.bundle import BundleError
+    from crossing_assist.runtime.audio import AudioDeviceError
+    from crossing_assist.runtime.sources import SourceError
+
+    try:
+        run(parse_args(argv))
+    except (DemoError, BundleError, AudioDeviceError, SourceError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

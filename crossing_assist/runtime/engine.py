@@ -1,0 +1,125 @@
+"""Inference engine: a bundle's ONNX graph on one frame -> a typed :class:`Prediction`.
+
+onnxruntime only (no torch). :meth:`Engine.predict` never raises for a bad frame or a failing
+session: it returns ``Prediction(ok=False, error=...)`` so the audio path never sees an
+exception. Opening an engine does raise (:class:`~crossing_assist.bundle.BundleError`) for a
+bundle that cannot be used, with one line saying why.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from crossing_assist.bundle import INPUT_NAME, OUTPUT_NAMES, Bundle, BundleError, check_session, read_bundle
+from crossing_assist.runtime.decide import DecisionConfig, Observation
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Model outputs for one frame.
+
+    ``probs`` (A,) mean class probabilities; ``entropy`` (nats) and ``mutual_info`` (nats, >= 0);
+    ``variance`` (A,) and ``votes`` (A,); ``conformal_set`` the actions with ``probs >=`` the
+    bundle's conformal threshold; ``action`` the argmax (0 = unknown); ``heading_deg`` its
+    heading (None for unknown); ``uncertainty`` the gate's measure; ``latency_s`` inference time.
+    ``ok=False`` (with ``error``) when inference failed; the arrays are then None.
+    """
+
+    ok: bool
+    probs: np.ndarray | None = None
+    entropy: float = math.inf
+    mutual_info: float = math.inf
+    variance: np.ndarray | None = None
+    votes: np.ndarray | None = None
+    conformal_set: tuple[int, ...] = ()
+    action: int = 0
+    heading_deg: float | None = None
+    uncertainty: float = math.inf
+    latency_s: float = 0.0
+    error: str = ""
+    extra: dict = field(default_factory=dict, repr=False)
+
+    def observation(self) -> Observation:
+        """What the decision logic needs from this prediction."""
+        return Observation(probs=self.probs, uncertainty=self.uncertainty, ok=self.ok)
+
+
+def measure_value(measure: str, entropy: float, mutual_info: float, variance: np.ndarray, probs: np.ndarray) -> float:
+    """The gate's frame uncertainty: ``entropy``, ``mutual_info``, or ``variance[argmax probs]``."""
+    if measure == "entropy":
+        return float(entropy)
+    if measure == "mutual_info":
+        return float(mutual_info)
+    if measure == "variance":
+        return float(variance[int(np.argmax(probs))])
+    raise ValueError(f"Unknown uncertainty measure: {measure!r}; valid: entropy, mutual_info, variance")
+
+
+class Engine:
+    """Runs a bundle. ``threads`` = onnxruntime intra-op threads (0 = its default)."""
+
+    def __init__(self, bundle_dir: str | Path, *, threads: int = 1) -> None:
+        import onnxruntime as ort
+
+        self.bundle: Bundle = read_bundle(bundle_dir)
+        opts = ort.SessionOptions()
+        if threads:
+            opts.intra_op_num_threads = int(threads)
+            opts.inter_op_num_threads = 1
+        opts.log_severity_level = 3
+        try:
+            self.session = ort.InferenceSession(str(self.bundle.model_path), sess_options=opts,
+                                                providers=["CPUExecutionProvider"])
+        except Exception as exc:  # onnxruntime raises its own error types
+            raise BundleError(f"bundle: onnxruntime cannot open {self.bundle.model_path} "
+                              f"({str(exc).splitlines()[0][:200]}); re-export the bundle") from None
+        check_session(self.bundle, self.session)
+        self.space = self.bundle.space
+        self.measure = self.bundle.calibration.uncertainty.measure
+        self.conformal_threshold = self.bundle.calibration.conformal.threshold
+        self._clock: Callable[[], float] = time.perf_counter
+
+    def decision_config(self, **overrides) -> DecisionConfig:
+        """The decision logic's config for this bundle (actions, FOV, measure, threshold)."""
+        unc = self.bundle.calibration.uncertainty
+        return DecisionConfig(n_actions=self.bundle.actions.n, fov_deg=self.bundle.fov_deg,
+                              measure=unc.measure, threshold=unc.threshold, **overrides)
+
+    def _check_frame(self, frame: np.ndarray) -> np.ndarray:
+        if not isinstance(frame, np.ndarray):
+            raise TypeError(f"Invalid frame: {type(frame).__name__}; expected a numpy array")
+        if frame.dtype != np.uint8 or frame.ndim != 3 or frame.shape[2] != 3 or min(frame.shape[:2]) < 2:
+            raise ValueError(f"Invalid frame: shape {frame.shape} dtype {frame.dtype}; expected H x W x 3 uint8 RGB")
+        return np.ascontiguousarray(frame)[None]
+
+    def predict(self, frame_rgb: np.ndarray) -> Prediction:
+        """Run one H x W x 3 uint8 RGB frame; failures come back as ``Prediction(ok=False)``."""
+        t0 = self._clock()
+        try:
+            x = self._check_frame(frame_rgb)
+            outs = self.session.run(list(OUTPUT_NAMES), {INPUT_NAME: x})
+            probs, ent, mi, var, votes = (np.asarray(o, dtype=np.float64)[0] for o in outs)
+            if probs.shape != (self.space.n,) or not np.all(np.isfinite(probs)):
+                raise ValueError(f"model returned probs of shape {probs.shape} with non-finite values"
+                                 if probs.shape == (self.space.n,) else
+                                 f"model returned probs of shape {probs.shape}; expected ({self.space.n},)")
+            action = int(np.argmax(probs))
+            unc = measure_value(self.measure, float(ent), float(mi), var, probs)
+            if not math.isfinite(unc):
+                raise ValueError(f"model returned a non-finite {self.measure}")
+            return Prediction(
+                ok=True, probs=probs, entropy=float(ent), mutual_info=float(mi), variance=var, votes=votes,
+                conformal_set=tuple(int(a) for a in np.flatnonzero(probs >= self.conformal_threshold)),
+                action=action,
+                heading_deg=None if action == 0 else self.space.action_heading(action, self.bundle.fov_deg),
+                uncertainty=unc, latency_s=self._clock() - t0,
+            )
+        except Exception as exc:  # never raise into the audio path
+            return Prediction(ok=False, error=f"{type(exc).__name__}: {str(exc).splitlines()[0][:300] if str(exc) else ''}",
+                              latency_s=self._clock() - t0)

@@ -1,0 +1,74 @@
+"""Live loop: frames -> decisions -> the cue the audio stream plays, guarded by the watchdog.
+
+Threads: this loop (capture, inference, decision, cue rendering), the watchdog (swaps in the
+stop cue when decisions stop coming), and the audio callback (only copies samples). The cue is
+handed over by a reference swap (:meth:`CuePlayer.set_loop`), never under a lock.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable, Iterable
+
+import numpy as np
+
+from crossing_assist.runtime.beacon import KIND_STOP, Cue
+from crossing_assist.runtime.beacon import CuePlayer
+from crossing_assist.runtime.pipeline import Pipeline, Step, cached_loop
+from crossing_assist.runtime.watchdog import Watchdog
+
+
+@dataclass(frozen=True)
+class LiveConfig:
+    """``watchdog_s``: longest time without a fresh decision; ``pace``: sleep so a video plays
+    in real time (its ``t`` are offsets from the start); ``frozen_check``: a frame identical to
+    the previous one (a frozen camera) does not count as fresh; ``max_seconds``: stop after."""
+
+    watchdog_s: float = 0.5
+    pace: bool = False
+    frozen_check: bool = True
+    max_seconds: float | None = None
+
+
+def _same(a: np.ndarray | None, b: np.ndarray) -> bool:
+    return a is not None and a.shape == b.shape and np.array_equal(a, b)
+
+
+def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, player: CuePlayer,
+             cfg: LiveConfig, *, clock: Callable[[], float] = time.monotonic,
+             on_step: Callable[[int, Step], None] | None = None, video_time: bool = True) -> int:
+    """Run until ``frames`` ends (or ``max_seconds``); returns the number of frames processed.
+
+    ``video_time=True``: frame times are offsets from the start of a video (mapped onto
+    ``clock`` at the first frame); False: they already are ``clock`` times (camera).
+    """
+    stop_loop = cached_loop(Cue(KIND_STOP), pipeline.beacon_cfg)
+    player.set_loop(stop_loop)
+    dog = Watchdog(cfg.watchdog_s, lambda: player.set_loop(stop_loop), clock=clock).start()
+    start = clock()
+    prev: np.ndarray | None = None
+    n = 0
+    try:
+        for i, (t, frame) in enumerate(frames):
+            now = clock()
+            if cfg.max_seconds is not None and now - start > cfg.max_seconds:
+                break
+            if cfg.pace and video_time and start + t > now:
+                time.sleep(start + t - now)
+            captured = start + t if video_time else t
+            if cfg.frozen_check and _same(prev, frame):
+                continue  # a frozen camera repeats its last frame: not fresh, let the watchdog act
+            prev = frame
+            step = pipeline.step(frame, captured - start)
+            fresh = clock() - captured <= cfg.watchdog_s
+            player.set_loop(step.loop if fresh else stop_loop)
+            if fresh:
+                dog.beat(captured)
+            if on_step is not None:
+                on_step(i, step)
+            n = i + 1
+    finally:
+        dog.stop()
+        player.set_loop(stop_loop)
+    return n

@@ -1,0 +1,76 @@
+"""Frame sources: a video file (timestamps from its frame rate) or a camera (monotonic clock).
+
+A source yields ``(t_seconds, frame_rgb)`` with ``frame_rgb`` H x W x 3 uint8 RGB; it ends when
+the video ends or the camera stops delivering. Tests substitute any iterable of such pairs.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+
+
+class SourceError(RuntimeError):
+    """A video or camera that cannot be opened; one line naming it."""
+
+
+class VideoSource:
+    """Frames of a video file in order; ``t = index / fps`` (the video's own timeline)."""
+
+    def __init__(self, path: str | Path, *, max_width: int | None = None) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise SourceError(f"video {self.path} does not exist")
+        self._cap = cv2.VideoCapture(str(self.path))
+        if not self._cap.isOpened():
+            raise SourceError(f"video {self.path} cannot be opened by OpenCV (unsupported or corrupt file)")
+        fps = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
+        self.fps = fps if 1.0 <= fps <= 1000.0 else 30.0
+        self.frame_count = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        self.max_width = max_width
+
+    def __iter__(self) -> Iterator[tuple[float, np.ndarray]]:
+        i = 0
+        try:
+            while True:
+                ok, bgr = self._cap.read()
+                if not ok or bgr is None:
+                    return
+                yield i / self.fps, _to_rgb(bgr, self.max_width)
+                i += 1
+        finally:
+            self._cap.release()
+
+
+class CameraSource:
+    """Frames from camera ``index``; ``t`` is ``time.monotonic()`` at capture."""
+
+    def __init__(self, index: int, *, max_width: int | None = 640) -> None:
+        self._cap = cv2.VideoCapture(int(index))
+        if not self._cap.isOpened():
+            raise SourceError(f"camera {index} cannot be opened; check the index (0 is usually the first camera)")
+        self.max_width = max_width
+        fps = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
+        self.fps = fps if 1.0 <= fps <= 240.0 else 30.0
+        self.frame_count = 0
+
+    def __iter__(self) -> Iterator[tuple[float, np.ndarray]]:
+        try:
+            while True:
+                ok, bgr = self._cap.read()
+                if not ok or bgr is None:
+                    return
+                yield time.monotonic(), _to_rgb(bgr, self.max_width)
+        finally:
+            self._cap.release()
+
+
+def _to_rgb(bgr: np.ndarray, max_width: int | None) -> np.ndarray:
+    if max_width and bgr.shape[1] > max_width:
+        h = round(bgr.shape[0] * max_width / bgr.shape[1])
+        bgr = cv2.resize(bgr, (max_width, h), interpolation=cv2.INTER_AREA)
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)

@@ -1,0 +1,217 @@
+"""End to end: the phone app in Debian's headless Chromium, fed a fake camera clip.
+
+One run of ``android_demo/tools/e2e_driver.mjs`` (playwright-core) per module: it serves a copy
+of the app built with a tiny test bundle on 127.0.0.1, plays ``clip.y4m`` (made here) as the
+camera, replays the shared test vectors in the page, runs the clip, freezes the camera, and
+reloads with the server stopped. The tests below judge what it recorded against the Python
+runtime on the same frames.
+
+Tolerances (stated once): model outputs within 1e-5 of onnxruntime's (same deterministic
+graph, WASM vs native float32); the Python Decider fed the Python engine's outputs for the
+app's frames, at the app's capture times, agrees with every app decision on the discrete
+fields (gate, reason, stop, learner action) and within 1e-4 degrees on headings; the frames
+the model saw are the clip's (mean absolute difference <= 4 grey levels to their nearest clip
+frame) and the Python pipeline on those *source* frames agrees with the app on >= 90% of the
+decisions (stop/go and side).
+
+Needs node >= 18, chromium (apt-get install chromium) and `npm ci` in android_demo; skips
+with the reason otherwise. Takes about 25 s.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from crossing_assist.runtime.decide import Decider, Observation
+from crossing_assist.runtime.engine import Engine
+
+REPO = Path(__file__).resolve().parents[1]
+DEMO = REPO / "android_demo"
+NODE = shutil.which("node")
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+FPS = 10
+RUN_S = 11.0  # longer than the 9.5 s clip: every segment, the frozen one included, is seen
+WATCHDOG_S = 0.5
+
+
+def _why_skip() -> str | None:
+    if NODE is None:
+        return "Node.js is not installed (apt-get install nodejs)"
+    if CHROMIUM is None:
+        return "Chromium is not installed (apt-get install chromium)"
+    for pkg in ("playwright-core", "onnxruntime-web"):
+        if not (DEMO / "node_modules" / pkg / "package.json").is_file():
+            return f"npm package {pkg} missing: run `npm ci` in android_demo"
+    return None
+
+
+pytestmark = pytest.mark.skipif(_why_skip() is not None, reason=_why_skip() or "")
+
+
+def _tools():
+    sys.path.insert(0, str(DEMO / "tools"))
+    try:
+        import clip
+        import make_test_bundle
+    finally:
+        sys.path.pop(0)
+    return clip, make_test_bundle
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> dict:
+    """Build the app with the test bundle, run the driver once, return its record + context."""
+    clip, mtb = _tools()
+    tmp = tmp_path_factory.mktemp("android_e2e")
+    bundle = mtb.make_test_bundle(tmp / "bundle")
+    www = tmp / "www"
+    shutil.copytree(DEMO / "www", www, ignore=shutil.ignore_patterns("vendor", "bundle", "precache.json"))
+    subprocess.run([NODE, "tools/build.mjs", "--bundle", str(bundle), "--www", str(www)], cwd=DEMO, check=True,
+                   capture_output=True, timeout=120)
+    frames, strips, frozen = clip.bar_clip(fps=FPS)
+    clip.write_y4m(tmp / "clip.y4m", frames, FPS)
+    cmd = [NODE, "tools/e2e_driver.mjs", "--clip", str(tmp / "clip.y4m"), "--out", str(tmp / "result.json"),
+           "--run-s", str(RUN_S), "--www", str(www), "--chromium", CHROMIUM]
+    vectors = DEMO / "test_vectors.json"
+    if vectors.is_file():
+        cmd += ["--vectors", str(vectors)]
+    proc = subprocess.run(cmd, cwd=DEMO, capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads((tmp / "result.json").read_text())
+    assert not [c for c in result["console"] if c.startswith(("error", "pageerror"))], result["console"]
+    return {"result": result, "engine": Engine(bundle), "clip": np.stack(frames), "strips": strips,
+            "frozen": frozen, "vectors": vectors.is_file()}
+
+
+def _app_steps(run: dict) -> list[tuple[dict, np.ndarray]]:
+    """The app's processed frames (trace entries of kind 'frame') with the RGB it fed the model."""
+    pixels = {f["seq"]: np.frombuffer(base64.b64decode(f["rgb"]), np.uint8).reshape(f["height"], f["width"], 3)
+              for f in run["result"]["frames"]}
+    steps = [(e, pixels[e["seq"]]) for e in run["result"]["trace"] if e["kind"] == "frame" and e["seq"] in pixels]
+    assert len(steps) >= 60, f"only {len(steps)} frames recorded"
+    return steps
+
+
+def _obs(pred) -> Observation:
+    return pred.observation()
+
+
+def test_shared_vectors_pass_in_the_browser(run: dict) -> None:
+    if not run["vectors"]:
+        pytest.skip("android_demo/test_vectors.json is missing")
+    v = run["result"]["vectors"]
+    assert v["steps"] > 100 and v["failures"] == [] and v["nFailures"] == 0, v
+
+
+def test_model_outputs_match_onnxruntime_on_the_same_frames(run: dict) -> None:
+    engine = run["engine"]
+    worst = 0.0
+    for entry, rgb in _app_steps(run):
+        pred = engine.predict(rgb)
+        assert pred.ok, pred.error
+        worst = max(worst, float(np.abs(np.asarray(entry["outputs"]["probs"]) - pred.probs).max()),
+                    abs(entry["outputs"]["entropy"] - pred.entropy))
+    assert worst <= 1e-5, f"largest difference {worst}"
+
+
+def test_decisions_match_the_python_runtime_on_the_same_frames(run: dict) -> None:
+    engine = run["engine"]
+    py = Decider(engine.decision_config())
+    gates = set()
+    for entry, rgb in _app_steps_in_order(run):
+        d = py.step(entry["t"], _obs(engine.predict(rgb))).to_json()
+        app = entry["decision"]
+        for key in ("gate", "reason", "stop", "learner_action"):
+            assert app[key] == d[key], (entry["t"], key, app[key], d[key])
+        for key in ("heading_deg", "learner_heading"):
+            assert (app[key] is None) == (d[key] is None), (entry["t"], key)
+            if d[key] is not None:
+                assert abs(app[key] - d[key]) <= 1e-4, (entry["t"], key, app[key], d[key])
+        gates.add(d["gate"])
+    assert {"learner", "stop"} <= gates  # the clip exercises guidance and stopping
+
+
+def _app_steps_in_order(run: dict) -> list[tuple[dict, np.ndarray]]:
+    """All of the run's frame steps must be present (the Decider is stateful)."""
+    steps = _app_steps(run)
+    n_frames = sum(e["kind"] == "frame" for e in run["result"]["trace"])
+    assert len(steps) == n_frames, "some frames the app processed were not kept; raise MAX_FRAMES in app.js"
+    return steps
+
+
+def test_the_model_saw_the_clip_and_python_agrees_on_the_source_frames(run: dict) -> None:
+    clip = run["clip"].astype(np.int16)
+    engine = run["engine"]
+    py = Decider(engine.decision_config())
+    agree = total = 0
+    for entry, rgb in _app_steps_in_order(run):
+        mad = np.abs(clip - rgb.astype(np.int16)[None]).mean(axis=(1, 2, 3))
+        k = int(np.argmin(mad))
+        assert mad[k] <= 4.0, f"frame at t={entry['t']:.2f} is {mad[k]:.1f} levels from every clip frame"
+        d = py.step(entry["t"], _obs(engine.predict(run["clip"][k]))).to_json()
+        app = entry["decision"]
+        total += 1
+        same_side = d["stop"] or app["stop"] or math.copysign(1, d["heading_deg"]) == math.copysign(1, app["heading_deg"])
+        agree += (d["stop"] == app["stop"]) and same_side
+    assert agree >= 0.9 * total, f"{agree}/{total} decisions agree"
+
+
+def _steady(samples: list[dict], side: float) -> list[dict]:
+    """Samples whose decision has pointed to ``side`` (pan sign, |pan| > 0.5) for >= 0.8 s."""
+    out = []
+    for i, s in enumerate(samples):
+        window = [w for w in samples[: i + 1] if s["t"] - w["t"] <= 0.8]
+        if s["t"] - window[0]["t"] < 0.7:
+            continue
+        if all(w["decision"] and not w["decision"]["stop"] and w["audio"]["kind"] == "beacon"
+               and w["decision"]["pan"] * side > 0.5 for w in window):
+            out.append(s)
+    return out
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0], ids=["right", "left"])
+def test_audio_graph_pans_to_the_goal_side(run: dict, side: float) -> None:
+    steady = _steady(run["result"]["samples"], side)
+    assert len(steady) >= 3, "the clip never held the goal on this side long enough"
+    for s in steady:
+        audio = s["audio"]
+        assert audio["pan"] * side > 0.5 and abs(audio["pan"] - s["decision"]["pan"]) < 0.05, s
+        near, far = (audio["levels"][1], audio["levels"][0]) if side > 0 else audio["levels"]
+        assert near > 0.2 and near > 1.5 * far, f"levels L/R {audio['levels']} at pan {audio['pan']:.2f}"
+
+
+def test_frozen_camera_frames_trigger_the_stop_cue(run: dict) -> None:
+    """The clip's last 2 s repeat one frame exactly: the app skips them and the watchdog stops."""
+    trace = run["result"]["trace"]
+    i = next(i for i, e in enumerate(trace) if e["kind"] == "frozen")
+    last_fresh = max(e["t"] for e in trace[:i] if e["kind"] == "frame" and e["fresh"])
+    dog = next(e for e in trace[i:] if e["kind"] != "frozen")
+    assert dog["kind"] == "watchdog", "a decision was made on a frozen frame"
+    assert WATCHDOG_S < dog["t"] - last_fresh <= WATCHDOG_S + 0.1
+
+
+def test_stalled_camera_triggers_the_stop_cue(run: dict) -> None:
+    """The <video> stops presenting frames: within the watchdog period the stop cue plays
+    (centred, audible) and the phone vibrates."""
+    f = run["result"]["freeze"]
+    assert f["t_stop"] - f["t_freeze"] <= WATCHDOG_S + 0.3
+    after = f["after"]["audio"]
+    assert after["kind"] == "stop"
+    left, right = after["levels"]
+    assert left > 0.2 and abs(left - right) < 0.02, after["levels"]
+    assert len(f["vibrations"]) >= 2  # at Start (nothing known yet) and at the freeze
+
+
+def test_app_works_offline_after_first_load(run: dict) -> None:
+    off = run["result"]["offline"]
+    assert off["loaded"] and off.get("error") is None, off
+    assert off["decisions"] >= 5

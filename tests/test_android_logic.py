@@ -1,0 +1,204 @@
+"""The phone app's JavaScript against the Python runtime, in Node (android_demo/).
+
+Runs the app's Node unit tests (which replay android_demo/test_vectors.json), checks the JS
+ports of the action vocabulary, the defaults and the decision logic against the Python
+modules on fresh random scenarios, and the build step's bundle checks. Skips cleanly when
+Node.js (>= 18) is not installed; the build tests also need `npm ci` in android_demo.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import shutil
+import subprocess
+import sys
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from crossing_assist.actions import get_space, x_to_heading
+from crossing_assist.runtime.beacon import BeaconConfig
+from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
+from crossing_assist.runtime.live import LiveConfig
+
+REPO = Path(__file__).resolve().parents[1]
+DEMO = REPO / "android_demo"
+JS = DEMO / "www" / "js"
+NODE = shutil.which("node")
+
+
+def _node_major() -> int:
+    out = subprocess.run([NODE, "--version"], capture_output=True, text=True, timeout=30).stdout
+    m = re.match(r"v(\d+)", out.strip())
+    return int(m.group(1)) if m else 0
+
+
+pytestmark = pytest.mark.skipif(NODE is None or _node_major() < 18,
+                                reason="Node.js >= 18 is not installed (apt-get install nodejs)")
+
+
+def run_node(script: str, *, timeout: float = 60) -> str:
+    """Run an ES-module snippet with Node; returns stdout (fails the test on a non-zero exit)."""
+    proc = subprocess.run([NODE, "--input-type=module", "-e", script], capture_output=True, text=True,
+                          timeout=timeout, cwd=DEMO)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return proc.stdout
+
+
+def js_module(name: str) -> str:
+    return (JS / name).as_uri()
+
+
+def test_node_unit_tests_pass() -> None:
+    proc = subprocess.run([NODE, "--test", "test/"], capture_output=True, text=True, timeout=180, cwd=DEMO)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0, out[-3000:]
+    passed = int(re.search(r"^# pass (\d+)", out, re.M).group(1))
+    assert passed >= 10 and re.search(r"^# fail 0$", out, re.M), out[-2000:]
+    if (DEMO / "test_vectors.json").is_file():
+        assert re.search(r"^# skipped 0$", out, re.M), "the vectors test was skipped although the file exists"
+
+
+def test_action_vocabulary_port_matches_python() -> None:
+    out = json.loads(run_node(f"""
+        import {{ actionHeading, headingToPan, spaceGroups, spaceNames, xToHeading }} from '{js_module("actions.js")}';
+        const r = {{}};
+        for (const n of [4, 8, 13]) {{
+          const g = spaceGroups(n);
+          r[n] = {{ groups: g, names: spaceNames(n),
+                   headings: g.map((_, a) => (a === 0 ? null : actionHeading(g, a, 70))) }};
+        }}
+        r.x = [0, 0.1, 0.37, 0.5, 0.93, 1].map((x) => xToHeading(x, 90));
+        r.pan = [-80, -45, -10, 0, 12.5, 44.9, 60].map((h) => headingToPan(h, 45));
+        console.log(JSON.stringify(r));
+    """))
+    for n in (4, 8, 13):
+        space = get_space(n)
+        assert out[str(n)]["groups"] == [list(g) for g in space.groups]
+        assert out[str(n)]["names"] == list(space.names)
+        want = [None] + [space.action_heading(a, 70.0) for a in range(1, n)]
+        assert out[str(n)]["headings"][0] is None
+        assert np.allclose(out[str(n)]["headings"][1:], want[1:], rtol=0, atol=1e-12)
+    assert np.allclose(out["x"], [x_to_heading(x, 90.0) for x in (0, 0.1, 0.37, 0.5, 0.93, 1)], atol=1e-12)
+    assert out["pan"] == [max(-1.0, min(1.0, h / 45)) for h in (-80, -45, -10, 0, 12.5, 44.9, 60)]
+
+
+def test_js_defaults_are_the_python_defaults() -> None:
+    out = json.loads(run_node(f"""
+        import {{ decisionConfig }} from '{js_module("logic.js")}';
+        import {{ SOUND }} from '{js_module("audio.js")}';
+        import {{ WATCHDOG_S }} from '{js_module("live.js")}';
+        console.log(JSON.stringify({{ decision: decisionConfig({{}}), sound: SOUND, watchdog: WATCHDOG_S }}));
+    """))
+    assert out["decision"] == asdict(DecisionConfig())
+    beacon = asdict(BeaconConfig())
+    for key, value in out["sound"].items():
+        assert beacon[key] == value, key
+    assert out["watchdog"] == LiveConfig().watchdog_s
+
+
+def _random_scenario(rng: np.random.Generator, cfg: DecisionConfig, n: int) -> dict:
+    """Random frames, ticks, failures, irregular times and yaw; expected decisions from Python."""
+    decider = Decider(cfg)
+    steps, t = [], 0.0
+    for _ in range(n):
+        t += float(rng.choice([0.0, rng.uniform(0.0, 0.12), rng.uniform(0.3, 0.9)], p=[0.05, 0.85, 0.1]))
+        yaw = float(rng.uniform(-50, 50)) if rng.uniform() < 0.3 else 0.0
+        r = rng.uniform()
+        if r < 0.1:
+            obs = None
+        elif r < 0.15:
+            obs = Observation(None, math.inf, ok=False)
+        else:
+            probs = rng.dirichlet(np.full(cfg.n_actions, 0.3))
+            obs = Observation(probs, float(rng.uniform(0.0, 2.5 * cfg.threshold)))
+        d = decider.step(t, obs, yaw)
+        steps.append({"t": t, "yaw_rate_dps": yaw, "expect": d.to_json(),
+                      "obs": None if obs is None else {
+                          "ok": obs.ok, "probs": None if obs.probs is None else obs.probs.tolist(),
+                          "uncertainty": obs.uncertainty if math.isfinite(obs.uncertainty) else None}})
+    return {"name": f"random_{cfg.n_actions}_{cfg.measure}", "config": asdict(cfg), "steps": steps}
+
+
+def test_js_decider_matches_python_on_random_scenarios(tmp_path: Path) -> None:
+    rng = np.random.default_rng(7)
+    base = DecisionConfig()
+    cfgs = [base, replace(base, n_actions=4, fov_deg=70.0), replace(base, n_actions=8, measure="mutual_info",
+                                                                    threshold=0.3, watchdog_s=0.3)]
+    vectors = {"version": 1, "tolerance": 1e-9, "scenarios": [_random_scenario(rng, c, 150) for c in cfgs]}
+    path = tmp_path / "random_vectors.json"
+    path.write_text(json.dumps(vectors))
+    out = json.loads(run_node(f"""
+        import {{ readFileSync }} from 'node:fs';
+        import {{ replayVectors }} from '{js_module("vectors.js")}';
+        console.log(JSON.stringify(replayVectors(JSON.parse(readFileSync({json.dumps(str(path))}, 'utf8')))));
+    """))
+    assert out["steps"] == 450
+    assert out["failures"] == [] and out["nFailures"] == 0
+    stops = sum(s["expect"]["stop"] for sc in vectors["scenarios"] for s in sc["steps"])
+    assert 0 < stops < 450  # the scenarios exercise both beacon and stop
+
+
+# ----------------------------------------------------------------------------- build step
+
+NO_NPM = not (DEMO / "node_modules" / "onnxruntime-web" / "dist").is_dir()
+needs_npm = pytest.mark.skipif(NO_NPM, reason="npm packages not installed: run `npm ci` in android_demo")
+
+
+def _make_bundle(out: Path) -> Path:
+    sys.path.insert(0, str(DEMO / "tools"))
+    try:
+        from make_test_bundle import make_test_bundle
+    finally:
+        sys.path.pop(0)
+    return make_test_bundle(out)
+
+
+@needs_npm
+def test_build_copies_only_the_wasm_runtime_and_lists_the_cache(tmp_path: Path) -> None:
+    www = tmp_path / "www"
+    shutil.copytree(DEMO / "www", www, ignore=shutil.ignore_patterns("vendor", "bundle", "precache.json"))
+    bundle = _make_bundle(tmp_path / "bundle")
+    proc = subprocess.run([NODE, "tools/build.mjs", "--bundle", str(bundle), "--www", str(www)],
+                          capture_output=True, text=True, timeout=120, cwd=DEMO)
+    assert proc.returncode == 0, proc.stderr
+    vendor = sorted(p.name for p in (www / "vendor").iterdir())
+    assert vendor == sorted(["ort.wasm.min.mjs", "ort-wasm-simd-threaded.mjs", "ort-wasm-simd-threaded.wasm"])
+    pre = json.loads((www / "precache.json").read_text())
+    urls = {f["url"] for f in pre["files"]}
+    assert {"index.html", "js/app.js", "bundle/model.onnx", "bundle/bundle.json",
+            "vendor/ort-wasm-simd-threaded.wasm", "manifest.webmanifest"} <= urls
+    assert "sw.js" not in urls and len(pre["version"]) == 16
+    # a different bundle gives a different cache version (phones pick up the swap)
+    meta = json.loads((bundle / "bundle.json").read_text())
+    meta["calibration"]["uncertainty"]["threshold"] = 0.9
+    (bundle / "bundle.json").write_text(json.dumps(meta))
+    subprocess.run([NODE, "tools/build.mjs", "--bundle", str(bundle), "--www", str(www)],
+                   capture_output=True, text=True, timeout=120, cwd=DEMO, check=True)
+    assert json.loads((www / "precache.json").read_text())["version"] != pre["version"]
+
+
+@needs_npm
+@pytest.mark.parametrize("damage", ["model", "json", "missing"])
+def test_build_refuses_a_bad_bundle_with_one_line(tmp_path: Path, damage: str) -> None:
+    bundle = _make_bundle(tmp_path / "bundle")
+    if damage == "model":
+        data = bytearray((bundle / "model.onnx").read_bytes())
+        data[-1] ^= 0xFF
+        (bundle / "model.onnx").write_bytes(bytes(data))
+    elif damage == "json":
+        meta = json.loads((bundle / "bundle.json").read_text())
+        meta["actions"]["n"] = 5
+        (bundle / "bundle.json").write_text(json.dumps(meta))
+    else:
+        bundle = tmp_path / "nowhere"
+    proc = subprocess.run([NODE, "tools/build.mjs", "--bundle", str(bundle), "--www", str(tmp_path / "www")],
+                          capture_output=True, text=True, timeout=120, cwd=DEMO)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
+    assert {"model": "SHA-256", "json": "actions.n", "missing": "no bundle"}[damage] in lines[0]

@@ -1,0 +1,192 @@
+"""The bundle reader/writer: validation with one-line errors, atomic writes, graph/json checks."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from crossing_assist.actions import get_space
+from crossing_assist.bundle import (
+    BundleError,
+    check_session,
+    embedded_meta,
+    read_bundle,
+    write_bundle,
+)
+
+FAKE_ONNX = b"\x08\x08" + bytes(range(200))  # starts like an ONNX ModelProto (ir_version tag)
+
+
+def make_meta(n: int = 13, **over) -> dict:
+    space = get_space(n)
+    meta = {
+        "schema_version": 1,
+        "model_file": "model.onnx",
+        "actions": {"n": n, "names": list(space.names), "bins": [list(g) for g in space.groups]},
+        "fov_deg": 90.0,
+        "input": {"layout": "NHWC", "dtype": "uint8", "color": "RGB", "size": [224, 224],
+                  "mean": [0.485, 0.456, 0.406], "std": [0.229, 0.224, 0.225]},
+        "mc": {"samples": 16, "p": 0.5},
+        "calibration": {"temperature": 1.3,
+                        "conformal": {"coverage": 0.9, "threshold": 0.05, "n_frames": 432},
+                        "uncertainty": {"measure": "entropy", "threshold": 1.2}},
+        "precision": "fp32",
+        "training": {"backbone": "mobilenet_v3_small", "head": "conv", "data": "ptl", "counts": {}},
+        "metrics": {"val": {"accuracy": 0.5, "bin_mae": 1.0}},
+        "package_version": "0.1.0",
+        "provenance": {"command": "test", "created": "2026-01-01T00:00:00Z"},
+    }
+    meta.update(over)
+    return meta
+
+
+@pytest.fixture
+def bundle_dir(tmp_path) -> Path:
+    return write_bundle(tmp_path / "b", FAKE_ONNX, make_meta())
+
+
+def test_roundtrip(bundle_dir):
+    b = read_bundle(bundle_dir)
+    assert b.actions.n == 13 and b.actions.bins[0] == () and b.actions.bins[7] == (7,)
+    assert b.input.size == (224, 224) and b.input.std[2] == pytest.approx(0.225)
+    assert b.mc.samples == 16 and b.mc.p == 0.5
+    assert b.calibration.temperature == 1.3
+    assert b.calibration.conformal.threshold == 0.05
+    assert b.calibration.uncertainty.measure == "entropy"
+    assert b.model_path == bundle_dir / "model.onnx" and b.model_path.read_bytes() == FAKE_ONNX
+    assert b.model_size == len(FAKE_ONNX)
+    assert b.space is get_space(13)
+    with pytest.raises(Exception):
+        b.fov_deg = 60.0  # frozen
+
+
+def test_write_replaces_existing_atomically_and_leaves_no_temp(tmp_path):
+    write_bundle(tmp_path / "b", FAKE_ONNX, make_meta())
+    write_bundle(tmp_path / "b", FAKE_ONNX + b"x" * 10, make_meta(n=4))
+    b = read_bundle(tmp_path / "b")
+    assert b.actions.n == 4 and b.model_size == len(FAKE_ONNX) + 10
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b"]
+
+
+def test_write_refuses_bad_meta_and_keeps_old_bundle(tmp_path):
+    write_bundle(tmp_path / "b", FAKE_ONNX, make_meta())
+    with pytest.raises(BundleError, match="actions.n"):
+        write_bundle(tmp_path / "b", FAKE_ONNX, make_meta(actions={"n": 5, "names": [], "bins": []}))
+    assert read_bundle(tmp_path / "b").actions.n == 13
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b"]
+
+
+def _rewrite(bundle_dir: Path, edit) -> None:
+    meta = json.loads((bundle_dir / "bundle.json").read_text())
+    edit(meta)
+    (bundle_dir / "bundle.json").write_text(json.dumps(meta))
+
+
+def _one_line_error(bundle_dir, match: str) -> str:
+    with pytest.raises(BundleError, match=match) as info:
+        read_bundle(bundle_dir)
+    msg = str(info.value)
+    assert "\n" not in msg and len(msg) < 300
+    return msg
+
+
+def test_missing_folder_json_and_model(tmp_path, bundle_dir):
+    _one_line_error(tmp_path / "nope", "not a folder")
+    (bundle_dir / "model.onnx").unlink()
+    _one_line_error(bundle_dir, "model.onnx is missing")
+    (bundle_dir / "bundle.json").unlink()
+    _one_line_error(bundle_dir, "bundle.json is missing")
+
+
+def test_truncated_and_replaced_model(bundle_dir):
+    path = bundle_dir / "model.onnx"
+    path.write_bytes(FAKE_ONNX[:100])
+    _one_line_error(bundle_dir, "truncated")
+    path.write_bytes(b"\x00" + FAKE_ONNX[1:])
+    _one_line_error(bundle_dir, "not an ONNX model")
+    path.write_bytes(FAKE_ONNX[:-1] + b"\xff")
+    _one_line_error(bundle_dir, "SHA-256")
+    assert read_bundle(bundle_dir, verify_hash=False).model_size == len(FAKE_ONNX)
+
+
+def test_invalid_json_text(bundle_dir):
+    (bundle_dir / "bundle.json").write_text('{"schema_version": 1,')
+    _one_line_error(bundle_dir, "not valid JSON")
+
+
+@pytest.mark.parametrize(
+    "edit, match",
+    [
+        (lambda m: m.update(schema_version=2), "schema_version 2 unsupported.*upgrade"),
+        (lambda m: m.update(schema_version=0), "schema_version 0 unsupported.*re-export"),
+        (lambda m: m.pop("fov_deg"), "missing field 'fov_deg'"),
+        (lambda m: m["actions"].update(n=5), "actions.n = 5 invalid; valid: 4, 8, 13"),
+        (lambda m: m["actions"].update(n=8), "actions.names .* disagree with the 8-action space"),
+        (lambda m: m["actions"]["names"].reverse(), "actions.names"),
+        (lambda m: m["actions"]["bins"].__setitem__(3, [4]), "actions.bins disagree"),
+        (lambda m: m["input"].update(size=[224]), r"input.size = \[224\] invalid"),
+        (lambda m: m["input"].update(size=[0, 224]), r"input.size"),
+        (lambda m: m["input"].update(size=[224.0, 224]), r"input.size"),
+        (lambda m: m["input"].update(layout="NCHW"), "input.layout = 'NCHW' unsupported"),
+        (lambda m: m["input"].update(std=[0.2, 0.0, 0.2]), r"input.std\[1\] = 0.0 is out of range"),
+        (lambda m: m["input"]["mean"].pop(), "input.mean must be a list of 3"),
+        (lambda m: m["mc"].update(samples=0), "mc.samples = 0 is out of range"),
+        (lambda m: m["mc"].update(p=1.0), r"mc.p = 1.0 is out of range"),
+        (lambda m: m["calibration"].update(temperature=-1), "calibration.temperature"),
+        (lambda m: m["calibration"]["conformal"].update(coverage=1.0), "calibration.conformal.coverage"),
+        (lambda m: m["calibration"]["conformal"].pop("threshold"),
+         "missing field 'calibration.conformal.threshold'"),
+        (lambda m: m["calibration"]["uncertainty"].update(measure="vibes"),
+         "calibration.uncertainty.measure = 'vibes' unknown; valid: entropy"),
+        (lambda m: m.update(precision="fp16"), "precision = 'fp16' unknown"),
+        (lambda m: m.update(model_file="../x.onnx"), "model_file"),
+        (lambda m: m.update(training=[]), "training must be an object"),
+        (lambda m: m.update(model_sha256="xyz"), "model_sha256"),
+    ],
+)
+def test_invalid_fields_give_one_line_naming_the_field(bundle_dir, edit, match):
+    _rewrite(bundle_dir, edit)
+    _one_line_error(bundle_dir, match)
+
+
+def test_reader_is_torch_free():
+    code = "import sys, crossing_assist.bundle; sys.exit(3 if 'torch' in sys.modules or 'onnx' in sys.modules else 0)"
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
+# ----------------------------------------------------------------------------- check_session
+
+
+def fake_session(meta: dict, *, a: int = 13, input_type: str = "tensor(uint8)", outputs=None):
+    outs = outputs or ["probs", "entropy", "mutual_info", "variance", "votes"]
+    return SimpleNamespace(
+        get_inputs=lambda: [SimpleNamespace(name="frames", type=input_type, shape=["N", "H", "W", 3])],
+        get_outputs=lambda: [SimpleNamespace(name=o, shape=["N", a] if o == "probs" else ["N"]) for o in outs],
+        get_modelmeta=lambda: SimpleNamespace(
+            custom_metadata_map={"bundle_json": json.dumps(embedded_meta(meta)), "schema_version": "1"}),
+    )
+
+
+def test_check_session_accepts_matching_graph(bundle_dir):
+    b = read_bundle(bundle_dir)
+    check_session(b, fake_session(make_meta()))
+
+
+def test_check_session_refuses_mismatches(bundle_dir):
+    b = read_bundle(bundle_dir)
+    with pytest.raises(BundleError, match="graph has 8 actions but bundle.json says 13"):
+        check_session(b, fake_session(make_meta(), a=8))
+    with pytest.raises(BundleError, match="graph input"):
+        check_session(b, fake_session(make_meta(), input_type="tensor(float)"))
+    with pytest.raises(BundleError, match="lacks outputs"):
+        check_session(b, fake_session(make_meta(), outputs=["probs"]))
+    other = make_meta()
+    other["input"] = dict(other["input"], size=[160, 160])
+    with pytest.raises(BundleError, match="'input'.*disagrees with the graph") as info:
+        check_session(b, fake_session(other))
+    assert "\n" not in str(info.value)
+    with pytest.raises(BundleError, match="'actions'"):
+        check_session(b, fake_session(make_meta(n=4)))

@@ -1,0 +1,82 @@
+"""crossing-data frames: real (OpenCV-written) videos, truncated and empty ones."""
+
+import csv
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from crossing_assist.data_tools.frames import FramesConfig, VideoError, extract_frames
+from crossing_assist.data_tools.images import load_rgb
+
+
+def _video(path, n=30, fps=10, fourcc="mp4v"):
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), fps, (32, 24))
+    assert writer.isOpened()
+    for i in range(n):
+        writer.write(np.full((24, 32, 3), 8 * i, np.uint8))   # brightness encodes the frame index
+    writer.release()
+    return path
+
+
+def _truncate(path):
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    return path
+
+
+def test_frames_at_the_requested_rate_named_by_time(tmp_path):
+    results, listing = extract_frames(FramesConfig((_video(tmp_path / "corner 03.mp4"),), tmp_path / "out",
+                                                   fps=2, progress=False))
+    (r,) = results
+    assert r.error is None and r.name == "corner_03"
+    assert [t for _, t in r.frames] == [0.0, 0.5, 1.0, 1.5, 2.0, 2.5]
+    assert r.frames[1][0] == "corner_03/corner_03_t00000.500.jpg"
+    # frame at 0.5 s is the 6th frame of a 10 fps video: brightness 8 * 5
+    assert abs(int(load_rgb(tmp_path / "out" / r.frames[1][0]).mean()) - 40) <= 3
+    with open(listing, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 6 and rows[0]["source"] == "vid:corner_03" and rows[3]["t_s"] == "1.500"
+
+
+def test_broken_videos_are_reported_and_do_not_stop_the_others(tmp_path):
+    good = _video(tmp_path / "good.mp4")
+    trunc = _truncate(_video(tmp_path / "trunc.mp4"))
+    partial = _truncate(_video(tmp_path / "partial.avi", fourcc="MJPG"))
+    empty = tmp_path / "empty.mp4"
+    empty.write_bytes(b"")
+    videos = (trunc, empty, tmp_path / "missing.mp4", partial, good)
+    results, listing = extract_frames(FramesConfig(videos, tmp_path / "out", fps=2, progress=False))
+    by = {r.video.name: r for r in results}
+    assert "cannot open" in by["trunc.mp4"].error and "cannot open" in by["empty.mp4"].error
+    assert "no such file" in by["missing.mp4"].error
+    assert by["good.mp4"].error is None and len(by["good.mp4"].frames) == 6
+    p = by["partial.avi"]
+    assert p.error is None and 0 < len(p.frames) < 6 and "truncated" in p.warning
+    with open(listing, newline="") as fh:
+        assert {r["source"] for r in csv.DictReader(fh)} == {"vid:good", "vid:partial"}
+
+
+def test_same_stem_in_two_folders_gets_two_names(tmp_path):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    vids = (_video(tmp_path / "a" / "clip.mp4", n=5), _video(tmp_path / "b" / "clip.mp4", n=5))
+    results, _ = extract_frames(FramesConfig(vids, tmp_path / "out", fps=2, progress=False))
+    assert [r.name for r in results] == ["clip", "clip_2"]
+
+
+def test_cli_exit_status_and_messages(tmp_path):
+    good = _video(tmp_path / "good.mp4")
+    bad = _truncate(_video(tmp_path / "bad.mp4"))
+    cmd = [sys.executable, "-m", "crossing_assist.data_tools.cli", "frames", str(bad), str(good),
+           "--fps", "2", "--out", str(tmp_path / "out"), "--quiet"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    assert proc.returncode == 1 and "error: " in proc.stderr and "bad.mp4" in proc.stderr
+    assert "6 frames from 1 of 2 videos" in proc.stdout and "Traceback" not in proc.stderr
+    proc = subprocess.run(cmd[:4] + [str(good), "--fps", "0", "--out", str(tmp_path / "o2")],
+                          capture_output=True, text=True)
+    assert proc.returncode == 1 and "fps=0.0 invalid" in proc.stderr
+    with pytest.raises(VideoError):
+        extract_frames(FramesConfig((), tmp_path))

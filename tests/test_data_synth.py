@@ -1,0 +1,134 @@
+"""Synthetic street corners: exact goal, determinism, unknown frames, the clip and its asset."""
+
+import json
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from crossing_assist.actions import parse_label, x_to_bin
+from crossing_assist.data_tools.manifest import read_manifest
+from crossing_assist.data_tools.synth import ClipConfig, SynthConfig, synth_clip, synth_frame
+from crossing_assist.data_tools.synth_scene import Camera, Occluder, goal_label, render, sample_scene
+
+ASSETS = Path(__file__).resolve().parents[1] / "crossing_assist" / "assets"
+SMALL = SynthConfig(Path("."), width=48, height=36, supersample=1)
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "crossing_assist.data_tools.cli", *map(str, args)],
+                          capture_output=True, text=True)
+
+
+def test_rendered_goal_is_where_the_label_says():
+    """A red pole stands on the goal; its column in the frame must match far_x."""
+    rng = np.random.default_rng(4)
+    scene = sample_scene(rng)
+    g = scene.goal()
+    pole = Occluder(scene.far, scene.offset - 0.15, scene.offset + 0.15, 3.0, (1.0, 0.0, 0.0))
+    scene = replace(scene, occluders=(pole,), lighting="day", marking="none")
+    w, h = 160, 120
+    for cam in (Camera(yaw=scene.theta + 10, pitch=8, roll=0), Camera(yaw=scene.theta - 15, pitch=14, roll=0)):
+        far_x, label, blocked = goal_label(scene, cam, w, h)
+        assert far_x is not None and label == x_to_bin(far_x)
+        img = render(scene, cam, w, h, rng=np.random.default_rng(0), supersample=1, noise=0).astype(int)
+        red = (img[..., 0] > 120) & (img[..., 1] < 60) & (img[..., 2] < 60)
+        cols = np.nonzero(red.any(axis=0))[0]
+        assert cols.size > 0
+        assert abs((cols.min() + cols.max() + 1) / 2 / w - far_x) < 2.0 / w
+        assert g is not None
+
+
+def test_frames_are_deterministic_per_seed_and_index():
+    a_img, a_row = synth_frame(7, 3, SMALL)
+    b_img, b_row = synth_frame(7, 3, SMALL)
+    c_img, _ = synth_frame(7, 4, SMALL)
+    d_img, _ = synth_frame(8, 3, SMALL)
+    np.testing.assert_array_equal(a_img, b_img)
+    assert a_row == b_row and a_img.shape == (36, 48, 3)
+    assert not np.array_equal(a_img, c_img) and not np.array_equal(a_img, d_img)
+
+
+def test_labels_are_consistent_and_unknown_fraction_is_honoured():
+    rows = [synth_frame(1, i, replace(SMALL, unknown_fraction=0.0))[1] for i in range(40)]
+    assert sum(r.label != 0 for r in rows) >= 36
+    for r in rows:
+        assert "synthetic" in r.flags
+        if r.label:
+            assert r.label == x_to_bin(r.far_x)
+    assert len({r.source for r in rows}) == 40
+    assert len({f for r in rows for f in r.flags if f.startswith("marking=")}) >= 3
+    unknown = [synth_frame(1, i, replace(SMALL, unknown_fraction=1.0))[1] for i in range(10)]
+    assert all(r.label == 0 and r.far_x is None for r in unknown)
+    assert {f for r in unknown for f in r.flags} >= {"view=away", "view=wall"}
+
+
+def test_synth_cli_writes_a_valid_dataset_and_extends_with_more_frames(tmp_path):
+    proc = _cli("synth", "--out", tmp_path / "a", "--frames", 4, "--seed", 2, "--size", "40x30",
+                "--supersample", 1, "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    proc = _cli("synth", "--out", tmp_path / "b", "--frames", 6, "--seed", 2, "--size", "40x30",
+                "--supersample", 1, "--quiet")
+    a, b = read_manifest(tmp_path / "a"), read_manifest(tmp_path / "b")
+    assert len(a) == 4 and b.rows[:4] == a.rows
+    assert (tmp_path / "a" / a.rows[0].image).read_bytes() == (tmp_path / "b" / b.rows[0].image).read_bytes()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--video", "--out", "clip.avi"], "expected a file name ending in .mp4"),
+    (["--out", "d", "--size", "4x4"], "size 4x4 invalid"),
+    (["--out", "d", "--frames", "0"], "frames=0 invalid"),
+])
+def test_synth_cli_rejects_bad_settings(tmp_path, args, message):
+    proc = _cli("synth", *[tmp_path / a if a in ("clip.avi", "d") else a for a in args])
+    assert proc.returncode == 1 and message in proc.stderr and "Traceback" not in proc.stderr
+
+
+def _read_video(path):
+    cap = cv2.VideoCapture(str(path))
+    frames = []
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        frames.append(frame)
+    cap.release()
+    return frames
+
+
+def _check_truth(meta, frames):
+    assert meta["synthetic"] is True and meta["n_frames"] == len(frames) == len(meta["far_x"])
+    for x, label in zip(meta["far_x"], meta["label"]):
+        assert (x is None) == (label == "unknown")
+        if x is not None:
+            assert parse_label(label) == x_to_bin(x)
+    phases = meta["phase"]
+    assert phases[0] == "away" and phases[-1] == "walk" and {"turn", "align"} <= set(phases)
+    assert all(x is None for x, p in zip(meta["far_x"], phases) if p == "away")
+    walk = [x for x, p in zip(meta["far_x"], phases) if p == "walk" and x is not None]
+    assert walk and np.ptp(walk) > 0.01            # veer moves the goal while walking
+    turn = [x for x, p in zip(meta["far_x"], phases) if p == "turn" and x is not None]
+    assert turn and max(turn) - min(turn) > 0.3     # the goal sweeps across the frame
+
+
+def test_clip_is_readable_with_ground_truth(tmp_path):
+    video, side = synth_clip(ClipConfig(tmp_path / "c.mp4", seed=1, seconds=6, fps=8, width=64, height=48,
+                                        supersample=1, progress=False))
+    frames = _read_video(video)
+    assert frames[0].shape == (48, 64, 3)
+    _check_truth(json.loads(side.read_text()), frames)
+
+
+def test_embedded_sample_clip_matches_its_ground_truth():
+    video, side = ASSETS / "sample_clip.mp4", ASSETS / "sample_clip.json"
+    assert video.stat().st_size < 2_000_000
+    meta = json.loads(side.read_text())
+    frames = _read_video(video)
+    assert frames[0].shape == (240, 320, 3) and meta["size"] == [320, 240]
+    assert 10 <= len(frames) / meta["fps"] <= 20
+    assert meta["command"].startswith("crossing-data synth --video")
+    _check_truth(meta, frames)

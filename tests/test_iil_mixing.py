@@ -1,0 +1,145 @@
+"""The mixing and sampling laws, exactly: UPMS's consistency, rationality, neutrality and
+impossibility; DAgger's beta schedule; SMILe's geometric mixture; the sampling strategies."""
+
+import math
+
+import numpy as np
+import pytest
+
+from crossing_assist.iil.mixing import (EXPERT, EXPLORER, LEARNER, BetaDecay, ExpertGate, GeometricMixture,
+                                        LearnerThreshold, PerStepSchedule, RationalMixing, StepView, ThriftyGate,
+                                        action_distance, beta_schedule, coefficient, rational_mixing, saturation)
+from crossing_assist.iil.sampling import FullHorizon, RandomSwitch, RationalSampling
+
+GRID = [0.0, 0.01, 0.1, 0.5, 1.0, 2.0, 10.0, math.inf]
+
+
+def test_coefficient_is_one_minus_tanh_and_half_at_threshold():
+    c = saturation(0.2)
+    assert coefficient(0.2, c) == pytest.approx(0.5, abs=1e-12)
+    assert coefficient(0.0, c) == 1.0
+    assert coefficient(math.inf, c) == 0.0
+    assert coefficient(0.7, 3.0) == pytest.approx(1 - math.tanh(2.1), abs=1e-15)
+    with pytest.raises(ValueError):
+        coefficient(-0.1, c)
+    with pytest.raises(ValueError):
+        saturation(0.0)
+
+
+@pytest.mark.parametrize("ut", GRID)
+@pytest.mark.parametrize("ul", GRID)
+def test_consistency(ut, ul):
+    p = rational_mixing(ut, ul, 1.3, 0.7)
+    assert 0.0 <= p <= 1.0
+    q_learner = 1.0 - p
+    assert p + q_learner == pytest.approx(1.0, abs=1e-15)
+
+
+@pytest.mark.parametrize("u", GRID[:-1])
+def test_neutrality(u):
+    assert rational_mixing(u, u, 2.0, 2.0) == pytest.approx(0.5, abs=1e-15)
+
+
+def test_rationality_less_uncertain_agent_is_more_likely():
+    c = 1.0
+    for lo, hi in [(0.0, 0.1), (0.1, 1.0), (0.5, 3.0), (1.0, math.inf)]:
+        assert rational_mixing(lo, hi, c, c) > 0.5  # expert less uncertain -> expert favoured
+        assert rational_mixing(hi, lo, c, c) < 0.5
+    ps = [rational_mixing(u, 0.5, c, c) for u in GRID]
+    assert all(a >= b for a, b in zip(ps, ps[1:]))  # monotone in the expert's uncertainty
+    assert rational_mixing(0.3, 0.9, c, c) == pytest.approx(
+        (1 - math.tanh(0.3)) / ((1 - math.tanh(0.3)) + (1 - math.tanh(0.9))), abs=1e-15)
+
+
+def test_impossibility_hands_control_to_the_expert():
+    assert rational_mixing(math.inf, math.inf, 1.0, 1.0) == 1.0
+    mix = RationalMixing(expert_threshold=1.0, learner_threshold=1.0)
+    rng = np.random.default_rng(0)
+    view = StepView(i=3, t=0, u_expert=math.inf, u_learner=math.inf)
+    assert all(mix.choose(view, rng) == (EXPERT, 1.0) for _ in range(50))
+    # only the learner answers -> the learner, with certainty
+    view = StepView(i=3, t=0, u_expert=math.inf, u_learner=0.2)
+    assert all(mix.choose(view, rng) == (LEARNER, 1.0) for _ in range(50))
+
+
+def test_rational_mixing_frequency_matches_the_law():
+    mix = RationalMixing(expert_threshold=1.0, learner_threshold=1.0)
+    rng = np.random.default_rng(1)
+    view = StepView(i=2, t=0, u_expert=0.5, u_learner=1.5)
+    p = rational_mixing(0.5, 1.5, mix.c_expert, mix.c_learner)
+    n = 4000
+    hits = sum(mix.choose(view, rng)[0] == EXPERT for _ in range(n))
+    # 6 standard deviations: a false failure has probability < 1e-8
+    assert abs(hits / n - p) < 6 * math.sqrt(p * (1 - p) / n)
+
+
+def test_first_episode_is_the_experts():
+    rng = np.random.default_rng(0)
+    view = StepView(i=1, t=0, u_expert=math.inf, u_learner=0.0)
+    assert RationalMixing(1.0, 1.0).choose(view, rng) == (EXPERT, 1.0)
+    assert LearnerThreshold(1.0).choose(view, rng) == (EXPERT, 1.0)
+
+
+def test_beta_schedule_exact():
+    assert [beta_schedule(i, 0.5) for i in range(1, 5)] == [1.0, 0.5, 0.25, 0.125]
+    assert beta_schedule(1, 0.0) == 1.0 and beta_schedule(2, 0.0) == 0.0
+    with pytest.raises(ValueError):
+        beta_schedule(0, 0.5)
+    rng = np.random.default_rng(0)
+    assert all(BetaDecay(0.5).choose(StepView(1, 0, 0.0, 0.0), rng)[0] == EXPERT for _ in range(100))
+    assert all(BetaDecay(0.0).choose(StepView(2, 0, 0.0, 0.0), rng)[0] == LEARNER for _ in range(100))
+    n, hits = 4000, sum(BetaDecay(0.5).choose(StepView(3, 0, 0.0, 0.0), rng)[0] == EXPERT for _ in range(4000))
+    assert abs(hits / n - 0.25) < 6 * math.sqrt(0.25 * 0.75 / n)  # false failure < 1e-8
+
+
+def test_smile_geometric_expert_probability():
+    mix = GeometricMixture(alpha=1.0)
+    rng = np.random.default_rng(0)
+    assert mix.choose(StepView(1, 0, 0.0, 0.0), rng)[0] == EXPERT
+    assert mix.choose(StepView(2, 0, 0.0, 0.0), rng)[0] == LEARNER
+
+
+def test_threshold_gates():
+    rng = np.random.default_rng(0)
+    gate = LearnerThreshold(0.1, max_discrepancy=0.0)
+    assert gate.choose(StepView(2, 0, 0.0, 0.05, expert_action=3, learner_action=3), rng)[0] == LEARNER
+    assert gate.choose(StepView(2, 0, 0.0, 0.05, expert_action=4, learner_action=3), rng)[0] == EXPERT
+    assert gate.choose(StepView(2, 0, 0.0, 0.2, expert_action=3, learner_action=3), rng)[0] == EXPERT
+    hg = ExpertGate(0.5)
+    assert hg.choose(StepView(2, 0, 0.4, 9.0, expert_action=1), rng)[0] == EXPERT
+    assert hg.choose(StepView(2, 0, 0.6, 9.0, expert_action=1), rng)[0] == LEARNER
+    fwd = PerStepSchedule(block=5)
+    assert [fwd.choose(StepView(3, t, 0, 0), rng)[0] for t in (0, 9, 10)] == [LEARNER, LEARNER, EXPERT]
+
+
+def test_thrifty_gate_switches_and_hands_back():
+    rng = np.random.default_rng(0)
+    gate = ThriftyGate(novelty_threshold=0.5, risk_threshold=0.5)
+    gate.begin_episode(2)
+    assert gate.choose(StepView(2, 0, 0, 0.1, 1, 1, novelty=0.1, risk=0.1), rng)[0] == LEARNER
+    assert gate.choose(StepView(2, 1, 0, 0.9, 1, 2, novelty=0.9, risk=0.1), rng)[0] == EXPERT
+    assert gate.choose(StepView(2, 2, 0, 0.1, 1, 2, novelty=0.1, risk=0.1), rng)[0] == EXPERT  # still differ
+    assert gate.choose(StepView(2, 3, 0, 0.1, 1, 1, novelty=0.1, risk=0.1), rng)[0] == LEARNER  # agree: hand back
+
+
+def test_action_distance():
+    assert action_distance(3, 3) == 0.0 and action_distance(3, 4) == 1.0
+    assert action_distance(np.array([0.0, 1.0]), np.array([3.0, 5.0])) == pytest.approx(5.0)
+    assert action_distance(None, 1) == math.inf
+
+
+def test_sampling_strategies():
+    rng = np.random.default_rng(0)
+    assert FullHorizon().control(0, LEARNER, 0.3, 1.0, rng) == LEARNER
+    sw = RandomSwitch()
+    sw.begin_episode(1, 10, rng)
+    assert [sw.control(t, LEARNER, 1.0, 0.0, rng) for t in range(10)] == [EXPERT] * 10
+    sw.begin_episode(2, 10, rng)
+    ts = sw.switch_time
+    got = [sw.control(t, LEARNER, 1.0, 0.0, rng) for t in range(10)]
+    assert got == [LEARNER] * ts + [EXPLORER] + [EXPERT] * (9 - ts)
+    rs = RationalSampling(expert_threshold=1.0)
+    assert all(rs.control(0, LEARNER, 1.0, 5.0, rng) == LEARNER for _ in range(50))  # p_choice 1: kept
+    # p_choice 0: E' = expert w.p. alpha_T; alpha(inf) = 0 -> always the explorer
+    assert all(rs.control(0, LEARNER, 0.0, math.inf, rng) == EXPLORER for _ in range(50))
+    assert all(rs.control(0, LEARNER, 0.0, 0.0, rng) == EXPERT for _ in range(50))

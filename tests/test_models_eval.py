@@ -1,0 +1,49 @@
+"""crossing-eval on a tiny run: metrics.json fields and plots; clear errors."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from crossing_assist.models.config import TrainConfig
+from crossing_assist.models.evaluate import EvalConfig, evaluate
+from crossing_assist.models.train import train
+from test_models_train import make_tiny_dataset
+
+EVAL = [sys.executable, "-c", "import sys; from crossing_assist.models.cli import eval_main as m; sys.exit(m(sys.argv[1:]))"]
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("eval")
+    data = make_tiny_dataset(root / "data", n_train=8, n_val=6)
+    cfg = TrainConfig(data=str(data), out=str(root / "run"), backbone="mobilenet_v3_small", weights="none",
+                      head="thesis", epochs=1, batch_size=4, input_size=(64, 64), cache_dir=str(root / "cache"),
+                      progress=False)
+    return data, train(cfg), root
+
+
+def test_eval_writes_metrics_and_plots(tiny_run):
+    data, run, root = tiny_run
+    out, m = evaluate(EvalConfig(data=str(data), run=str(run), examples=4, cache_dir=str(root / "cache"),
+                                 progress=False))
+    saved = json.loads((out / "metrics.json").read_text())
+    for key in ("accuracy", "bin_mae", "bin_mae_ci95", "majority_accuracy", "balanced_accuracy", "top3_accuracy",
+                "far_x_error", "nll", "ece", "confusion", "reliability"):
+        assert key in saved, key
+    assert saved["n"] == 6 and np.array(saved["confusion"]).sum() == 6
+    assert saved["majority_from"] == "train"
+    for png in ("confusion_matrix.png", "reliability.png", "examples.png"):
+        assert (out / png).stat().st_size > 1000
+
+
+def test_eval_cli_errors_are_one_line(tiny_run, tmp_path):
+    data, run, _ = tiny_run
+    r = subprocess.run([*EVAL, "--data", str(data), "--run", str(tmp_path / "nope")], capture_output=True, text=True)
+    assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr
+    r = subprocess.run([*EVAL, "--data", str(data), "--run", str(run), "--split", "test"], capture_output=True, text=True)
+    assert r.returncode == 2 and "no test rows" in r.stderr
+    r = subprocess.run([*EVAL, "--data", str(data), "--bundle", str(tmp_path)], capture_output=True, text=True)
+    assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr

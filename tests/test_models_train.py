@@ -1,0 +1,124 @@
+"""crossing-train: run folder, caching, resume after a kill, corrupt checkpoints, CLI errors."""
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from crossing_assist.data_tools.images import save_rgb
+from crossing_assist.data_tools.manifest import Row, write_manifest
+from crossing_assist.models.checkpoint import CheckpointError, load_checkpoint, load_policy
+from crossing_assist.models.config import TrainConfig
+from crossing_assist.models.train import train
+
+TRAIN = [sys.executable, "-c", "import sys; from crossing_assist.models.cli import train_main as m; sys.exit(m(sys.argv[1:]))"]
+
+
+def make_tiny_dataset(root: Path, n_train: int = 8, n_val: int = 4, size: int = 64, seed: int = 0) -> Path:
+    """Frames with a bright vertical bar at the goal position (label = its strip); one unknown."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for i in range(n_train + n_val):
+        split = "train" if i < n_train else "val"
+        img = rng.integers(0, 60, (size, size, 3), dtype=np.uint8)
+        if i % 5 == 4:
+            far_x, label = None, 0
+        else:
+            far_x = float(rng.uniform(0.05, 0.95))
+            label = min(12, int(far_x * 12) + 1)
+            c = int(far_x * size)
+            img[:, max(0, c - 2):c + 2] = 255
+        save_rgb(root / "images" / f"f{i:03d}.png", img)
+        rows.append(Row(f"images/f{i:03d}.png", label, far_x, f"src:{i % 3}", split))
+    write_manifest(root, rows)
+    return root
+
+
+@pytest.fixture()
+def tiny(tmp_path):
+    return make_tiny_dataset(tmp_path / "data")
+
+
+def _cfg(tiny: Path, out: Path, **kw) -> TrainConfig:
+    base = dict(data=str(tiny), out=str(out), backbone="mobilenet_v3_small", weights="none", epochs=2,
+                batch_size=4, input_size=(64, 64), cache_dir=str(out.parent / "cache"), progress=False)
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+def test_run_folder_has_everything_and_best_loads(tiny, tmp_path):
+    out = train(_cfg(tiny, tmp_path / "run", yaw=(10.0,), smoothing=0.1, balance="weights"))
+    for name in ("args.yaml", "results.csv", "results.png", "weights/best.pt", "weights/last.pt"):
+        assert (out / name).is_file(), name
+    with open(out / "results.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [int(r["epoch"]) for r in rows] == [1, 2]
+    assert all(float(r["val_accuracy"]) >= 0 for r in rows)
+    policy = load_policy(out / "weights" / "best.pt")
+    assert policy.config["input_size"] == [64, 64] and policy.n_actions == 13
+    # mirrored + yaw +-10 -> 6 variants of the 8 train frames
+    assert policy.config["counts"]["train_samples"] == 8 * 6
+    logits = policy(torch.zeros(2, 3, 64, 64), samples=3, mc=False)
+    assert logits.shape == (3, 2, 13)
+
+
+def test_existing_run_refused_without_resume(tiny, tmp_path):
+    train(_cfg(tiny, tmp_path / "run", epochs=1))
+    from crossing_assist.models.config import ConfigError
+    with pytest.raises(ConfigError, match="--resume"):
+        train(_cfg(tiny, tmp_path / "run", epochs=1))
+
+
+def test_corrupt_checkpoint_gives_clear_error(tiny, tmp_path):
+    out = train(_cfg(tiny, tmp_path / "run", epochs=1))
+    best = out / "weights" / "best.pt"
+    data = best.read_bytes()
+    best.write_bytes(data[: len(data) // 2])
+    with pytest.raises(CheckpointError, match="corrupt"):
+        load_policy(best)
+    (out / "weights" / "last.pt").write_bytes(b"garbage")
+    r = subprocess.run([*TRAIN, "--data", str(tiny),
+                        "--out", str(out), "--resume", "--quiet"], capture_output=True, text=True)
+    assert r.returncode != 0
+    assert r.stderr.startswith("error:") and "corrupt" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_cli_bad_input_is_one_line(tiny, tmp_path):
+    r = subprocess.run([*TRAIN, "--data", str(tiny),
+                        "--out", str(tmp_path / "r"), "--backbone", "vgg"], capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip().count("\n") == 0 and "valid:" in r.stderr
+
+
+@pytest.mark.slow
+def test_resume_after_kill_mid_epoch(tmp_path):
+    tiny = make_tiny_dataset(tmp_path / "data", n_train=40, n_val=8)
+    out = tmp_path / "run"
+    args = [*TRAIN, "--data", str(tiny), "--out", str(out),
+            "--backbone", "mobilenet_v3_small", "--weights", "none", "--input-size", "64", "--epochs", "8",
+            "--batch-size", "2", "--unfreeze", "13", "--cache-dir", str(tmp_path / "cache"), "--quiet"]
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    last = out / "weights" / "last.pt"
+    deadline = time.time() + 120
+    while time.time() < deadline and not (last.is_file() and load_checkpoint(last)["epoch"] >= 2):
+        time.sleep(0.2)
+    time.sleep(0.2)  # inside the next epoch (40 steps through the whole unfrozen backbone)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    killed_at = load_checkpoint(last)["epoch"]
+    assert 2 <= killed_at < 8
+    r = subprocess.run(args + ["--resume"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert load_checkpoint(last)["epoch"] == 8
+    with open(out / "results.csv") as fh:
+        assert [int(x["epoch"]) for x in csv.DictReader(fh)] == list(range(1, 9))
+    best = load_policy(out / "weights" / "best.pt")
+    assert 1 <= load_checkpoint(out / "weights" / "best.pt")["epoch"] <= 8
+    assert best(torch.zeros(1, 3, 64, 64), mc=False).shape == (1, 1, 13)

@@ -1,0 +1,164 @@
+"""The decision logic: Bayes filter, UPMS gate, freshness (pure; no model, no audio)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from crossing_assist.actions import bin_center_x, get_space, x_to_heading
+from crossing_assist.runtime import belief as bf
+from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
+from crossing_assist.runtime.gate import GATE_HOLD, GATE_LEARNER, GATE_STOP, GateConfig, alpha, mix
+
+FPS = 30.0
+
+
+def obs_bin(k: int, conf: float = 0.9, n: int = 13) -> Observation:
+    """A frame whose policy puts ``conf`` on bin/action ``k``; uncertainty = entropy (nats)."""
+    p = np.full(n, (1 - conf) / (n - 1))
+    p[k] = conf
+    return Observation(p, float(-(p * np.log(p)).sum()))
+
+
+FLAT = Observation(np.full(13, 1 / 13), math.log(13))
+
+
+def heading(k: int) -> float:
+    return x_to_heading(bin_center_x(k))
+
+
+def run(decider, frames, t0=0.0, yaw=0.0):
+    out = []
+    for i, o in enumerate(frames):
+        out.append(decider.step(t0 + i / FPS, o, yaw))
+    return out
+
+
+def test_alpha_is_one_half_at_the_threshold_and_decreasing():
+    c = GateConfig().saturation / 1.2
+    assert alpha(0.0, c) == 1.0
+    assert alpha(1.2, c) == pytest.approx(0.5, abs=1e-12)
+    us = np.linspace(0, 10, 50)
+    assert np.all(np.diff([alpha(u, c) for u in us]) < 0)
+    assert alpha(math.inf, c) == 0.0 and alpha(float("nan"), c) == 0.0
+
+
+def test_mix_consistency_rationality_neutrality_and_impossibility():
+    cfg = GateConfig()
+    m = mix(10.0, 0.9, None, 0.0, cfg)  # consistency: an absent hold has no say
+    assert (m.state, m.heading_deg, m.weight_learner) == (GATE_LEARNER, 10.0, 1.0)
+    m = mix(10.0, 0.7, 0.0, 0.7, cfg)  # neutrality: equal coefficients -> equal weights
+    assert m.weight_learner == pytest.approx(0.5) and m.heading_deg == pytest.approx(5.0)
+    m = mix(10.0, 0.9, 0.0, 0.6, cfg)  # rationality: the surer policy weighs more
+    assert m.weight_learner == pytest.approx(0.6) and m.heading_deg == pytest.approx(6.0)
+    m = mix(-30.0, 0.6, 20.0, 0.8, cfg)  # disagreement: never average into the middle
+    assert m.heading_deg == 20.0
+    m = mix(10.0, 0.3, 5.0, 0.49, cfg)  # both below alpha_min: impossible
+    assert m.state == GATE_STOP and m.heading_deg is None
+    assert mix(None, 0.0, 5.0, 0.8, cfg).state == GATE_HOLD
+
+
+def test_yaw_shift_moves_mass_by_the_pinhole_geometry_and_off_frame_to_unknown():
+    b = np.zeros(13)
+    b[7] = 1.0
+    turn = heading(7) - heading(6)  # turning right by this moves the goal exactly one bin left
+    moved = bf.yaw_shift(b, turn, 90.0)
+    assert moved[6] == pytest.approx(1.0) and moved.sum() == pytest.approx(1.0)
+    half = bf.yaw_shift(b, (heading(7) - heading(6)) / 2, 90.0)
+    assert half[6] > 0.3 and half[7] > 0.3 and half.sum() == pytest.approx(1.0)
+    edge = np.zeros(13)
+    edge[1] = 1.0
+    gone = bf.yaw_shift(edge, 30.0, 90.0)  # the goal leaves the frame on the left
+    assert gone[0] == pytest.approx(1.0)
+
+
+def test_bin_likelihood_spreads_grouped_actions_evenly():
+    q = bf.bin_likelihood(np.array([0.1, 0.6, 0.2, 0.1]), get_space(4))
+    assert q[0] == pytest.approx(0.1) and np.allclose(q[1:5], 0.15) and np.allclose(q[9:13], 0.025)
+
+
+def test_confident_frames_guide_toward_their_bin():
+    d = Decider(DecisionConfig())
+    out = run(d, [obs_bin(3)] * 30)
+    assert not out[-1].stop and out[-1].gate == GATE_LEARNER
+    assert out[-1].heading_deg == pytest.approx(heading(3), abs=2.0)
+    assert out[-1].pan < -0.3
+
+
+def test_one_odd_frame_does_not_swing_the_beacon():
+    d = Decider(DecisionConfig())
+    out = run(d, [obs_bin(3)] * 30 + [obs_bin(11)] + [obs_bin(3)] * 3)
+    for dec in out[30:]:
+        assert not dec.stop and abs(dec.heading_deg - heading(3)) < 3.0
+
+
+def test_a_goal_moving_left_to_right_is_followed():
+    d = Decider(DecisionConfig())
+    frames = [obs_bin(1 + min(11, i * 12 // 120)) for i in range(150)]
+    out = run(d, frames)
+    heads = [o.heading_deg for o in out if not o.stop]
+    assert len(heads) > 120
+    assert heads[5] < -30 and heads[-1] > 30
+    assert np.corrcoef(np.arange(len(heads)), heads)[0, 1] > 0.95
+
+
+@pytest.mark.parametrize("frame", [FLAT, obs_bin(0, 0.9)], ids=["noise", "unknown"])
+def test_noise_or_unknown_frames_never_guide(frame):
+    d = Decider(DecisionConfig())
+    out = run(d, [frame] * 90)
+    assert all(o.stop and o.reason == "uncertain" for o in out)
+    assert all(o.frame_weight == 0.0 for o in out)
+
+
+def test_uncertain_frames_do_not_move_the_belief():
+    d = Decider(DecisionConfig(threshold=0.5))
+    run(d, [obs_bin(4, 0.98)] * 20)
+    before = d.belief.copy()
+    d.step(20 / FPS, obs_bin(10, conf=0.5))  # entropy 1.78 nats > threshold 0.5: no evidence
+    ref = Decider(DecisionConfig(threshold=0.5))
+    run(ref, [obs_bin(4, 0.98)] * 20)
+    ref.step(20 / FPS, None)  # the same time passing without any frame
+    assert np.allclose(d.belief, ref.belief) and not np.allclose(d.belief, before)
+
+
+def test_the_hold_takes_over_then_fades_to_stop():
+    d = Decider(DecisionConfig())
+    run(d, [obs_bin(9)] * 30)
+    out = run(d, [FLAT] * 90, t0=30 / FPS)
+    assert out[0].heading_deg == pytest.approx(heading(9), abs=2.0)
+    hold = [o for o in out if o.gate == GATE_HOLD]
+    assert hold, "the heading hold never took over"
+    assert all(abs(o.heading_deg - heading(9)) < 2.5 for o in hold)
+    rates = [o.rate_hz for o in out if not o.stop]
+    assert rates[-1] < rates[0]  # slower pulses as the hold ages
+    assert out[-1].stop and out[-1].reason == "uncertain"  # 3 s later: nothing to trust
+
+
+def test_yaw_moves_the_held_heading_and_the_belief():
+    d = Decider(DecisionConfig())
+    run(d, [obs_bin(7)] * 30)
+    out = run(d, [FLAT] * 8, t0=30 / FPS, yaw=30.0)  # turning right at 30 deg/s for 0.27 s
+    turned = 30.0 * 8 / FPS
+    assert not out[-1].stop
+    assert out[-1].heading_deg == pytest.approx(heading(7) - turned, abs=2.0)
+
+
+def test_stale_input_stops_within_the_watchdog_period_and_failures_stop_at_once():
+    d = Decider(DecisionConfig(watchdog_s=0.5))
+    run(d, [obs_bin(5)] * 30)
+    assert not d.step(1.0 + 0.45, None).stop
+    late = d.step(1.0 + 0.52, None)
+    assert late.stop and late.reason == "stale" and late.pan is None
+    d2 = Decider(DecisionConfig())
+    run(d2, [obs_bin(5)] * 30)
+    bad = d2.step(1.0, Observation(None, math.inf, ok=False))
+    assert bad.stop and bad.reason == "failed"
+    assert not d2.step(1.0 + 1 / FPS, obs_bin(5)).stop  # recovers on the next good frame
+
+
+def test_decisions_are_deterministic():
+    rng = np.random.default_rng(3)
+    seq = [obs_bin(int(rng.integers(0, 13)), float(rng.uniform(0.3, 0.99))) for _ in range(60)]
+    a = [x.to_json() for x in run(Decider(DecisionConfig()), seq, yaw=5.0)]
+    b = [x.to_json() for x in run(Decider(DecisionConfig()), seq, yaw=5.0)]
+    assert a == b

@@ -1,0 +1,114 @@
+"""The offline demo end to end on the toy bundle: the WAV follows the goal, noise stops it."""
+
+import json
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+import soundfile as sf
+from runtime_toy import toy_bundle, write_clip  # noqa: F401  (fixture)
+
+from crossing_assist.runtime import demo
+from crossing_assist.runtime.beacon import BeaconConfig
+from crossing_assist.runtime.engine import Engine, Prediction
+from crossing_assist.runtime.offline import OfflineConfig, run_offline
+
+SR = 16000
+BEACON = BeaconConfig(sample_rate=SR)
+
+
+def band_energy(x: np.ndarray, hz: float, sr: int = SR, width: float = 30.0) -> float:
+    spec = np.abs(np.fft.rfft(x)) ** 2
+    f = np.fft.rfftfreq(len(x), 1 / sr)
+    return float(spec[(f > hz - width) & (f < hz + width)].sum() / spec.sum())
+
+
+def run(tmp_path, bundle, xs, name, engine=None, noise=0.0, annotate=False):
+    clip = write_clip(tmp_path / f"{name}.mp4", xs, noise=noise)
+    cfg = OfflineConfig(video=clip, bundle=bundle, out_dir=tmp_path / name, annotate=annotate,
+                        progress=False, beacon=BEACON)
+    summary = run_offline(cfg, engine=engine)
+    audio, sr = sf.read(tmp_path / name / "beacon.wav")
+    trace = [json.loads(line) for line in (tmp_path / name / "trace.jsonl").read_text().splitlines()]
+    return summary, audio, sr, trace
+
+
+def test_wav_left_right_energy_follows_a_goal_moving_left_to_right(tmp_path, toy_bundle):  # noqa: F811
+    xs = np.linspace(0.04, 0.96, 150)
+    summary, audio, sr, trace = run(tmp_path, toy_bundle, xs, "move", annotate=True)
+    assert sr == SR and audio.shape == (round(150 / 30 * SR), 2)  # on the video's timeline
+    assert len(trace) == 150 == summary.frames
+    win = SR // 2
+    balance = []
+    for i in range(0, len(audio) - win + 1, win):
+        el, er = (audio[i:i + win] ** 2).sum(0)
+        balance.append((er - el) / (er + el))
+    assert balance[0] < -0.6 and balance[-1] > 0.6
+    assert np.corrcoef(np.arange(len(balance)), balance)[0, 1] > 0.95
+    assert band_energy(audio.sum(1), BEACON.tone_hz) > 0.5
+    cap = cv2.VideoCapture(str(tmp_path / "move" / "annotated.mp4"))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 150
+    ok, img = cap.read()
+    assert ok and img.shape == (72, 96, 3)
+
+
+@pytest.mark.parametrize("noise", [0.0, 1.0], ids=["no-crossing", "noise"])
+def test_no_crossing_or_noise_keeps_the_beacon_off_and_plays_the_stop_cue(tmp_path, toy_bundle, noise):  # noqa: F811
+    _, audio, _, trace = run(tmp_path, toy_bundle, [None] * 60, "none", noise=noise)
+    assert all(r["stop"] and r["cue"] == "stop" and r["pan"] is None for r in trace)
+    mono = audio.sum(1)
+    assert band_energy(mono, BEACON.tone_hz) < 1e-3  # no beacon tone at all
+    assert band_energy(mono, BEACON.stop_hz) + band_energy(mono, 0.75 * BEACON.stop_hz) > 0.5
+    assert np.abs(audio).max() > 0.1
+
+
+def test_failing_inference_stops_the_beacon_for_those_frames(tmp_path, toy_bundle, monkeypatch):  # noqa: F811
+    engine = Engine(toy_bundle)
+    real = engine.predict
+    calls = {"n": 0}
+
+    def flaky(frame):
+        calls["n"] += 1
+        if 40 <= calls["n"] <= 60:
+            return Prediction(ok=False, error="RuntimeError: simulated")
+        return real(frame)
+
+    monkeypatch.setattr(engine, "predict", flaky)
+    summary, audio, _, trace = run(tmp_path, toy_bundle, [0.8] * 90, "flaky", engine=engine)
+    assert [r["reason"] for r in trace[39:60]] == ["failed"] * 21
+    assert summary.failed == 21
+    seg = audio[round(40 / 30 * SR) + 400:round(60 / 30 * SR)].sum(1)  # after the fade
+    assert band_energy(seg, BEACON.tone_hz) < 1e-3
+    assert not trace[-1]["stop"]  # recovers
+
+
+def test_cli_runs_and_says_where_the_outputs_are(tmp_path, toy_bundle):  # noqa: F811
+    clip = write_clip(tmp_path / "c.mp4", np.linspace(0.2, 0.8, 20))
+    out = tmp_path / "o"
+    proc = subprocess.run([sys.executable, "-m", "crossing_assist.runtime.demo", str(clip), "--bundle",
+                           str(toy_bundle), "--out", str(out), "--quiet"], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert str(out.resolve()) in proc.stdout
+    assert {p.name for p in out.iterdir()} >= {"beacon.wav", "annotated.mp4", "trace.jsonl"}
+
+
+def test_cli_bad_input_is_one_line(tmp_path, toy_bundle):  # noqa: F811
+    proc = subprocess.run([sys.executable, "-m", "crossing_assist.runtime.demo", str(tmp_path / "nope.mp4"),
+                           "--bundle", str(toy_bundle)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and proc.stderr.startswith("error:") and proc.stderr.count("\n") == 1
+    bad = tmp_path / "bad.mp4"
+    bad.write_bytes(b"not a video")
+    proc = subprocess.run([sys.executable, "-m", "crossing_assist.runtime.demo", str(bad), "--bundle",
+                           str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and proc.stderr.startswith("error: bundle") and proc.stderr.count("\n") == 1
+
+
+def test_missing_default_assets_name_what_is_missing(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(demo, "DEFAULT_BUNDLE", tmp_path / "default_bundle")
+    monkeypatch.setattr(demo, "DEFAULT_CLIP", tmp_path / "sample_clip.mp4")
+    assert demo.main([]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "default_bundle" in err and "sample_clip.mp4" in err

@@ -1,0 +1,210 @@
+"""Live path: watchdog, frozen and failing input, real audio through an ALSA file PCM, no
+device, and the torch-free import."""
+
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+
+import numpy as np
+import pytest
+from runtime_toy import bar_frame, toy_bundle  # noqa: F401  (fixture)
+
+from crossing_assist.runtime.beacon import KIND_STOP, BeaconConfig, Cue, CuePlayer
+from crossing_assist.runtime.engine import Engine, Prediction
+from crossing_assist.runtime.live import LiveConfig, run_live
+from crossing_assist.runtime.pipeline import Pipeline, cached_loop
+from crossing_assist.runtime.watchdog import Watchdog
+
+BEACON = BeaconConfig(sample_rate=16000)
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_watchdog_fires_once_after_the_period():
+    clock, fired = FakeClock(), []
+    dog = Watchdog(0.5, lambda: fired.append(clock.now), clock=clock)
+    dog.beat()
+    clock.now += 0.49
+    assert not dog.poll() and fired == []
+    clock.now += 0.02
+    assert dog.poll() and fired == [pytest.approx(100.51)]
+    clock.now += 1.0
+    assert dog.poll() and len(fired) == 1  # once per stale episode
+    dog.beat()
+    assert not dog.poll()
+
+
+def _is_stop(loop) -> bool:
+    return loop is cached_loop(Cue(KIND_STOP), BEACON)
+
+
+def _live(engine, frames, clock, watchdog_s=0.5, player=None):
+    player = player or CuePlayer(BEACON)
+    pipeline = Pipeline(engine, engine.decision_config(watchdog_s=watchdog_s), BEACON)
+    steps = []
+    th = threading.Thread(target=run_live, args=(frames, pipeline, player, LiveConfig(watchdog_s=watchdog_s)),
+                          kwargs={"clock": clock, "on_step": lambda i, s: steps.append(s)}, daemon=True)
+    th.start()
+    return player, steps, th
+
+
+def test_frozen_frame_source_triggers_the_stop_cue_within_the_watchdog_period(toy_bundle):  # noqa: F811
+    """Frames come for 1 s (clock injected), then the source freezes; the stop cue must be
+    queued once the clock passes the 0.5 s period, and not before."""
+    engine, clock = Engine(toy_bundle), FakeClock()
+    frozen, release, checked = threading.Event(), threading.Event(), {}
+
+    def frames():
+        for i in range(30):
+            clock.now = 100.0 + i / 30
+            yield i / 30, bar_frame(0.2 + 0.01 * (i % 2))
+        frozen.set()
+        release.wait(10)  # the camera hangs
+
+    player, steps, th = _live(engine, frames(), clock)
+    assert frozen.wait(20)
+    time.sleep(0.1)
+    checked["beacon_before"] = not _is_stop(player.queued_loop) and not steps[-1].decision.stop
+    clock.now += 0.45
+    time.sleep(0.15)  # several real polls
+    checked["still_beacon"] = not _is_stop(player.queued_loop)
+    clock.now += 0.1  # 0.55 s after the last frame
+    deadline = time.monotonic() + 2.0
+    while not _is_stop(player.queued_loop) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    checked["stopped"] = _is_stop(player.queued_loop)
+    release.set()
+    th.join(5)
+    assert checked == {"beacon_before": True, "still_beacon": True, "stopped": True}
+
+
+def test_repeated_identical_frames_count_as_frozen(toy_bundle):  # noqa: F811
+    engine, clock = Engine(toy_bundle), FakeClock()
+    done = threading.Event()
+
+    def frames():
+        frame = bar_frame(0.7)
+        for i in range(60):  # the same bytes for 2 s: a frozen camera
+            clock.now = 100.0 + i / 30
+            yield i / 30, frame
+            time.sleep(0.005)
+        done.set()
+
+    player, steps, th = _live(engine, frames(), clock)
+    th.join(20)
+    assert len(steps) == 1  # only the first copy was used
+    assert done.is_set()
+
+
+def test_failing_inference_queues_the_stop_cue(toy_bundle, monkeypatch):  # noqa: F811
+    engine, clock = Engine(toy_bundle), FakeClock()
+    real, seen = engine.predict, {}
+
+    def flaky(frame):
+        return Prediction(ok=False, error="RuntimeError: boom") if seen.get("fail") else real(frame)
+
+    monkeypatch.setattr(engine, "predict", flaky)
+    gate = threading.Event()
+    states = []
+
+    def frames():
+        for i in range(40):
+            clock.now = 100.0 + i / 30
+            if i == 20:
+                seen["fail"] = True
+            yield i / 30, bar_frame(0.2 + 0.01 * (i % 2))
+            gate.wait(0.01)
+            states.append(_is_stop(player.queued_loop))
+
+    player = CuePlayer(BEACON)
+    _, steps, th = _live(engine, frames(), clock, player=player)
+    th.join(20)
+    assert states[15] is False and all(states[20:])
+    assert all(s.decision.reason == "failed" for s in steps[20:])
+
+
+ALSA_CONF = """
+pcm.!default {{
+  type plug
+  slave {{ pcm "capturefile"; format S16_LE; rate {sr}; channels 2 }}
+}}
+pcm.capturefile {{
+  type file
+  slave.pcm "null"
+  file "{path}"
+  format "raw"
+}}
+"""
+
+PLAY = textwrap.dedent("""
+    import time
+    from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer, Cue, KIND_BEACON
+    from crossing_assist.runtime.audio import LiveAudio
+    p = CuePlayer(BeaconConfig(sample_rate={sr}))
+    p.set_cue(Cue(KIND_BEACON, pan=0.6, heading_deg=27.0, rate_hz=4.0))
+    with LiveAudio(p):
+        time.sleep(0.05)
+""")
+
+
+def _sounddevice_ok() -> bool:
+    try:
+        import sounddevice  # noqa: F401
+    except (ImportError, OSError):
+        return False
+    return True
+
+
+@pytest.mark.skipif(not _sounddevice_ok(), reason="PortAudio (libportaudio2) is not installed")
+def test_live_audio_through_an_alsa_file_pcm_plays_exactly_the_cue(tmp_path):
+    sr = 16000
+    raw = tmp_path / "played.raw"
+    (tmp_path / ".asoundrc").write_text(ALSA_CONF.format(sr=sr, path=raw))
+    env = {"HOME": str(tmp_path), "PATH": "/usr/bin:/bin"}
+    proc = subprocess.run([sys.executable, "-c", PLAY.format(sr=sr)], env=env, capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    played = np.fromfile(raw, dtype="<i2").reshape(-1, 2).astype(np.float64) / 32768
+    raw.unlink()
+    want_player = CuePlayer(BeaconConfig(sample_rate=sr))
+    loop = want_player.set_cue(Cue("beacon", pan=0.6, heading_deg=27.0, rate_hz=4.0))
+    m = 3 * len(loop)
+    want = want_player.render(m).astype(np.float64)
+    assert len(played) > m + 8192, "too little audio came through"
+    first = lambda x: int(np.argmax(np.abs(x[:, 1]) > 0.05))  # noqa: E731
+    off0 = first(played) - first(want)
+    errs = {off: np.abs(played[off:off + m] - want[:m]).max() for off in range(max(0, off0 - 2), off0 + 3)}
+    assert min(errs.values()) < 2.5 / 32768  # 16-bit quantisation only
+    el, er = (played ** 2).sum(0)
+    assert er / (el + er) == pytest.approx(np.sin(0.4 * np.pi) ** 2, abs=0.01)  # pan 0.6, constant power
+
+
+@pytest.mark.skipif(not _sounddevice_ok(), reason="PortAudio (libportaudio2) is not installed")
+def test_no_audio_device_is_one_clear_line(tmp_path, toy_bundle):  # noqa: F811
+    (tmp_path / ".asoundrc").write_text("pcm.!default { type hw; card 99 }\nctl.!default { type hw; card 99 }\n")
+    from runtime_toy import write_clip
+
+    clip = write_clip(tmp_path / "c.mp4", [0.5] * 5)
+    env = {"HOME": str(tmp_path), "PATH": "/usr/bin:/bin"}
+    proc = subprocess.run([sys.executable, "-m", "crossing_assist.runtime.demo", str(clip), "--bundle",
+                           str(toy_bundle), "--live", "--out", str(tmp_path / "o")], env=env,
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert proc.stderr.startswith("error: no audio output device") and proc.stderr.count("\n") == 1
+
+
+def test_import_runtime_leaves_torch_out():
+    code = ("import sys, crossing_assist.runtime, crossing_assist.runtime.demo, crossing_assist.runtime.offline, "
+            "crossing_assist.runtime.live, crossing_assist.runtime.engine, crossing_assist.runtime.vectors; "
+            "bad = [m for m in sys.modules if m == 'torch' or m.startswith(('torch.', 'crossing_assist.models', "
+            "'crossing_assist.export', 'crossing_assist.iil'))]; print(bad); sys.exit(3 if bad else 0)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
