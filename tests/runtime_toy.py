@@ -20,7 +20,7 @@ from crossing_assist.actions import get_space
 from crossing_assist.bundle import embedded_meta, write_bundle
 
 T_SAMPLES = 8
-DROP_P = 0.1
+DROP_P = 0.05
 GAIN = 40.0
 THRESHOLD = 1.0  # entropy (nats) where the gate's coefficient is one half
 

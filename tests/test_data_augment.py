@@ -117,3 +117,29 @@ def test_random_yaw_is_reproducible_and_grayscale_ok():
     a = random_yaw(img, 0.5, 7, np.random.default_rng(5))
     b = random_yaw(img, 0.5, 7, np.random.default_rng(5))
     assert a[4] == b[4] and -15 <= a[4] <= 15 and a[0].shape == (H, W)
+
+
+def test_random_augment_keeps_labels_consistent_with_far_x():
+    from crossing_assist.data_tools.augment import random_augment
+    rng = np.random.default_rng(9)
+    img = np.zeros((H, W, 3), np.uint8)
+    mirrored = 0
+    for _ in range(100):
+        out, x, b, valid = random_augment(img, 0.3, x_to_bin(0.3), rng, p_mirror=0.5, max_yaw_deg=10)
+        assert out.shape == img.shape and valid.shape == (H, W)
+        assert (b == 0 and x is None) or b == x_to_bin(x)
+        mirrored += x is not None and x > 0.5
+    assert 25 < mirrored < 75     # p = 0.5; fails by luck with probability < 1e-6
+    out, x, b, valid = random_augment(img, 0.3, 4, rng, p_mirror=0.0)
+    assert (x, b) == (0.3, 4) and valid.all()
+
+
+def test_warp_maps_are_the_inverse_homography():
+    from crossing_assist.data_tools.augment import _yaw_maps
+    for psi in (-25.0, 7.0):
+        map_x, map_y, valid = _yaw_maps(W, H, psi, 90.0)
+        h_inv = np.linalg.inv(yaw_homography(W, H, psi))
+        vs, us = np.nonzero(valid)
+        pts = h_inv @ np.stack([us, vs, np.ones_like(us)]).astype(float)
+        np.testing.assert_allclose(map_x[vs, us], np.clip(pts[0] / pts[2], 0, W - 1), atol=1e-3)
+        np.testing.assert_allclose(map_y[vs, us], np.clip(pts[1] / pts[2], 0, H - 1), atol=1e-3)

@@ -80,3 +80,48 @@ def test_cli_exit_status_and_messages(tmp_path):
     assert proc.returncode == 1 and "fps=0.0 invalid" in proc.stderr
     with pytest.raises(VideoError):
         extract_frames(FramesConfig((), tmp_path))
+
+
+def test_clip_to_frames_to_votes_to_dataset(tmp_path):
+    """The whole path a user takes: video -> frames at 2 fps -> three people's votes -> dataset."""
+    import json
+
+    from crossing_assist.data_tools.labels import VotesConfig, build_voted_dataset
+    from crossing_assist.data_tools.manifest import read_manifest
+    from crossing_assist.data_tools.synth import ClipConfig, synth_clip
+
+    video, side = synth_clip(ClipConfig(tmp_path / "walk.mp4", seed=2, seconds=6, fps=8, width=64, height=48,
+                                        supersample=1, progress=False))
+    truth = json.loads(side.read_text())
+    results, _ = extract_frames(FramesConfig((video,), tmp_path / "frames", fps=2, progress=False))
+    frames = results[0].frames
+    assert len(frames) == 12
+    lines = []
+    for k, (rel, t) in enumerate(frames):
+        label = truth["label"][round(t * truth["fps"])]
+        lines += [f"{rel},ann,{label}", f"{rel},bob,{label}", f"{rel},cat,{'unknown' if k % 3 == 0 else label}"]
+    (tmp_path / "votes.csv").write_text("frame,annotator,label\n" + "\n".join(lines) + "\n")
+    summary = build_voted_dataset(VotesConfig(tmp_path / "frames", (tmp_path / "votes.csv",)))
+    ds = read_manifest(tmp_path / "frames")
+    assert len(ds) == 12 and summary.ties == 0 and 0 < summary.kappa < 1
+    expected = [truth["label"][round(t * truth["fps"])] for _, t in frames]
+    assert [("unknown" if b == 0 else str(b)) for b in ds.labels()] == expected
+
+
+def test_label_studio_tasks_round_trip_to_votes(tmp_path):
+    """Tasks written by frames, annotated as Label Studio would export them, read back as votes."""
+    import json
+
+    from crossing_assist.data_tools.votes import FrameIndex, read_label_studio, tally
+
+    results, listing = extract_frames(FramesConfig((_video(tmp_path / "v.mp4", n=10),), tmp_path / "out",
+                                                   fps=2, progress=False))
+    tasks = json.loads((tmp_path / "out" / "label_studio_tasks.json").read_text())
+    assert len(tasks) == len(results[0].frames) == 2
+    for k, task in enumerate(tasks):
+        task["id"] = k
+        task["annotations"] = [{"completed_by": 1, "result": [
+            {"type": "choices", "from_name": "strip", "to_name": "image", "value": {"choices": [str(k + 5)]}}]}]
+    (tmp_path / "export.json").write_text(json.dumps(tasks))
+    votes = tally(read_label_studio(tmp_path / "export.json", FrameIndex([f for f, _ in results[0].frames])))
+    assert [v.counts for v in votes.values()] == [{5: 1}, {6: 1}]

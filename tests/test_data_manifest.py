@@ -99,3 +99,16 @@ def test_load_rgb_keeps_channel_order_and_names_bad_files(tmp_path):
         load_rgb(tmp_path / "broken.jpg")
     with pytest.raises(ImageError, match="nope.png: image not found"):
         load_rgb(tmp_path / "nope.png")
+
+
+def test_imports_stay_light():
+    """The package imports nothing heavy; the manifest reader needs no OpenCV; nothing needs torch."""
+    import subprocess
+    import sys
+    code = ("import sys, crossing_assist.data_tools as d; assert 'cv2' not in sys.modules and 'numpy' not in sys.modules;"
+            "import crossing_assist.data_tools.manifest; assert 'cv2' not in sys.modules;"
+            "import crossing_assist.data_tools.cli, crossing_assist.data_tools.augment, crossing_assist.data_tools.synth,"
+            " crossing_assist.data_tools.labels, crossing_assist.data_tools.ptl, crossing_assist.data_tools.stats;"
+            "assert 'torch' not in sys.modules and 'matplotlib' not in sys.modules")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr

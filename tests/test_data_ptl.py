@@ -106,3 +106,20 @@ def test_shared_ptl_imports_with_its_split_and_bins(ptl_dir, tmp_path):
     st = compute_stats(ds)
     assert st.bins["all"][0] == 0 and set(st.shared_sources) == {r.source for r in ds.rows}
     assert 0.5 < st.baseline[4][1] < 1.0
+
+
+def test_minimal_ptl_layout_with_images_elsewhere(tmp_path):
+    """Only the required columns, images outside an images/ folder: still imports."""
+    root = tmp_path / "other"
+    save_rgb(root / "pics" / "x.jpg", np.zeros((6, 8, 3), np.uint8))
+    save_rgb(root / "y.jpg", np.zeros((6, 8, 3), np.uint8))
+    (root / "labels.csv").write_text("photographer,image,bin12,far_x,split\n"
+                                     "ann,pics/x.jpg,12,0.99,train\n,y.jpg,1,0.0,test\n")
+    import_ptl(PTLImportConfig(root, tmp_path / "ds", progress=False))
+    ds = read_manifest(tmp_path / "ds")
+    assert [r.image for r in ds.rows] == ["images/pics/x.jpg", "images/y.jpg"]
+    assert [r.source for r in ds.rows] == ["ptl:ann", "ptl:unnamed"] and ds.rows[1].split == "test"
+    assert all(r.flags == () for r in ds.rows)
+    (root / "labels.csv").write_text("image,split,far_x\nx.jpg,train,0.5\n")
+    with pytest.raises(PTLError, match="line 1: header lacks column.*photographer, bin12"):
+        import_ptl(PTLImportConfig(root, tmp_path / "ds2", progress=False))

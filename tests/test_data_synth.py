@@ -132,3 +132,18 @@ def test_embedded_sample_clip_matches_its_ground_truth():
     assert 10 <= len(frames) / meta["fps"] <= 20
     assert meta["command"].startswith("crossing-data synth --video")
     _check_truth(meta, frames)
+
+
+def test_embedded_clip_ground_truth_is_reproduced_by_the_current_code():
+    """The sidecar's far_x per frame follows from the recorded seed with today's geometry."""
+    from crossing_assist.data_tools.synth import _passing_car, clip_pose, clip_scene
+    meta = json.loads((ASSETS / "sample_clip.json").read_text())
+    scene = clip_scene(meta["seed"])
+    seconds = meta["n_frames"] / meta["fps"]
+    w, h = meta["size"]
+    for i in range(0, meta["n_frames"], 5):
+        t = i / meta["fps"]
+        cam, phase = clip_pose(scene, t, seconds, meta["fov_deg"])
+        far_x, _, _ = goal_label(replace(scene, occluders=_passing_car(scene, t, seconds)), cam, w, h)
+        assert phase == meta["phase"][i]
+        assert (far_x is None and meta["far_x"][i] is None) or abs(far_x - meta["far_x"][i]) < 1e-5

@@ -10,6 +10,7 @@ import pytest
 import soundfile as sf
 from runtime_toy import toy_bundle, write_clip  # noqa: F401  (fixture)
 
+from crossing_assist.actions import x_to_bin, x_to_heading
 from crossing_assist.runtime import demo
 from crossing_assist.runtime.beacon import BeaconConfig
 from crossing_assist.runtime.engine import Engine, Prediction
@@ -37,6 +38,8 @@ def run(tmp_path, bundle, xs, name, engine=None, noise=0.0, annotate=False):
 
 def test_wav_left_right_energy_follows_a_goal_moving_left_to_right(tmp_path, toy_bundle):  # noqa: F811
     xs = np.linspace(0.04, 0.96, 150)
+    truth = {"label": [str(x_to_bin(x)) for x in xs], "goal_azimuth_deg": [x_to_heading(x) for x in xs]}
+    (tmp_path / "move.json").write_text(json.dumps(truth))  # ground truth beside the clip
     summary, audio, sr, trace = run(tmp_path, toy_bundle, xs, "move", annotate=True)
     assert sr == SR and audio.shape == (round(150 / 30 * SR), 2)  # on the video's timeline
     assert len(trace) == 150 == summary.frames
@@ -48,6 +51,11 @@ def test_wav_left_right_energy_follows_a_goal_moving_left_to_right(tmp_path, toy
     assert balance[0] < -0.6 and balance[-1] > 0.6
     assert np.corrcoef(np.arange(len(balance)), balance)[0, 1] > 0.95
     assert band_energy(audio.sum(1), BEACON.tone_hz) > 0.5
+    tone_step = 2 * np.pi * BEACON.tone_hz / SR * BEACON.amplitude
+    assert np.abs(np.diff(audio, axis=0)).max() < 1.15 * tone_step  # 150 cue changes, no click
+    assert summary.truth["guided_when_visible"] > 0.9
+    assert summary.truth["median_heading_error_deg"] < 4.0
+    assert any(line.startswith("vs ground truth") for line in summary.lines())
     cap = cv2.VideoCapture(str(tmp_path / "move" / "annotated.mp4"))
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 150
     ok, img = cap.read()
@@ -112,3 +120,16 @@ def test_missing_default_assets_name_what_is_missing(tmp_path, monkeypatch, caps
     assert demo.main([]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "default_bundle" in err and "sample_clip.mp4" in err
+
+
+def test_benchmark_reports_decisions_per_second(tmp_path, toy_bundle):  # noqa: F811
+    from pathlib import Path
+
+    clip = write_clip(tmp_path / "b.mp4", np.linspace(0.1, 0.9, 30))
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "demo_throughput.py"
+    proc = subprocess.run([sys.executable, str(script), "--bundle", str(toy_bundle), "--video", str(clip),
+                           "--repeat", "1", "--json"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    rec = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert rec["decisions_per_s"] > 0 and rec["x_real_time"] == pytest.approx(rec["decisions_per_s"] / 30, rel=1e-6)
+    assert str(toy_bundle) in proc.stdout

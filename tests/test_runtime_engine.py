@@ -23,7 +23,8 @@ def test_prediction_follows_the_bar(engine, k):
     assert p.ok and p.action == k and p.probs.shape == (13,)
     assert p.probs.sum() == pytest.approx(1.0, abs=1e-5)
     assert p.heading_deg == pytest.approx(x_to_heading(bin_center_x(k)))
-    assert k in p.conformal_set and p.uncertainty == p.entropy < 1.0
+    # entropy < 1.6 unless >= 5 of the 8 samples drop the bar (p=0.05 each: chance < 2e-5)
+    assert k in p.conformal_set and p.uncertainty == p.entropy < 1.6
 
 
 def test_no_bar_is_flat_and_uncertain(engine):
@@ -33,9 +34,9 @@ def test_no_bar_is_flat_and_uncertain(engine):
 
 def test_mc_samples_vary(engine):
     """Dropout survives onnxruntime's optimiser: samples differ, so mutual information > 0
-    (each sample drops the bar's logit with p=0.1; 8 samples all keep it with chance 0.43,
-    so over 20 frames the chance that none varies is 0.43**20 < 1e-7)."""
-    mis = [engine.predict(bar_frame(0.3)).mutual_info for _ in range(20)]
+    (each sample drops the bar's logit with p=0.05; 8 samples all keep it with chance 0.66,
+    so over 40 frames the chance that none varies is 0.66**40 < 1e-7)."""
+    mis = [engine.predict(bar_frame(0.3)).mutual_info for _ in range(40)]
     assert max(mis) > 0.01 and len(set(mis)) > 1
 
 

@@ -123,8 +123,9 @@ async function main() {
       ignoreDefaultArgs: ['--mute-audio'],
     });
     const page = context.pages()[0] || await context.newPage();
-    page.on('console', (m) => result.console.push(`${m.type()}: ${m.text()}`.slice(0, 500)));
-    page.on('pageerror', (e) => result.console.push(`pageerror: ${e.message}`.slice(0, 500)));
+    let sink = result.console; // the offline phase gets its own list
+    page.on('console', (m) => sink.push(`${m.type()}: ${m.text()}`.slice(0, 500)));
+    page.on('pageerror', (e) => sink.push(`pageerror: ${e.message}`.slice(0, 500)));
     await page.addInitScript(() => {
       window.__vibrations = [];
       navigator.vibrate = (p) => { window.__vibrations.push(p); return true; };
@@ -132,6 +133,11 @@ async function main() {
     const url = `${server.url}?test=1`;
     await page.goto(url);
     await waitFor(page, () => window.crossingAssist?.ready && window.crossingAssist.offline === 'ready', null, 60000, 'the app and its service worker');
+
+    // What Chrome on a phone would say about installing the app ("Add to Home screen").
+    const cdp = await context.newCDPSession(page);
+    result.installability = (await cdp.send('Page.getInstallabilityErrors')).installabilityErrors;
+    result.manifest_errors = (await cdp.send('Page.getAppManifest')).errors;
 
     if (args.vectors) {
       const vectors = JSON.parse(readFileSync(args.vectors, 'utf8'));
@@ -169,7 +175,8 @@ async function main() {
     await stopServer(server.proc);
     server = null;
     await page.reload();
-    const offline = { loaded: false };
+    const offline = { loaded: false, console: [] };
+    sink = offline.console;
     try {
       await waitFor(page, () => window.crossingAssist?.ready, null, 30000, 'the app offline');
       offline.loaded = true;

@@ -105,18 +105,24 @@ def yaw_label(far_x: float | None, label: int, psi_deg: float, fov_deg: float = 
 
 
 def _yaw_maps(width: int, height: int, psi_deg: float, fov_deg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Source coordinates (map_x, map_y, float32 H×W) of each output pixel and the valid mask."""
+    """Source coordinates (map_x, map_y, float32 H×W) of each output pixel and the valid mask.
+
+    The output pixel's ray ``r' = K^-1 (u, v, 1)`` comes from the old ray ``R^T r'``; for a
+    rotation about the vertical axis its depth and source column depend on ``u`` only, so the
+    maps are built from 1-D arrays (equivalent to applying ``(K R K^-1)^-1`` per pixel).
+    """
     k = intrinsics(width, height, fov_deg)
-    u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
-    rays_new = np.stack([u, v, np.ones_like(u)], axis=-1) @ np.linalg.inv(k).T   # H×W×3
-    rays_old = rays_new @ yaw_rotation(psi_deg)                                 # R^T applied per ray
-    z = rays_old[..., 2]
+    f, cx, cy = k[0, 0], k[0, 2], k[1, 2]
+    c, s = math.cos(math.radians(psi_deg)), math.sin(math.radians(psi_deg))
+    xn = (np.arange(width, dtype=np.float64) - cx) / f                   # (W,)
+    yn = (np.arange(height, dtype=np.float64) - cy) / f                  # (H,)
+    z = c - s * xn                                                       # old depth per column
     ahead = z > 1e-9
     zsafe = np.where(ahead, z, 1.0)
-    src = (rays_old / zsafe[..., None]) @ k.T
-    sx, sy = src[..., 0], src[..., 1]
-    valid = ahead & (sx >= -0.5) & (sx <= width - 0.5) & (sy >= -0.5) & (sy <= height - 0.5)
-    map_x = np.where(valid, np.clip(sx, 0, width - 1), -1).astype(np.float32)
+    sx = f * (c * xn + s) / zsafe + cx                                   # (W,)
+    sy = f * yn[:, None] / zsafe[None, :] + cy                           # (H, W)
+    valid = (ahead & (sx >= -0.5) & (sx <= width - 0.5))[None, :] & (sy >= -0.5) & (sy <= height - 0.5)
+    map_x = np.where(valid, np.clip(sx, 0, width - 1)[None, :], -1).astype(np.float32)
     map_y = np.where(valid, np.clip(sy, 0, height - 1), -1).astype(np.float32)
     return map_x, map_y, valid
 
@@ -134,7 +140,7 @@ def yaw(image: np.ndarray, far_x: float | None, label: int, psi_deg: float,
     new_x, new_label = yaw_label(far_x, label, psi_deg, fov_deg, out_of_frame)
     h, w = image.shape[:2]
     map_x, map_y, valid = _yaw_maps(w, h, float(psi_deg), fov_deg)
-    warped = cv2.remap(image, map_x, map_y, interpolation=cv2.INTER_LINEAR,
+    warped = cv2.remap(np.ascontiguousarray(image), map_x, map_y, interpolation=cv2.INTER_LINEAR,
                        borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     if warped.ndim < image.ndim:
         warped = warped[..., None]
@@ -147,3 +153,19 @@ def random_yaw(image: np.ndarray, far_x: float | None, label: int, rng: np.rando
     """:func:`yaw` by an angle drawn uniformly from ``[-max_deg, max_deg]``; returns it last."""
     psi = float(rng.uniform(-max_deg, max_deg))
     return (*yaw(image, far_x, label, psi, fov_deg, out_of_frame), psi)
+
+
+def random_augment(image: np.ndarray, far_x: float | None, label: int, rng: np.random.Generator, *,
+                   p_mirror: float = 0.5, max_yaw_deg: float = 0.0, fov_deg: float = DEFAULT_FOV_DEG,
+                   out_of_frame: str = "unknown") -> tuple[np.ndarray, float | None, int, np.ndarray]:
+    """On-the-fly augmentation for a training loop: mirror with probability ``p_mirror``, then
+    (if ``max_yaw_deg`` > 0) yaw by an angle uniform in ``[-max_yaw_deg, max_yaw_deg]``.
+
+    Returns ``(image, far_x, label, valid)`` like :func:`yaw` (``valid`` all True without yaw).
+    """
+    if rng.random() < p_mirror:
+        image, far_x, label = mirror(image, far_x, label)
+    if max_yaw_deg > 0:
+        image, far_x, label, valid, _ = random_yaw(image, far_x, label, rng, max_yaw_deg, fov_deg, out_of_frame)
+        return image, far_x, label, valid
+    return image, far_x, parse_label(label), np.ones(np.asarray(image).shape[:2], dtype=bool)

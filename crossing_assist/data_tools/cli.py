@@ -4,6 +4,7 @@ builds a frozen config and calls the library; user errors print one ``error: ...
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import Callable, Sequence
@@ -17,8 +18,10 @@ USER_ERRORS: tuple[type[BaseException], ...] = (ManifestError, ImageError, OSErr
 def _user_errors() -> tuple[type[BaseException], ...]:
     from crossing_assist.data_tools.ptl import PTLError
     from crossing_assist.data_tools.frames import VideoError
+    from crossing_assist.data_tools.splits import SplitError
     from crossing_assist.data_tools.synth import SynthError
-    return USER_ERRORS + (PTLError, SynthError, VideoError)
+    from crossing_assist.data_tools.votes import VotesError
+    return USER_ERRORS + (PTLError, SynthError, VideoError, VotesError, SplitError)
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -95,11 +98,48 @@ def _cmd_frames(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def _cmd_votes(args: argparse.Namespace) -> int:
+    from crossing_assist.data_tools.labels import VotesConfig, build_voted_dataset
+    from crossing_assist.data_tools.splits import SplitConfig
+    cfg = VotesConfig(Path(args.frames_dir), tuple(Path(v) for v in args.votes), args.tie, args.min_votes,
+                      SplitConfig(args.val, args.test, args.seed))
+    print(build_voted_dataset(cfg).format())
+    return 0
+
+
+def _cmd_split(args: argparse.Namespace) -> int:
+    from crossing_assist.data_tools.manifest import read_manifest, write_manifest
+    from crossing_assist.data_tools.splits import SplitConfig, assign_splits
+    ds = read_manifest(args.dataset)
+    rows = assign_splits(ds.rows, SplitConfig(args.val, args.test, args.seed))
+    path = write_manifest(args.dataset, rows)
+    counts = {s: sum(r.split == s for r in rows) for s in ("train", "val", "test")}
+    n_src = {s: len({r.source for r in rows if r.split == s}) for s in counts}
+    print(f"wrote {path}: " + ", ".join(f"{s} {counts[s]} frames / {n_src[s]} sources" for s in counts if counts[s]))
+    return 0
+
+
+def _cmd_augment(args: argparse.Namespace) -> int:
+    from crossing_assist.data_tools.augment_dataset import AugmentConfig, augment_dataset
+    cfg = AugmentConfig(Path(args.dataset), Path(args.out), not args.no_mirror, tuple(args.yaw), args.fov,
+                        args.out_of_frame, tuple(args.splits), args.drop_unknown, not args.quiet)
+    path = augment_dataset(cfg)
+    from crossing_assist.data_tools.manifest import read_manifest
+    print(f"wrote {path} ({len(read_manifest(path.parent))} rows)")
+    return 0
+
+
+def _cmd_label_config(args: argparse.Namespace) -> int:
+    from crossing_assist.data_tools.votes import LABEL_STUDIO_CONFIG
+    sys.stdout.write(LABEL_STUDIO_CONFIG)
+    return 0
+
+
 # ---------------------------------------------------------------- parser
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="crossing-data", description=__doc__.split(".")[0] + ".")
+    parser = argparse.ArgumentParser(prog="crossing-data", description="Data tools: frames, votes, datasets, augmentation, synthetic corners.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("import-ptl", help="turn a folder in the PTL layout into a dataset")
@@ -123,6 +163,40 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=float, default=2.0, help="frames per second to keep (default 2)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_frames)
+
+    p = sub.add_parser("votes", help="majority-vote people's labels into FRAMES_DIR/manifest.csv")
+    p.add_argument("frames_dir", help="folder written by 'crossing-data frames' (with frames.csv)")
+    p.add_argument("votes", nargs="+", help="votes: CSV (frame,annotator,label) and/or Label Studio JSON exports")
+    p.add_argument("--tie", choices=("unknown", "drop"), default="unknown",
+                   help="a tied vote becomes unknown (flag 'tie'), or the frame is dropped")
+    p.add_argument("--min-votes", type=int, default=1, help="leave out frames with fewer votes")
+    p.add_argument("--val", type=float, default=0.0, help="share of frames for val, by source")
+    p.add_argument("--test", type=float, default=0.0, help="share of frames for test, by source")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=_cmd_votes)
+
+    p = sub.add_parser("split", help="reassign splits by source (no frame of a video/place on two sides)")
+    p.add_argument("dataset")
+    p.add_argument("--val", type=float, default=0.2)
+    p.add_argument("--test", type=float, default=0.0)
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=_cmd_split)
+
+    p = sub.add_parser("augment", help="write a dataset with mirrored / yawed copies (exact labels)")
+    p.add_argument("dataset")
+    p.add_argument("--out", required=True)
+    p.add_argument("--no-mirror", action="store_true", help="no mirrored copies")
+    p.add_argument("--yaw", type=float, nargs="*", default=[], help="yaw angles in degrees (+ = user turned right)")
+    p.add_argument("--fov", type=float, default=90.0, help="assumed horizontal field of view, degrees")
+    p.add_argument("--out-of-frame", choices=("unknown", "edge"), default="unknown",
+                   help="label of a goal the yaw pushes out of the frame")
+    p.add_argument("--drop-unknown", action="store_true", help="skip yawed copies whose goal left the frame")
+    p.add_argument("--splits", nargs="+", default=["train"], help="splits to augment (others are copied as is)")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_augment)
+
+    p = sub.add_parser("label-config", help="print the Label Studio labelling config (12 strips + unknown)")
+    p.set_defaults(func=_cmd_label_config)
 
     d_frames, d_clip = synth_defaults()
     p = sub.add_parser("synth", help="render synthetic street corners (a dataset, or with --video a clip)")
@@ -158,6 +232,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     func: Callable[[argparse.Namespace], int] = args.func
     try:
         return func(args)
+    except BrokenPipeError:          # e.g. `crossing-data stats DIR | head`: not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except _user_errors() as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

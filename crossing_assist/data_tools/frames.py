@@ -5,7 +5,9 @@ For each video, frame ``k`` is the first decoded frame at or after ``k / fps`` s
 ``OUT/<video>/<video>_t<seconds>.jpg`` (``corner03_t0012.500.jpg``: sorts by time) and listed
 in ``OUT/frames.csv`` (``image,source,video,t_s``) with source ``vid:<video>``, the leakage
 unit for splits. A video that cannot be opened or yields no frame is reported and skipped;
-the others are still processed. A video that ends before its header's frame count
+the others are still processed. ``OUT/label_studio_tasks.json`` lists the same frames as
+Label Studio tasks served from local files (``/data/local-files/?d=<OUT name>/<image>``: set
+``LABEL_STUDIO_LOCAL_FILES_DOCUMENT_ROOT`` to OUT's parent folder). A video that ends before its header's frame count
 (truncated) keeps the frames decoded so far and gets a warning.
 """
 
@@ -13,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +27,7 @@ from crossing_assist.data_tools.images import save_rgb
 from crossing_assist.data_tools.manifest import atomic_write_text
 
 FRAMES_CSV = "frames.csv"
+LABEL_STUDIO_TASKS = "label_studio_tasks.json"
 
 
 class VideoError(ValueError):
@@ -121,4 +125,7 @@ def extract_frames(cfg: FramesConfig) -> tuple[list[VideoResult], Path | None]:
             writer.writerow([rel, f"vid:{r.name}", str(r.video), f"{t:.3f}"])
     path = out / FRAMES_CSV
     atomic_write_text(path, buf.getvalue())
+    tasks = [{"data": {"image": f"/data/local-files/?d={out.name}/{rel}", "source": f"vid:{r.name}", "t_s": t}}
+             for r in results for rel, t in r.frames]
+    atomic_write_text(out / LABEL_STUDIO_TASKS, json.dumps(tasks, indent=1) + "\n")
     return results, path

@@ -120,12 +120,17 @@ def _format_x(x: float | None) -> str:
     return "" if x is None else repr(float(x))
 
 
+def _check_bin_value(b: object, what: str) -> None:
+    if isinstance(b, bool) or not isinstance(b, (int, np.integer)) or not 0 <= int(b) <= N_BINS:
+        raise ValueError(f"{what} {b!r} invalid; expected an int bin 0..{N_BINS} (0 = unknown)")
+
+
 def check_row(row: Row) -> None:
     """Raise ValueError (one line, no location) when ``row`` breaks the format's rules."""
     img = row.image
     if not img or "\\" in img or PurePosixPath(img).is_absolute() or img != img.strip():
         raise ValueError(f"image {img!r} invalid; expected a POSIX path relative to the dataset folder")
-    parse_label(row.label)
+    _check_bin_value(row.label, "label")
     if not row.source or any(c.isspace() for c in row.source):
         raise ValueError(f"source {row.source!r} invalid; expected a non-empty id such as ptl:john")
     if row.split not in SPLITS:
@@ -140,7 +145,7 @@ def check_row(row: Row) -> None:
         if row.label not in (lo, hi):
             raise ValueError(f"label {row.label} disagrees with far_x {x} (strip {x_to_bin(x)})")
     for b, n in row.votes.items():
-        parse_label(b)
+        _check_bin_value(b, "vote label")
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f"vote count {n!r} for {format_label(b)} invalid; expected an int >= 1")
     for flag in row.flags:

@@ -75,13 +75,18 @@ def _check_size(width: int, height: int, fov: float) -> None:
 
 
 def sample_view(scene: Scene, rng: np.random.Generator, fov_deg: float, away: bool) -> Camera:
-    """A phone pose at the near kerb: facing the crossing (yaw within ±18° of it) or, with
-    ``away``, facing along the road so the goal is out of view."""
+    """A phone pose at the near kerb: facing the goal (its bearing in view: 60% near the centre,
+    N(0, 10°), 40% anywhere across the field of view) or, with ``away``, facing along the road
+    so the goal is out of view."""
+    goal = scene.goal()
+    bearing = math.degrees(math.atan2(goal[0], goal[2])) if goal is not None else scene.theta
     if away:
         side = 1.0 if rng.random() < 0.5 else -1.0
-        yaw = scene.theta + side * float(rng.uniform(fov_deg / 2 + 25, fov_deg / 2 + 70))
+        yaw = bearing + side * float(rng.uniform(fov_deg / 2 + 25, fov_deg / 2 + 70))
+    elif rng.random() < 0.6:
+        yaw = bearing - float(np.clip(rng.normal(0, 10), -30, 30))
     else:
-        yaw = scene.theta + float(np.clip(rng.normal(0, 9), -18, 18))
+        yaw = bearing - float(rng.uniform(-0.98, 0.98)) * fov_deg / 2
     return Camera(yaw=yaw, pitch=float(rng.uniform(3, 20)), roll=float(rng.normal(0, 2.5)),
                   height=float(rng.uniform(1.2, 1.6)), fov_deg=fov_deg)
 

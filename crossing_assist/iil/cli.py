@@ -11,18 +11,18 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import fields, replace
 from pathlib import Path
 from typing import Sequence
 
-from .algorithms import THESIS_ALGORITHMS, AlgoParams, list_algorithms
+from .config import LearnerConfig
 from .envs import ENV_NAMES
-from .learners import LearnerConfig
+from .files import RunError
 from .report import ReportError, write_report
-from .runner import RunConfig, RunError, run
 
 
 def _algos(names: list[str]) -> list[str]:
+    from .algorithms import THESIS_ALGORITHMS, list_algorithms  # noqa: PLC0415 - torch, only when running
+
     out: list[str] = []
     for n in names:
         for part in n.split(","):
@@ -67,6 +67,9 @@ def _cmd_run(a: argparse.Namespace) -> int:
     import torch  # noqa: PLC0415
     from tqdm import tqdm  # noqa: PLC0415
 
+    from .algorithms import AlgoParams  # noqa: PLC0415
+    from .runner import RunConfig, run  # noqa: PLC0415
+
     if a.episodes < 1 or a.horizon < 1:
         raise RunError(f"--episodes={a.episodes} and --horizon={a.horizon} must both be >= 1")
     torch.set_num_threads(max(1, a.threads))
@@ -99,6 +102,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     try:
         if a.cmd == "list":
+            from .algorithms import THESIS_ALGORITHMS, list_algorithms  # noqa: PLC0415
+
             print("environments:", ", ".join(ENV_NAMES))
             print("algorithms:", ", ".join(list_algorithms()))
             print("thesis:", ", ".join(THESIS_ALGORITHMS))

@@ -14,29 +14,13 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass
-
 import numpy as np
 import torch
 from torch import nn
 
+from .config import LearnerConfig
 from .data import Aggregate, Step
 from .networks import SmallResNet
-
-
-@dataclass(frozen=True)
-class LearnerConfig:
-    """Hyper-parameters of every learner (defaults: the thesis's)."""
-
-    lr: float = 1e-3
-    epochs: int = 3
-    batch_size: int = 32
-    mc_samples: int = 8
-    dropout: float = 0.5
-    channels: int = 16
-    hidden: int = 64
-    ensemble: int = 5
-    max_samples: int = 4096  # most recent samples used per fit (bounds time on long runs)
 
 
 class ActionCodec:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .runner import _atomic_write, read_episodes
+from .files import _atomic_write, read_episodes
 
 METRICS = (("reward", "Figure 4.4: reward per episode"), ("queries", "Figure 4.5: expert queries per episode"),
            ("penalties", "Figure 4.6: penalties per episode"), ("out_of_bounds", "Figure 4.7: out-of-bounds events per episode"))

@@ -15,10 +15,7 @@ uninterrupted run (same rng streams).
 
 from __future__ import annotations
 
-import csv
-import io
 import json
-import math
 import os
 import platform
 import sys
@@ -34,11 +31,8 @@ from .data import Aggregate
 from .envs import make_env
 from .experts import OracleExpert
 from .learners import LearnerConfig
+from .files import RunError, _atomic_write, _write_csv, read_episodes  # noqa: F401 (re-exported)
 from .loop import aggregate_and_learn, run_episode
-
-
-class RunError(ValueError):
-    """A run cannot start or continue (bad folder, mismatching configuration)."""
 
 
 @dataclass(frozen=True)
@@ -67,35 +61,6 @@ def versions() -> dict:
                 continue
         out[mod] = getattr(m, "__version__", "?")
     return out
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    keys: list[str] = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=keys)
-    w.writeheader()
-    w.writerows(rows)
-    _atomic_write(path, buf.getvalue())
-
-
-def read_episodes(path: Path) -> list[dict]:
-    """Rows of an ``episodes.csv`` with numbers parsed (empty cells -> nan)."""
-    with Path(path).open(newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    def num(v):
-        try:
-            return float(v) if v not in ("", None) else math.nan
-        except ValueError:
-            return v
-    return [{k: num(v) for k, v in r.items()} for r in rows]
 
 
 def _config_json(cfg: RunConfig) -> dict:

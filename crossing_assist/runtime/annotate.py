@@ -32,12 +32,14 @@ def annotate(frame_rgb: np.ndarray, pred: Prediction, dec: Decision, space, fov_
         x = heading_to_x(max(-89.0, min(89.0, dec.heading_deg)), fov_deg)
         xp = round(min(max(x, 0.0), 1.0) * (w - 1))
         cv2.line(img, (xp, 0), (xp, h - 1), color, 3)
-    scale = max(0.35, w / 1000)
-    lines = [f"t={dec.t:6.2f}s gate={dec.gate} ({dec.reason})",
-             f"U={pred.uncertainty:.2f} aL={dec.alpha_learner:.2f} aF={dec.alpha_hold:.2f}",
-             "STOP / SCAN" if dec.stop else f"heading {dec.heading_deg:+.1f} deg  {dec.rate_hz:.1f} Hz"]
+    scale = max(0.4, w / 900)
+    gap = round(26 * scale) + 4
+    u = f"{pred.uncertainty:.2f}" if pred.ok else "--"
+    lines = [f"{dec.t:.2f}s {dec.gate.upper()} ({dec.reason})",
+             f"U {u}  aL {dec.alpha_learner:.2f}  aF {dec.alpha_hold:.2f}",
+             "STOP / SCAN" if dec.stop else f"{dec.heading_deg:+.0f} deg  {dec.rate_hz:.1f} Hz"]
     for i, text in enumerate(lines):
-        y = round((i + 1) * 22 * scale / 0.5)
+        y = (i + 1) * gap
         cv2.putText(img, text, (6, y), cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), 3, cv2.LINE_AA)
         cv2.putText(img, text, (6, y), cv2.FONT_HERSHEY_SIMPLEX, scale, color if i == 2 else WHITE, 1, cv2.LINE_AA)
     if dec.stop:

@@ -160,15 +160,14 @@ class CuePlayer:
     :meth:`fill`. A change arriving during a fade waits until the fade ends.
     """
 
-    def __init__(self, cfg: BeaconConfig, max_block: int = 16384) -> None:
+    def __init__(self, cfg: BeaconConfig) -> None:
         self.cfg = cfg
         self._fade_n = max(1, round(cfg.fade_s * cfg.sample_rate))
         i = np.arange(self._fade_n, dtype=np.float64)
         up = (0.5 - 0.5 * np.cos(np.pi * (i + 1) / (self._fade_n + 1))).astype(np.float32)
         self._up = up[:, None].copy()
         self._down = (1.0 - up)[:, None].copy()
-        self._scratch = np.zeros((max_block, 2), dtype=np.float32)
-        self._max_block = max_block
+        self._scratch = np.zeros((self._fade_n, 2), dtype=np.float32)  # the old loop during a fade
         silent = render_cue(SILENCE, cfg)
         self._next = silent
         self._cur = silent
@@ -195,8 +194,6 @@ class CuePlayer:
     def fill(self, out: np.ndarray) -> None:
         """Write ``len(out)`` frames into ``out`` (n, 2) float32 in place; audio-callback safe."""
         n = len(out)
-        if n > self._max_block:
-            raise ValueError(f"Invalid block: {n} frames > max_block={self._max_block}")
         nxt = self._next
         if nxt is not self._cur and self._fade_i >= self._fade_n:
             self._old, self._old_pos = self._cur, self._pos

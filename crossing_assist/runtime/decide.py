@@ -98,14 +98,15 @@ class Decision:
         return out
 
 
-def frame_weight(obs: Observation, c_frame: float) -> float:
-    """Evidence weight of a frame before time scaling: ``max(0, 1 - 2 tanh(c U))`` (0 at and
-    beyond the threshold), 0 for failed frames and when ``argmax probs`` is unknown."""
+def frame_weight(obs: Observation, c_frame: float, threshold: float) -> float:
+    """Evidence weight of a frame before time scaling: ``alpha(U) = 1 - tanh(c U)`` when
+    ``U < threshold`` (so in (1/2, 1]), else 0: frames at or beyond the calibrated threshold,
+    failed frames and frames whose ``argmax probs`` is unknown carry no evidence."""
     if not obs.ok or obs.probs is None or not math.isfinite(obs.uncertainty):
         return 0.0
-    if int(np.argmax(obs.probs)) == 0:
+    if int(np.argmax(obs.probs)) == 0 or not obs.uncertainty < threshold:
         return 0.0
-    return max(0.0, 1.0 - 2.0 * math.tanh(c_frame * max(obs.uncertainty, 0.0)))
+    return alpha(obs.uncertainty, c_frame)
 
 
 class Decider:
@@ -139,7 +140,7 @@ class Decider:
             self.hold_turned += abs(psi)
         w = 0.0
         if obs is not None and obs.ok:
-            w = frame_weight(obs, self.c_frame)
+            w = frame_weight(obs, self.c_frame, cfg.threshold)
             since = cfg.filter.tau_evidence_s if self.t_last_ok is None else t - self.t_last_ok
             w *= min(1.0, max(0.0, since) / cfg.filter.tau_evidence_s)
             if w > 0.0:

@@ -26,6 +26,7 @@ from crossing_assist.runtime.audio import write_wav
 from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
 from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.pipeline import Pipeline, Step
+from crossing_assist.runtime.truth import compare, load_truth, truth_line
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,7 @@ class Summary:
     reasons: dict
     failed: int
     outputs: dict
+    truth: dict | None = None
 
     def lines(self) -> list[str]:
         """Human-readable summary lines."""
@@ -65,6 +67,8 @@ class Summary:
                f"gate: {pct(self.gates)}", f"stop reasons: {pct(self.reasons)}"]
         if self.failed:
             out.append(f"failed inferences: {self.failed}")
+        if self.truth:
+            out.append(truth_line(self.truth))
         out += [f"{k}: {v}" for k, v in self.outputs.items()]
         return out
 
@@ -82,7 +86,7 @@ def trace_record(i: int, step: Step) -> dict:
     return rec
 
 
-def run_frames(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, *, fps: float, sink) -> int:
+def run_frames(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, *, sink) -> int:
     """Drive ``pipeline`` over ``(t, frame)`` pairs, calling ``sink(i, t, frame, step)``; returns
     the number of frames."""
     n = 0
@@ -123,6 +127,7 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     gates: Counter = Counter()
     reasons: Counter = Counter()
     state = {"writer": None, "failed": 0, "pos": 0}
+    headings: list[float | None] = []
     tmp_video = out / ".annotated.tmp.mp4"
     trace_tmp = tempfile.NamedTemporaryFile("w", dir=out, prefix=".trace.", suffix=".jsonl", delete=False)
 
@@ -135,6 +140,7 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     def sink(i: int, t: float, frame: np.ndarray, step: Step) -> None:
         flush_audio(t)
         player.set_loop(step.loop)
+        headings.append(step.decision.heading_deg)
         gates[step.decision.gate] += 1
         reasons[step.decision.reason] += 1
         state["failed"] += not step.prediction.ok
@@ -152,7 +158,7 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     total = source.frame_count or None
     with tqdm(total=total, unit="frame", disable=not cfg.progress, leave=False, desc="crossing-demo") as bar:
         try:
-            n = run_frames(source, pipeline, fps=source.fps, sink=sink)
+            n = run_frames(source, pipeline, sink=sink)
         finally:
             trace_tmp.close()
             if state["writer"] is not None:
@@ -174,5 +180,7 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
         if cfg.mux:
             muxed = _mux(out / "annotated.mp4", outputs["beacon"], out / "annotated_with_audio.mp4")
             outputs["with_audio"] = muxed if muxed else "skipped (ffmpeg not found; play annotated.mp4 with beacon.wav)"
+    truth = load_truth(cfg.video)
     return Summary(frames=n, video_s=video_s, wall_s=wall, gates=dict(gates), reasons=dict(reasons),
-                   failed=state["failed"], outputs={k: str(v) for k, v in outputs.items()})
+                   failed=state["failed"], outputs={k: str(v) for k, v in outputs.items()},
+                   truth=compare(truth, headings) if truth else None)

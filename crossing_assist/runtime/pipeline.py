@@ -25,7 +25,7 @@ class Step:
     loop: np.ndarray
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=16)
 def cached_loop(cue: Cue, cfg: BeaconConfig) -> np.ndarray:
     """:func:`render_cue` memoised (cues and configs are frozen, hashable values); read-only."""
     loop = render_cue(cue, cfg)

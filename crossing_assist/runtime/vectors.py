@@ -3,8 +3,9 @@
     python -m crossing_assist.runtime.vectors --out android_demo/test_vectors.json
 
 Each scenario gives the full :class:`DecisionConfig`, then one entry per step with the inputs
-(``t`` seconds, ``yaw_rate_dps``, and ``obs``: null for a tick without a frame, else ``ok``,
-``probs`` and ``uncertainty``) and the expected :class:`Decision` (every field, the belief
+(``t`` seconds, ``yaw_rate_dps``, and ``obs``: null for a tick without a frame, else the
+graph's raw outputs ``ok``, ``probs``, ``entropy``, ``mutual_info``, ``variance`` and the derived
+``uncertainty``, the bundle's measure) and the expected :class:`Decision` (every field, the belief
 included). Inputs are generated from a seeded generator, so the file is reproducible. Floats
 are written at full double precision; a port should agree to ~1e-9 (``tolerance``), and on
 every discrete field (gate, reason, stop, learner_action) exactly. Plus pure-function vectors
@@ -20,6 +21,7 @@ import math
 import os
 import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +29,7 @@ import numpy as np
 from crossing_assist.actions import get_space, heading_to_pan
 from crossing_assist.runtime.beacon import BeaconConfig, itd_seconds, pan_gains
 from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
+from crossing_assist.runtime.engine import measure_value
 
 FPS = 30.0
 VERSION = 1
@@ -42,49 +45,77 @@ def _entropy(p: np.ndarray) -> float:
     return float(-(p * np.log(p)).sum())
 
 
-def _frame(space_n: int, action: int, conf: float, measure: str, rng: np.random.Generator) -> Observation:
+@dataclass(frozen=True)
+class RawOutputs:
+    """A frame's graph outputs as the bundle gives them (``ok=False``: inference failed)."""
+
+    probs: np.ndarray | None
+    entropy: float = math.inf
+    mutual_info: float = math.inf
+    variance: np.ndarray | None = None
+    ok: bool = True
+
+    def observation(self, measure: str) -> Observation:
+        """What the decision logic sees: ``probs`` and the bundle's measure (engine rule)."""
+        if not self.ok:
+            return Observation(None, math.inf, ok=False)
+        return Observation(self.probs, measure_value(measure, self.entropy, self.mutual_info, self.variance,
+                                                     self.probs))
+
+    def to_json(self) -> dict:
+        if not self.ok:
+            return {"ok": False, "probs": None, "entropy": None, "mutual_info": None, "variance": None}
+        return {"ok": True, "probs": [float(v) for v in self.probs], "entropy": self.entropy,
+                "mutual_info": self.mutual_info, "variance": [float(v) for v in self.variance]}
+
+
+FAILED = RawOutputs(None, ok=False)
+
+
+def _frame(space_n: int, action: int, conf: float, rng: np.random.Generator) -> RawOutputs:
     p = _probs_for(space_n, action, conf)
     p = p * rng.uniform(0.9, 1.1, size=space_n)
     p = p / p.sum()
-    u = _entropy(p) if measure == "entropy" else float(rng.uniform(0.0, 0.3))
-    return Observation(p, u)
+    return RawOutputs(p, _entropy(p), float(rng.uniform(0.0, 0.3)), rng.uniform(0.0, 0.03, size=space_n))
 
 
-def _scenarios(rng: np.random.Generator) -> list[tuple[str, DecisionConfig, list[tuple[float, float, Observation | None]]]]:
+def _scenarios(rng: np.random.Generator) -> list[tuple[str, DecisionConfig, list[tuple[float, float, RawOutputs | None]]]]:
     base = DecisionConfig()
-    flat = Observation(np.full(13, 1 / 13), math.log(13))
+    flat = RawOutputs(np.full(13, 1 / 13), math.log(13), 0.0, np.zeros(13))
     out = []
-    sweep = [(i / FPS, 0.0, _frame(13, 1 + min(11, i * 12 // 90), 0.9, "entropy", rng)) for i in range(100)]
+    sweep = [(i / FPS, 0.0, _frame(13, 1 + min(11, i * 12 // 90), 0.9, rng)) for i in range(100)]
     out.append(("sweep_left_to_right", base, sweep))
     out.append(("noise", base, [(i / FPS, 0.0, flat) for i in range(30)]))
-    out.append(("unknown", base, [(i / FPS, 0.0, _frame(13, 0, 0.8, "entropy", rng)) for i in range(30)]))
-    odd = [(i / FPS, 0.0, _frame(13, 11 if i == 40 else 4, 0.9, "entropy", rng)) for i in range(50)]
+    out.append(("unknown", base, [(i / FPS, 0.0, _frame(13, 0, 0.8, rng)) for i in range(30)]))
+    odd = [(i / FPS, 0.0, _frame(13, 11 if i == 40 else 4, 0.9, rng)) for i in range(50)]
     out.append(("odd_frame", base, odd))
-    hold = [(i / FPS, 0.0, _frame(13, 8, 0.95, "entropy", rng)) for i in range(30)]
+    hold = [(i / FPS, 0.0, _frame(13, 8, 0.95, rng)) for i in range(30)]
     hold += [((30 + i) / FPS, 25.0, flat) for i in range(75)]
     out.append(("hold_with_yaw_then_stop", base, hold))
-    freeze = [(i / FPS, 0.0, _frame(13, 6, 0.9, "entropy", rng)) for i in range(20)]
+    freeze = [(i / FPS, 0.0, _frame(13, 6, 0.9, rng)) for i in range(20)]
     freeze += [(20 / FPS + 0.05 * (j + 1), 0.0, None) for j in range(14)]
     out.append(("freeze_ticks_stale", base, freeze))
-    fail = [(i / FPS, 0.0, _frame(13, 10, 0.9, "entropy", rng)) for i in range(20)]
-    fail[12] = (12 / FPS, 0.0, Observation(None, math.inf, ok=False))
+    fail = [(i / FPS, 0.0, _frame(13, 10, 0.9, rng)) for i in range(20)]
+    fail[12] = (12 / FPS, 0.0, FAILED)
     out.append(("inference_failure", base, fail))
-    jump = [(i / FPS, 0.0, _frame(13, 3 if i < 30 else 11, 0.97, "entropy", rng)) for i in range(45)]
+    jump = [(i / FPS, 0.0, _frame(13, 3 if i < 30 else 11, 0.97, rng)) for i in range(45)]
     out.append(("disagreement_jump", base, jump))
-    turn = [(i / FPS, -60.0 if i >= 20 else 0.0, _frame(13, 2, 0.9, "entropy", rng)) for i in range(40)]
+    turn = [(i / FPS, -60.0 if i >= 20 else 0.0, _frame(13, 2, 0.9, rng)) for i in range(40)]
     out.append(("fast_turn_goal_leaves_frame", base, turn))
     c4 = dataclasses.replace(base, n_actions=4)
-    out.append(("four_actions", c4, [(i / FPS, 5.0, _frame(4, 1 + (i // 15) % 3, 0.85, "entropy", rng))
+    out.append(("four_actions", c4, [(i / FPS, 5.0, _frame(4, 1 + (i // 15) % 3, 0.85, rng))
                                       for i in range(45)]))
     c8 = dataclasses.replace(base, n_actions=8, measure="mutual_info", threshold=0.2)
-    out.append(("eight_actions_mutual_info", c8, [(i / 15.0, 0.0, _frame(8, 1 + (i // 8) % 7, 0.8, "mi", rng))
+    out.append(("eight_actions_mutual_info", c8, [(i / 15.0, 0.0, _frame(8, 1 + (i // 8) % 7, 0.8, rng))
                                                    for i in range(40)]))
-    irregular = [(0.0, 0.0, _frame(13, 5, 0.9, "entropy", rng))]
+    cv = dataclasses.replace(base, measure="variance", threshold=0.02)
+    out.append(("variance_measure", cv, [(i / FPS, 0.0, _frame(13, 10, 0.9, rng)) for i in range(40)]))
+    irregular = [(0.0, 0.0, _frame(13, 5, 0.9, rng))]
     t = 0.0
     for i in range(40):
         t += float(rng.uniform(0.01, 0.3))
         k = 9 if rng.uniform() < 0.7 else int(rng.integers(0, 13))
-        obs = None if i % 7 == 3 else _frame(13, k, float(rng.uniform(0.5, 0.99)), "entropy", rng)
+        obs = None if i % 7 == 3 else _frame(13, k, float(rng.uniform(0.5, 0.99)), rng)
         irregular.append((t, float(rng.uniform(-40, 40)), obs))
     out.append(("irregular_random", base, irregular))
     return out
@@ -94,11 +125,11 @@ def _config_json(cfg: DecisionConfig) -> dict:
     return dataclasses.asdict(cfg)
 
 
-def _obs_json(obs: Observation | None) -> dict | None:
-    if obs is None:
+def _obs_json(raw: RawOutputs | None, measure: str) -> dict | None:
+    if raw is None:
         return None
-    return {"ok": obs.ok, "probs": None if obs.probs is None else [float(v) for v in obs.probs],
-            "uncertainty": obs.uncertainty if math.isfinite(obs.uncertainty) else None}
+    obs = raw.observation(measure)
+    return {**raw.to_json(), "uncertainty": obs.uncertainty if math.isfinite(obs.uncertainty) else None}
 
 
 def build_vectors(seed: int = 20240601) -> dict:
@@ -108,9 +139,9 @@ def build_vectors(seed: int = 20240601) -> dict:
     for name, cfg, steps in _scenarios(rng):
         d = Decider(cfg)
         rows = []
-        for t, yaw, obs in steps:
-            dec = d.step(t, obs, yaw)
-            rows.append({"t": t, "yaw_rate_dps": yaw, "obs": _obs_json(obs), "expect": dec.to_json()})
+        for t, yaw, raw in steps:
+            dec = d.step(t, None if raw is None else raw.observation(cfg.measure), yaw)
+            rows.append({"t": t, "yaw_rate_dps": yaw, "obs": _obs_json(raw, cfg.measure), "expect": dec.to_json()})
         scenarios.append({"name": name, "config": _config_json(cfg), "steps": rows})
     bcfg = BeaconConfig()
     pans = [-1.0, -0.5, -0.1, 0.0, 0.3, 0.77, 1.0]

@@ -185,13 +185,14 @@ export function mix(hLearner, aLearner, hHold, aHold, cfg) {
 // ----------------------------------------------------------------------------- decider
 
 /**
- * Evidence weight of a frame before time scaling: max(0, 1 - 2 tanh(c U)); 0 for failed
- * frames, non-finite uncertainty, and when argmax(probs) is unknown.
+ * Evidence weight of a frame before time scaling: alpha(U) = 1 - tanh(c U) when U < threshold
+ * (so in (1/2, 1]), else 0: frames at or beyond the calibrated threshold, failed frames, frames
+ * with non-finite uncertainty and frames whose argmax(probs) is unknown carry no evidence.
  */
-export function frameWeight(obs, cFrame) {
+export function frameWeight(obs, cFrame, threshold) {
   if (!obs.ok || !obs.probs || !Number.isFinite(obs.uncertainty)) return 0;
-  if (argmax(obs.probs) === 0) return 0;
-  return Math.max(0, 1 - 2 * Math.tanh(cFrame * Math.max(obs.uncertainty, 0)));
+  if (argmax(obs.probs) === 0 || !(obs.uncertainty < threshold)) return 0;
+  return alpha(obs.uncertainty, cFrame);
 }
 
 /**
@@ -270,7 +271,7 @@ export class Decider {
     }
     let w = 0;
     if (obs && obs.ok) {
-      w = frameWeight(obs, this.cFrame);
+      w = frameWeight(obs, this.cFrame, cfg.threshold);
       const since = this.tLastOk === null ? cfg.filter.tau_evidence_s : t - this.tLastOk;
       w *= Math.min(1, Math.max(0, since) / cfg.filter.tau_evidence_s);
       if (w > 0) this.belief = update(this.belief, binLikelihood(obs.probs, this.groups, this.lookup), w, cfg.filter.eps);

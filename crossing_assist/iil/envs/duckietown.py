@@ -1,0 +1,147 @@
+"""Duckietown lane following (map ``udem1``) as a gymnasium environment, headless.
+
+Needs ``duckietown-gym-daffy==6.1.34`` with ``pyglet>=1.5,<1.6`` and ``numpy<1.24`` (its
+dynamics build a ragged array), so it lives in its own virtualenv (``.venv-duckietown``; see
+docs/readme_iil.md), never in the project's ``.venv``. Rendering uses pyglet's headless EGL
+mode (Mesa works, no X server).
+
+* Observation: the 160 x 120 camera frame, resized to ``obs_size`` (default 80 x 60) uint8 RGB.
+* Action: ``Box([0, -1], [1, 1])`` = (velocity, steering) in the pure-pursuit teacher's
+  units; the steering is multiplied by ``steer_gain`` (10, as gym-duckietown's own imitation
+  example does) before it reaches ``DuckietownEnv``.
+* Seeding: ``reset(seed=s)`` seeds the simulator's generator AND ``np.random`` (the
+  simulator draws from both).
+* Invalid pose (off the road): reward -1000, ``info["out_of_bounds"] = True``, terminated;
+  the simulator's own step limit is disabled, so the horizon is the caller's alone.
+* ``info["reward_terms"]``: the simulator's reward split as the thesis reports it:
+  ``speed = v * dot_dir``, ``lateral = -10 |d|``, ``collision = 40 * proximity penalty``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+
+LANE_HALF_WIDTH_M = 0.15  # risk 1 at this lateral offset from the lane centre
+ANGLE_LIMIT_DEG = 45.0
+
+
+def duckietown_available() -> tuple[bool, str]:
+    """(True, "") when the simulator can be imported and an EGL context made here; else
+    (False, reason)."""
+    try:
+        import pyglet  # noqa: PLC0415
+        if not pyglet.version.startswith("1.5"):
+            return False, f"pyglet {pyglet.version} found; duckietown-gym-daffy needs pyglet 1.5.x"
+        pyglet.options["headless"] = True
+        import gym_duckietown  # noqa: F401,PLC0415
+    except Exception as exc:  # noqa: BLE001 - any import failure means unavailable
+        return False, f"gym_duckietown not importable ({type(exc).__name__}: {exc})"
+    if tuple(int(p) for p in np.__version__.split(".")[:2]) >= (1, 24):
+        return False, f"numpy {np.__version__} found; duckietown-gym-daffy 6.1.34 needs numpy<1.24"
+    return True, ""
+
+
+def _preload_torch_compiler() -> None:
+    """Import torch's compiler stack (and triton's LLVM) before Mesa loads its own LLVM for
+    the EGL context: the other order segfaults when the optimiser first imports torch._dynamo."""
+    try:
+        import torch._dynamo  # noqa: F401,PLC0415
+    except Exception:  # noqa: BLE001 - torch absent or without a compiler: nothing to preload
+        pass
+
+
+class DuckietownLaneEnv(gym.Env):
+    metadata = {"render_modes": []}
+    iil_defaults = {"expert_threshold": 1.0, "learner_threshold": 0.003, "ensemble_threshold": 0.003,
+                    "hg_threshold": 0.5, "max_discrepancy": 0.3}
+    source = "duckietown udem1"
+
+    def __init__(self, map_name: str = "udem1", obs_size: tuple[int, int] = (80, 60), steer_gain: float = 10.0,
+                 ref_velocity: float = 0.7, following_distance: float = 0.24):
+        ok, why = duckietown_available()
+        if not ok:
+            raise RuntimeError(f"Duckietown is not available here: {why}; see docs/readme_iil.md")
+        _preload_torch_compiler()
+        from gym_duckietown.envs import DuckietownEnv  # noqa: PLC0415
+
+        self.sim = DuckietownEnv(map_name=map_name, domain_rand=False, max_steps=10**9, camera_width=160,
+                                 camera_height=120, distortion=False, full_transparency=True, seed=0)
+        self.obs_size, self.steer_gain = tuple(obs_size), float(steer_gain)
+        self.ref_velocity, self.following_distance = float(ref_velocity), float(following_distance)
+        w, h = self.obs_size
+        self.observation_space = gym.spaces.Box(0, 255, (h, w, 3), np.uint8)
+        self.action_space = gym.spaces.Box(np.array([0.0, -1.0], np.float32), np.array([1.0, 1.0], np.float32))
+
+    def _obs(self, frame: np.ndarray) -> np.ndarray:
+        import cv2  # noqa: PLC0415
+        return cv2.resize(np.ascontiguousarray(frame), self.obs_size, interpolation=cv2.INTER_AREA)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        if seed is not None:
+            np.random.seed(seed % 2**32)
+            self.sim.seed(int(seed))
+        return self._obs(self.sim.reset()), {}
+
+    def step(self, action):
+        v, steer = (float(a) for a in np.asarray(action, dtype=float).reshape(2))
+        v, steer = min(max(v, 0.0), 1.0), min(max(steer, -1.0), 1.0)
+        frame, reward, done, info = self.sim.step(np.array([v, steer * self.steer_gain]))
+        oob = bool(reward <= -1000.0)
+        terms = {} if oob else self._terms()
+        return self._obs(frame), float(reward), bool(done), False, {"out_of_bounds": oob, "reward_terms": terms}
+
+    def _terms(self) -> dict:
+        s = self.sim.unwrapped
+        col = 40.0 * float(s.proximity_penalty2(s.cur_pos, s.cur_angle))
+        try:
+            lp = s.get_lane_pos2(s.cur_pos, s.cur_angle)
+        except Exception:  # noqa: BLE001 - NotInLane
+            return {"collision": col}
+        return {"speed": float(s.robot_speed * lp.dot_dir), "lateral": -10.0 * abs(float(lp.dist)), "collision": col}
+
+    # -- the scripted expert -------------------------------------------------------------------
+    def _curve_point(self, lookup: float):
+        s = self.sim.unwrapped
+        point, tangent = s.closest_curve_point(s.cur_pos, s.cur_angle)
+        if point is None:
+            return None, None, None
+        for _ in range(10):
+            follow = point + tangent * lookup
+            curve_point, curve_tangent = s.closest_curve_point(follow, s.cur_angle)
+            if curve_point is not None and curve_tangent is not None:
+                return float(np.dot(curve_tangent, tangent)), point, curve_point
+            lookup *= 0.5
+        return None, None, None
+
+    def oracle(self):
+        """Pure pursuit (gym-duckietown's imitation teacher, re-implemented): steer towards a
+        point ``following_distance`` ahead on the lane's curve, half speed in curves. Risk
+        from the lane pose: max(|d| / 0.15 m, |angle| / 45 deg), 1 when not in a lane."""
+        s = self.sim.unwrapped
+        projected, _, _ = self._curve_point(0.3)
+        _, closest, curve_point = self._curve_point(self.following_distance)
+        if closest is None:
+            return np.array([0.0, 0.0], np.float32), 1.0
+        tile = s._get_tile(*s.get_grid_coords(s.cur_pos))
+        slow = (tile is not None and "curve" in tile["kind"]) or (projected is not None and abs(projected) < 0.92)
+        vec = curve_point - s.cur_pos
+        vec = vec / max(np.linalg.norm(vec), 1e-9)
+        right = np.array([math.sin(s.cur_angle), 0.0, math.cos(s.cur_angle)])
+        omega = float(np.clip(-np.dot(right, vec), -1.0, 1.0))
+        action = np.array([self.ref_velocity * (0.5 if slow else 1.0), omega], np.float32)
+        try:
+            lp = s.get_lane_pos2(s.cur_pos, s.cur_angle)
+            risk = max(abs(float(lp.dist)) / LANE_HALF_WIDTH_M, abs(float(lp.angle_deg)) / ANGLE_LIMIT_DEG)
+        except Exception:  # noqa: BLE001 - NotInLane
+            risk = 1.0
+        return action, float(min(1.0, risk))
+
+    def safe_action(self):
+        return np.array([0.0, 0.0], np.float32)
+
+    def close(self):
+        self.sim.close()

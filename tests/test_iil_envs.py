@@ -1,0 +1,95 @@
+"""Experts (scripted oracle, human with scripted key events) and the crossing environment."""
+
+import math
+
+import numpy as np
+import pytest
+
+from crossing_assist.actions import UNKNOWN, get_space
+from crossing_assist.iil.envs import make_env
+from crossing_assist.iil.envs.crossing import CrossingConfig, CrossingEnv, synthetic_frame
+from crossing_assist.iil.experts import HumanExpert, KeyMap, OracleExpert, ScriptedEvents, risk_to_uncertainty
+
+
+def test_risk_to_uncertainty_is_continuous_and_spans_zero_to_infinity():
+    assert risk_to_uncertainty(1.0) == 0.0
+    assert risk_to_uncertainty(0.0) == math.inf
+    us = [risk_to_uncertainty(r) for r in np.linspace(0.05, 1.0, 20)]
+    assert all(a > b for a, b in zip(us, us[1:]))
+    assert risk_to_uncertainty(0.5, scale=2.0) == pytest.approx(2.0)
+
+
+def test_human_expert_follows_scripted_keys():
+    events = ScriptedEvents([[("down", "7")], [], [("down", "space")], [("up", "space")], [("up", "7")], [],
+                             [("down", "x")]])
+    human = HumanExpert(events, KeyMap.crossing())
+    got = [human.act(None) for _ in range(7)]
+    assert got[0] == (7, 0.0) and got[1] == (7, 0.0)          # held key keeps acting
+    assert got[2] == (UNKNOWN, 0.0)                            # the latest key wins: space = stop
+    assert got[3] == (7, 0.0)                                  # released: back to the held 7
+    assert got[4][0] is None and got[4][1] == math.inf         # nothing held: no action
+    assert got[6][0] is None                                   # unmapped keys are ignored
+    assert KeyMap.crossing().keys["="] == 12 and KeyMap.crossing().keys["1"] == 1
+
+
+def test_gamepad_axis_gives_a_continuous_confidence():
+    human = HumanExpert(ScriptedEvents([[("axis", 0.25)], [("axis", -1.0)], [("axis", 0.0)]]),
+                        axis_to_action=lambda v: 1 if v < 0 else 2)
+    a1, u1 = human.act(None)
+    a2, u2 = human.act(None)
+    a3, u3 = human.act(None)
+    assert (a1, a2, a3) == (2, 1, None)
+    assert u1 == pytest.approx(3.0) and u2 == 0.0 and u3 == math.inf
+
+
+def test_crossing_expert_is_the_true_bin_and_frames_follow_the_heading():
+    env = CrossingEnv(CrossingConfig(photos=None))
+    env.reset(seed=3)
+    env.y, env.s, env.phi = 0.0, 0.0, 0.0
+    assert env.true_bin() in (6, 7)                     # straight ahead: the central strips
+    env.phi = -30.0                                     # facing left: the goal is to the right
+    b, risk = env.oracle()
+    assert b == get_space(13).bin_to_action(env.true_bin()) and b >= 9 and 0 < risk <= 1
+    env.phi = 80.0                                      # out of view on the left
+    assert env.true_bin() == UNKNOWN and env.oracle()[0] == 1
+    left, right = synthetic_frame(-30, 64, 48), synthetic_frame(30, 64, 48)
+    cols = lambda img: np.nonzero(img[20:30].min(-1).max(0) > 200)[0].mean()  # noqa: E731
+    assert cols(left) < 32 < cols(right)
+
+
+def test_crossing_out_of_bounds_and_expert_keeps_the_walker_in():
+    env = make_env("crossing-synthetic")
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (48, 64, 3) and obs.dtype == np.uint8
+    env.y = 1.45
+    env.phi = 60.0
+    _, r, term, _, info = env.step(12)
+    assert info["out_of_bounds"] and r == -1000.0 and term
+    expert, rng = OracleExpert(env), np.random.default_rng(0)
+    oob = 0
+    for k in range(3):
+        obs, _ = env.reset(seed=k)
+        for _ in range(60):
+            a, u = expert.act(obs)
+            assert u >= 0
+            obs, r, term, _, info = env.step(a)
+            oob += info["out_of_bounds"]
+            if term:
+                break
+    assert oob == 0
+
+
+def test_crossing_with_real_ptl_photos(ptl_dir):
+    from crossing_assist.actions import x_to_bin, x_to_heading
+
+    env = CrossingEnv(CrossingConfig(photos=str(ptl_dir), n_photos=4))
+    assert env.source == "ptl"
+    env.reset(seed=1)
+    h0 = x_to_heading(env.photos[env.photo][1])
+    env.y, env.s, env.phi = 0.0, 0.0, -h0            # facing so that the far end is where the photo has it
+    straight = env._obs()
+    assert straight.shape == (48, 64, 3) and straight[:, -4:].mean() > 10  # the photo itself, no border
+    env.phi = -h0 + 30.0                              # turned 30 degrees right: unseen (black) on the right
+    turned = env._obs()
+    assert turned[:, -4:].mean() < 10 and turned[:, :4].mean() > 10
+    assert env.true_bin() < x_to_bin(env.photos[env.photo][1])  # the far end moved left
