@@ -8,11 +8,17 @@ default ``spatial`` head at the backbone's own input size, this exports
 * ``naive``: T=1, p=0.5, run 16 times (what MC dropout costs without folding),
 * ``batch16``: T=1, p=0.5 on a batch of 16 copies of the frame (naive, batched),
 
-and times single-frame calls under onnxruntime's DEFAULT session options, interleaving the
-graphs call by call so they share the machine's load; the table shows median latencies and
-the median of
-per-repeat ratios to ``det`` (calls made back to back share the load of a busy machine) and
-the ratio of the fastest calls. With ``--int8`` the det and mc16 graphs are also quantised (convolutions
+and times single-frame calls under onnxruntime's DEFAULT session options in rounds: each
+round runs every graph for a block of calls (median of the block), so the graphs share the
+machine's load round by round; the table shows median latencies over rounds, the median of
+per-round ratios to ``det`` (calls made close together share the load of a busy machine) and
+the ratio of the fastest blocks.
+
+With ``--clock cpu`` every session gets one intra-op thread (same options for all graphs) and
+the CPU time of the calling thread is measured instead of wall time: on a machine shared with
+other work this measures the cost of the graph itself, which wall time cannot.
+
+With ``--int8`` the det and mc16 graphs are also quantised (convolutions
 only, as ``crossing-export --int8``) and timed in the same loop.
 
     python benchmarks/mc_overhead.py                      # every backbone, fp32 + int8
@@ -41,12 +47,14 @@ from crossing_assist.models.policy import Policy, policy_config
 @dataclass(frozen=True)
 class BenchConfig:
     backbones: tuple[str, ...]
-    repeats: int = 20
+    repeats: int = 8
+    block: int = 5
     samples: int = 16
     p: float = 0.5
     head: str = "spatial"
     weights: str = "none"
     int8: bool = True
+    clock: str = "wall"          # wall: default session options; cpu: 1 intra-op thread, thread CPU time
     seed: int = 0
 
 
@@ -78,7 +86,11 @@ def bench_backbone(name: str, cfg: BenchConfig) -> dict:
         for key in ("det", "mc16"):
             models[f"{key}_int8"] = quantize_convs(models[key], frames[1:])
     sizes = {k: len(model_bytes(m)) for k, m in models.items()}
-    sessions = {k: ort.InferenceSession(model_bytes(m)) for k, m in models.items()}  # default options
+    opts = ort.SessionOptions()  # default options ...
+    if cfg.clock == "cpu":
+        opts.intra_op_num_threads = 1  # ... except one thread: the graph runs on the calling thread
+    sessions = {k: ort.InferenceSession(model_bytes(m), opts) for k, m in models.items()}
+    clock = time.thread_time if cfg.clock == "cpu" else time.perf_counter
     one = frames[0][None]
     batch = np.repeat(one, cfg.samples, 0)
     calls = {k: (lambda s=s: s.run(None, {"frames": one})) for k, s in sessions.items() if k != "naive"}
@@ -86,16 +98,23 @@ def bench_backbone(name: str, cfg: BenchConfig) -> dict:
     calls["batch16"] = lambda s=sessions["naive"]: s.run(None, {"frames": batch})
     for f in calls.values():  # warm-up
         f()
+    # Rounds of blocks: each graph runs ``block`` calls in a row (its first call discarded: it
+    # wakes that session's thread pool), graphs alternate within a round. Interleaving single
+    # calls instead lets one session's spinning pool steal the cores from the next.
     times: dict[str, list[float]] = {k: [] for k in calls}
     for _ in range(cfg.repeats):
         for k, f in calls.items():
-            t0 = time.perf_counter()
             f()
-            times[k].append(time.perf_counter() - t0)
+            block = []
+            for _ in range(cfg.block):
+                t0 = clock()
+                f()
+                block.append(clock() - t0)
+            times[k].append(float(np.median(block)))
     ms = {k: float(np.median(v) * 1000) for k, v in times.items()}
     best = {k: float(np.min(v) * 1000) for k, v in times.items()}
     det = np.asarray(times["det"])
-    # Ratios of calls made back to back (same load on a shared machine), then the median.
+    # Per-round ratios (same load on a shared machine), then their median.
     ratio = {k: float(np.median(np.asarray(v) / det)) for k, v in times.items()}
     if cfg.int8:
         ratio["mc16_int8_vs_det_int8"] = float(np.median(np.asarray(times["mc16_int8"]) / times["det_int8"]))
@@ -103,7 +122,7 @@ def bench_backbone(name: str, cfg: BenchConfig) -> dict:
 
 
 def table(rows: list[dict], int8: bool) -> str:
-    head = ("| backbone | input | det ms | T=16 ms | **T=16 / det** | (fastest calls) | naive 16 passes / det "
+    head = ("| backbone | input | det ms | T=16 ms | **T=16 / det** | (fastest blocks) | naive 16 passes / det "
             "| naive batch of 16 / det |")
     sep = "|---|---|---:|---:|---:|---:|---:|---:|"
     if int8:
@@ -124,8 +143,11 @@ def table(rows: list[dict], int8: bool) -> str:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--backbones", default=",".join(list_backbones()), help="comma-separated names")
-    p.add_argument("--repeats", type=int, default=BenchConfig.repeats)
+    p.add_argument("--repeats", type=int, default=BenchConfig.repeats, help="rounds")
+    p.add_argument("--block", type=int, default=BenchConfig.block, help="calls per graph per round")
     p.add_argument("--no-int8", dest="int8", action="store_false")
+    p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                   help="wall: default session options; cpu: 1 thread, thread CPU time (busy machines)")
     p.add_argument("--json", help="also write the raw numbers here")
     a = p.parse_args(argv)
     names = tuple(n.strip() for n in a.backbones.split(",") if n.strip())
@@ -133,8 +155,9 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         print(f"error: unknown backbone(s) {unknown}; valid: {', '.join(list_backbones())}", file=sys.stderr)
         return 2
-    cfg = BenchConfig(backbones=names, repeats=a.repeats, int8=a.int8)
-    print(f"onnxruntime {ort.__version__}, default session options, single-frame calls, median of {cfg.repeats}",
+    cfg = BenchConfig(backbones=names, repeats=a.repeats, block=a.block, int8=a.int8, clock=a.clock)
+    what = "default session options, wall time" if cfg.clock == "wall" else "1 intra-op thread, thread CPU time"
+    print(f"onnxruntime {ort.__version__}, {what}, single-frame calls, {cfg.repeats} rounds of {cfg.block}",
           file=sys.stderr)
     rows = []
     for name in names:

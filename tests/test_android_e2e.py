@@ -2,7 +2,7 @@
 
 One run of ``android_demo/tools/e2e_driver.mjs`` (playwright-core) per module: it serves a copy
 of the app built with a tiny test bundle on 127.0.0.1, plays ``clip.y4m`` (made here) as the
-camera, replays the shared test vectors in the page, runs the clip, freezes the camera, and
+camera, presses the app's self-test (the shared test vectors, in the page), runs the clip, freezes the camera, and
 reloads with the server stopped. The tests below judge what it recorded against the Python
 runtime on the same frames.
 
@@ -15,7 +15,7 @@ frame) and the Python pipeline on those *source* frames agrees with the app on >
 decisions (stop/go and side).
 
 Needs node >= 18, chromium (apt-get install chromium) and `npm ci` in android_demo; skips
-with the reason otherwise. Takes about 25 s.
+with the reason otherwise. Takes about 30 s.
 """
 
 from __future__ import annotations
@@ -58,6 +58,7 @@ pytestmark = pytest.mark.skipif(_why_skip() is not None, reason=_why_skip() or "
 
 
 def _tools():
+    pytest.importorskip("onnx", reason="onnx is needed to make the test bundle (pip install -e '.[train]')")
     sys.path.insert(0, str(DEMO / "tools"))
     try:
         import clip
@@ -82,8 +83,6 @@ def run(tmp_path_factory) -> dict:
     cmd = [NODE, "tools/e2e_driver.mjs", "--clip", str(tmp / "clip.y4m"), "--out", str(tmp / "result.json"),
            "--run-s", str(RUN_S), "--www", str(www), "--chromium", CHROMIUM]
     vectors = DEMO / "test_vectors.json"
-    if vectors.is_file():
-        cmd += ["--vectors", str(vectors)]
     proc = subprocess.run(cmd, cwd=DEMO, capture_output=True, text=True, timeout=240)
     assert proc.returncode == 0, proc.stderr[-3000:]
     result = json.loads((tmp / "result.json").read_text())
@@ -106,10 +105,14 @@ def _obs(pred) -> Observation:
 
 
 def test_shared_vectors_pass_in_the_browser(run: dict) -> None:
+    """The app's own self-test button replays the Python runtime's vectors in the page."""
     if not run["vectors"]:
         pytest.skip("android_demo/test_vectors.json is missing")
     v = run["result"]["vectors"]
-    assert v["steps"] > 100 and v["failures"] == [] and v["nFailures"] == 0, v
+    want = json.loads((DEMO / "test_vectors.json").read_text())
+    assert v["steps"] == sum(len(sc["steps"]) for sc in want["scenarios"]), v
+    assert v["failures"] == [] and v["nFailures"] == 0, v
+    assert run["result"]["vectors_text"].startswith("Decision logic OK"), run["result"]["vectors_text"]
 
 
 def test_model_outputs_match_onnxruntime_on_the_same_frames(run: dict) -> None:
@@ -125,11 +128,15 @@ def test_model_outputs_match_onnxruntime_on_the_same_frames(run: dict) -> None:
 
 def test_decisions_match_the_python_runtime_on_the_same_frames(run: dict) -> None:
     engine = run["engine"]
+    space = engine.space
     py = Decider(engine.decision_config())
     gates = set()
     for entry, rgb in _app_steps_in_order(run):
-        d = py.step(entry["t"], _obs(engine.predict(rgb))).to_json()
+        d = py.step(entry["t"], _obs(engine.predict(rgb)), entry["yaw_rate_dps"]).to_json()
         app = entry["decision"]
+        top2 = np.sort(space.bin_probs_to_action_probs(np.asarray(d["belief"])))[-2:]
+        if top2[1] - top2[0] < 1e-6:
+            continue  # a genuine tie: float32 noise may break it either way
         for key in ("gate", "reason", "stop", "learner_action"):
             assert app[key] == d[key], (entry["t"], key, app[key], d[key])
         for key in ("heading_deg", "learner_heading"):
@@ -157,12 +164,19 @@ def test_the_model_saw_the_clip_and_python_agrees_on_the_source_frames(run: dict
         mad = np.abs(clip - rgb.astype(np.int16)[None]).mean(axis=(1, 2, 3))
         k = int(np.argmin(mad))
         assert mad[k] <= 4.0, f"frame at t={entry['t']:.2f} is {mad[k]:.1f} levels from every clip frame"
-        d = py.step(entry["t"], _obs(engine.predict(run["clip"][k]))).to_json()
+        d = py.step(entry["t"], _obs(engine.predict(run["clip"][k])), entry["yaw_rate_dps"]).to_json()
         app = entry["decision"]
         total += 1
         same_side = d["stop"] or app["stop"] or math.copysign(1, d["heading_deg"]) == math.copysign(1, app["heading_deg"])
         agree += (d["stop"] == app["stop"]) and same_side
     assert agree >= 0.9 * total, f"{agree}/{total} decisions agree"
+
+
+def test_gyroscope_turn_reaches_the_decider(run: dict) -> None:
+    """The driver's synthetic gyroscope turns right at 3 deg/s (rotation about the phone's
+    upward axis of -3 deg/s): the app feeds the Decider +3 deg/s (right), per frame interval."""
+    yaws = [e["yaw_rate_dps"] for e in run["result"]["trace"] if e["kind"] == "frame"][1:]
+    assert 2.5 <= float(np.median(yaws)) <= 3.5, np.percentile(yaws, [10, 50, 90])
 
 
 def _steady(samples: list[dict], side: float) -> list[dict]:
@@ -197,14 +211,16 @@ def test_frozen_camera_frames_trigger_the_stop_cue(run: dict) -> None:
     last_fresh = max(e["t"] for e in trace[:i] if e["kind"] == "frame" and e["fresh"])
     dog = next(e for e in trace[i:] if e["kind"] != "frozen")
     assert dog["kind"] == "watchdog", "a decision was made on a frozen frame"
-    assert WATCHDOG_S < dog["t"] - last_fresh <= WATCHDOG_S + 0.1
+    assert WATCHDOG_S < dog["t"] - last_fresh <= WATCHDOG_S + 0.2  # polled every 20 ms; slack for a busy CI
 
 
 def test_stalled_camera_triggers_the_stop_cue(run: dict) -> None:
     """The <video> stops presenting frames: within the watchdog period the stop cue plays
     (centred, audible) and the phone vibrates."""
     f = run["result"]["freeze"]
-    assert f["t_stop"] - f["t_freeze"] <= WATCHDOG_S + 0.3
+    dog = [e["t"] for e in run["result"]["trace"] if e["kind"] == "watchdog" and e["t"] > f["t_freeze"]]
+    assert dog and dog[0] - f["t_freeze"] <= WATCHDOG_S + 0.2, (f["t_freeze"], dog)
+    assert f["t_stop"] - f["t_freeze"] <= WATCHDOG_S + 0.5  # as seen by the driver's 100 ms polling
     after = f["after"]["audio"]
     assert after["kind"] == "stop"
     left, right = after["levels"]
@@ -223,3 +239,64 @@ def test_app_works_offline_after_first_load(run: dict) -> None:
     assert off["loaded"] and off.get("error") is None, off
     assert not [c for c in off["console"] if c.startswith(("error", "pageerror"))], off["console"]
     assert off["decisions"] >= 5
+
+
+# ----------------------------------------------------------------------------- the shipped bundle
+
+DEFAULT_BUNDLE = REPO / "crossing_assist" / "assets" / "default_bundle"
+SAMPLE_CLIP = REPO / "crossing_assist" / "assets" / "sample_clip.mp4"
+
+
+@pytest.mark.slow
+def test_default_bundle_on_the_sample_clip_agrees_with_python(tmp_path: Path) -> None:
+    """The embedded bundle (MC dropout: outputs are random) on the embedded clip, in Chromium.
+
+    Tolerance, stated for sampling noise: on frames where onnxruntime's top probability is
+    >= 0.5 the app's top action is the same on >= 80% of them; entropies differ by <= 0.15 nats
+    at the median; the Python Decider fed the Python engine's outputs for the app's frames at
+    the app's times agrees with the app on stop/go and side on >= 80% of the decisions.
+    """
+    if not (DEFAULT_BUNDLE / "bundle.json").is_file() or not SAMPLE_CLIP.is_file():
+        pytest.skip("the default bundle or the sample clip is not in crossing_assist/assets yet")
+    import cv2
+
+    clip, _ = _tools()
+    cap = cv2.VideoCapture(str(SAMPLE_CLIP))
+    fps = cap.get(cv2.CAP_PROP_FPS) or 15.0
+    frames = []
+    while True:
+        ok, bgr = cap.read()
+        if not ok:
+            break
+        frames.append(cv2.cvtColor(bgr[: bgr.shape[0] // 2 * 2, : bgr.shape[1] // 2 * 2], cv2.COLOR_BGR2RGB))
+    clip.write_y4m(tmp_path / "clip.y4m", frames, round(fps))
+    www = tmp_path / "www"
+    shutil.copytree(DEMO / "www", www, ignore=shutil.ignore_patterns("vendor", "bundle", "precache.json"))
+    subprocess.run([NODE, "tools/build.mjs", "--bundle", str(DEFAULT_BUNDLE), "--www", str(www)], cwd=DEMO,
+                   check=True, capture_output=True, timeout=120)
+    proc = subprocess.run([NODE, "tools/e2e_driver.mjs", "--clip", str(tmp_path / "clip.y4m"), "--out",
+                           str(tmp_path / "r.json"), "--run-s", str(len(frames) / fps), "--www", str(www),
+                           "--chromium", CHROMIUM], cwd=DEMO, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads((tmp_path / "r.json").read_text())
+    run = {"result": result}
+    engine = Engine(DEFAULT_BUNDLE)
+    py = Decider(engine.decision_config())
+    top_same = top_n = agree = total = 0
+    dent = []
+    for entry, rgb in _app_steps_in_order(run):
+        pred = engine.predict(rgb)
+        app_probs = np.asarray(entry["outputs"]["probs"])
+        if pred.probs.max() >= 0.5:
+            top_n += 1
+            top_same += int(np.argmax(app_probs) == np.argmax(pred.probs))
+        dent.append(abs(entry["outputs"]["entropy"] - pred.entropy))
+        d = py.step(entry["t"], pred.observation(), entry["yaw_rate_dps"]).to_json()
+        a = entry["decision"]
+        total += 1
+        same_side = d["stop"] or a["stop"] or math.copysign(1, d["heading_deg"]) == math.copysign(1, a["heading_deg"])
+        agree += (d["stop"] == a["stop"]) and same_side
+    assert top_n == 0 or top_same >= 0.8 * top_n, f"top action agrees on {top_same}/{top_n} confident frames"
+    assert float(np.median(dent)) <= 0.15
+    assert agree >= 0.8 * total, f"{agree}/{total} decisions agree"
+    assert result["offline"]["loaded"] and result["offline"]["decisions"] >= 5

@@ -150,6 +150,7 @@ needs_npm = pytest.mark.skipif(NO_NPM, reason="npm packages not installed: run `
 
 
 def _make_bundle(out: Path) -> Path:
+    pytest.importorskip("onnx", reason="onnx is needed to make the test bundle (pip install -e '.[train]')")
     sys.path.insert(0, str(DEMO / "tools"))
     try:
         from make_test_bundle import make_test_bundle
@@ -173,6 +174,7 @@ def test_build_copies_only_the_wasm_runtime_and_lists_the_cache(tmp_path: Path) 
     assert {"index.html", "js/app.js", "bundle/model.onnx", "bundle/bundle.json",
             "vendor/ort-wasm-simd-threaded.wasm", "manifest.webmanifest"} <= urls
     assert "sw.js" not in urls and len(pre["version"]) == 16
+    assert ("test_vectors.json" in urls) == (DEMO / "test_vectors.json").is_file()  # the self-test's data
     # a different bundle gives a different cache version (phones pick up the swap)
     meta = json.loads((bundle / "bundle.json").read_text())
     meta["calibration"]["uncertainty"]["threshold"] = 0.9
@@ -202,3 +204,43 @@ def test_build_refuses_a_bad_bundle_with_one_line(tmp_path: Path, damage: str) -
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
     assert {"model": "SHA-256", "json": "actions.n", "missing": "no bundle"}[damage] in lines[0]
+
+
+def test_server_serves_wasm_and_modules_and_stays_inside_its_root(tmp_path: Path) -> None:
+    import urllib.error
+    import urllib.request
+
+    root = tmp_path / "www"
+    root.mkdir()
+    (root / "index.html").write_text("<p>hi</p>")
+    (root / "a.wasm").write_bytes(b"\0asm\1\0\0\0")
+    (root / "m.mjs").write_text("export const x = 1;")
+    (tmp_path / "secret.txt").write_text("no")
+    proc = subprocess.Popen([NODE, "tools/serve.mjs", "--port", "0", "--root", str(root)], cwd=DEMO,
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        m = re.match(r"serving (http://127\.0\.0\.1:\d+/)", line)
+        assert m, line
+        base = m.group(1)
+        with urllib.request.urlopen(base) as r:
+            assert r.read() == b"<p>hi</p>" and r.headers["Content-Type"].startswith("text/html")
+        with urllib.request.urlopen(base + "a.wasm") as r:
+            assert r.headers["Content-Type"] == "application/wasm"
+        with urllib.request.urlopen(base + "m.mjs") as r:
+            assert r.headers["Content-Type"].startswith("text/javascript")
+        for path, code in (("..%2fsecret.txt", 403), ("%2e%2e/secret.txt", 404), ("missing.js", 404)):
+            with pytest.raises(urllib.error.HTTPError) as err:
+                urllib.request.urlopen(base + path)
+            assert err.value.code == code, path
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+    assert proc.returncode == 0  # SIGTERM: a clean shutdown
+
+
+def test_server_bad_port_is_one_line_error() -> None:
+    proc = subprocess.run([NODE, "tools/serve.mjs", "--port", "99999"], cwd=DEMO, capture_output=True, text=True,
+                          timeout=30)
+    assert proc.returncode == 2 and proc.stderr.strip().count("\n") == 0
+    assert proc.stderr.startswith("error: invalid --port")

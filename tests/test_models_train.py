@@ -122,3 +122,24 @@ def test_resume_after_kill_mid_epoch(tmp_path):
     best = load_policy(out / "weights" / "best.pt")
     assert 1 <= load_checkpoint(out / "weights" / "best.pt")["epoch"] <= 8
     assert best(torch.zeros(1, 3, 64, 64), mc=False).shape == (1, 1, 13)
+
+
+def test_cache_is_reused_and_deeper_entries_derive_from_shallower(tiny, tmp_path):
+    from crossing_assist.data_tools.manifest import read_manifest
+    from crossing_assist.models.backbones import create_backbone
+    from crossing_assist.models.cache import compute_features
+    from crossing_assist.models.data import make_variants
+
+    ds = read_manifest(tiny).split("train")
+    bb = create_backbone("mobilenet_v3_small", weights="none").eval()
+    v = make_variants(True)
+    a = compute_features(bb, 6, ds, (64, 64), v, 90.0, tmp_path / "c", progress=False)
+    assert a.feats.shape[0] == len(ds) * 2 and (a.labels[1::2] == [13 - b if b else 0 for b in a.labels[::2]]).all()
+    assert compute_features(bb, 6, ds, (64, 64), v, 90.0, tmp_path / "c", progress=False).path == a.path
+    deep = compute_features(bb, 13, ds, (64, 64), v, 90.0, tmp_path / "c", progress=False)
+    with torch.no_grad():
+        direct = bb.forward_from(torch.from_numpy(np.array(a.feats)).float(), 6).numpy()
+    assert np.allclose(deep.feats, direct, atol=2e-2, rtol=1e-2)
+    # a different variant list or input size is a different entry
+    other = compute_features(bb, 6, ds, (64, 64), make_variants(False), 90.0, tmp_path / "c", progress=False)
+    assert other.path != a.path and other.feats.shape[0] == len(ds)

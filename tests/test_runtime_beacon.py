@@ -106,3 +106,29 @@ def test_player_keeps_the_rhythm_phase_and_plays_the_loop_exactly():
     fade = round(CFG.fade_s * CFG.sample_rate)
     want = np.tile(loop, (3, 1))
     assert np.allclose(got[fade:], want[fade:], atol=1e-7)
+
+
+def test_fill_allocates_no_sample_buffers():
+    """The audio callback's work: after warm-up, 300 fills across cue changes and fades
+    allocate no sample buffers (one 4096-frame stereo block would be 32 KB; Python's small
+    objects, views and ints, stay far below)."""
+    import tracemalloc
+
+    cfg = BeaconConfig(sample_rate=48000)
+    player = CuePlayer(cfg)
+    loops = [render_cue(Cue(KIND_BEACON, pan=p, heading_deg=40 * p, rate_hz=2 + 4 * abs(p)), cfg)
+             for p in (-0.8, 0.0, 0.7)] + [render_cue(Cue(KIND_STOP), cfg)]
+    out = np.zeros((4096, 2), dtype=np.float32)
+    for loop in loops:
+        player.set_loop(loop)
+        player.fill(out)
+    tracemalloc.start()
+    base, _ = tracemalloc.get_traced_memory()
+    tracemalloc.reset_peak()
+    for i in range(300):
+        if i % 10 == 0:
+            player.set_loop(loops[(i // 10) % len(loops)])
+        player.fill(out)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert peak - base < 12 * 1024

@@ -21,9 +21,11 @@ BEACON = BeaconConfig(sample_rate=SR)
 
 
 def band_energy(x: np.ndarray, hz: float, sr: int = SR, width: float = 30.0) -> float:
+    """Share of the signal's energy within ``width`` Hz of ``hz`` (0 for pure silence)."""
     spec = np.abs(np.fft.rfft(x)) ** 2
     f = np.fft.rfftfreq(len(x), 1 / sr)
-    return float(spec[(f > hz - width) & (f < hz + width)].sum() / spec.sum())
+    total = spec.sum()
+    return float(spec[(f > hz - width) & (f < hz + width)].sum() / total) if total > 0 else 0.0
 
 
 def run(tmp_path, bundle, xs, name, engine=None, noise=0.0, annotate=False):
@@ -48,7 +50,8 @@ def test_wav_left_right_energy_follows_a_goal_moving_left_to_right(tmp_path, toy
     for i in range(0, len(audio) - win + 1, win):
         el, er = (audio[i:i + win] ** 2).sum(0)
         balance.append((er - el) / (er + el))
-    assert balance[0] < -0.6 and balance[-1] > 0.6
+    # window 0 may hold a few start-up frames of the (centred) stop cue while evidence builds up
+    assert balance[0] < 0 and balance[1] < -0.6 and balance[-1] > 0.6
     assert np.corrcoef(np.arange(len(balance)), balance)[0, 1] > 0.95
     assert band_energy(audio.sum(1), BEACON.tone_hz) > 0.5
     tone_step = 2 * np.pi * BEACON.tone_hz / SR * BEACON.amplitude
@@ -86,6 +89,7 @@ def test_failing_inference_stops_the_beacon_for_those_frames(tmp_path, toy_bundl
     monkeypatch.setattr(engine, "predict", flaky)
     summary, audio, _, trace = run(tmp_path, toy_bundle, [0.8] * 90, "flaky", engine=engine)
     assert [r["reason"] for r in trace[39:60]] == ["failed"] * 21
+    assert {r["cue"] for r in trace[39:60]} == {"stop"}
     assert summary.failed == 21
     seg = audio[round(40 / 30 * SR) + 400:round(60 / 30 * SR)].sum(1)  # after the fade
     assert band_energy(seg, BEACON.tone_hz) < 1e-3
@@ -112,6 +116,11 @@ def test_cli_bad_input_is_one_line(tmp_path, toy_bundle):  # noqa: F811
     proc = subprocess.run([sys.executable, "-m", "crossing_assist.runtime.demo", str(bad), "--bundle",
                            str(tmp_path)], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and proc.stderr.startswith("error: bundle") and proc.stderr.count("\n") == 1
+    clip = write_clip(tmp_path / "ok.mp4", [0.5] * 3)
+    proc = subprocess.run([sys.executable, "-m", "crossing_assist.runtime.demo", str(clip), "--bundle",
+                           str(toy_bundle), "--out", str(bad / "sub"), "--quiet"], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 2 and proc.stderr.startswith("error: cannot write") and proc.stderr.count("\n") == 1
 
 
 def test_missing_default_assets_name_what_is_missing(tmp_path, monkeypatch, capsys):
@@ -133,3 +142,17 @@ def test_benchmark_reports_decisions_per_second(tmp_path, toy_bundle):  # noqa: 
     rec = json.loads(proc.stdout.strip().splitlines()[-1])
     assert rec["decisions_per_s"] > 0 and rec["x_real_time"] == pytest.approx(rec["decisions_per_s"] / 30, rel=1e-6)
     assert str(toy_bundle) in proc.stdout
+
+
+def test_with_ffmpeg_on_path_the_beacon_is_muxed_into_the_video(tmp_path, toy_bundle, monkeypatch):  # noqa: F811
+    fake = tmp_path / "bin" / "ffmpeg"
+    fake.parent.mkdir()
+    log = tmp_path / "ffmpeg_args.txt"
+    fake.write_text(f'#!/bin/sh\necho "$@" > {log}\nfor a; do last="$a"; done\necho muxed > "$last"\n')
+    fake.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{fake.parent}:/usr/bin:/bin")
+    summary, _, _, _ = run(tmp_path, toy_bundle, [0.5] * 10, "mux", annotate=True)
+    muxed = tmp_path / "mux" / "annotated_with_audio.mp4"
+    assert summary.outputs["with_audio"] == str(muxed) and muxed.read_text() == "muxed\n"
+    args = log.read_text()
+    assert "annotated.mp4" in args and "beacon.wav" in args and "libx264" in args

@@ -1,7 +1,8 @@
 #!/usr/bin/env node
 // Build step of the phone app: copy the few onnxruntime-web files the app uses (the WASM
 // backend only) from node_modules into www/vendor/, copy a bundle (model.onnx + bundle.json,
-// validated, SHA-256 checked) into www/bundle/, and write www/precache.json: every file the
+// validated, SHA-256 checked) into www/bundle/, copy test_vectors.json (for the app's
+// self-test) into www/, and write www/precache.json: every file the
 // service worker caches for offline use, with its SHA-256, and a version that changes when
 // any of them changes (so phones pick up a new app or bundle on their next online visit).
 //
@@ -83,6 +84,15 @@ function listFiles(root, dir = root) {
   return out.sort();
 }
 
+/** Copy ../test_vectors.json (the Python runtime's decision vectors) for the app's self-test, if present. */
+function copyVectors(www) {
+  const src = join(HERE, 'test_vectors.json');
+  const dst = join(www, 'test_vectors.json');
+  if (existsSync(src)) copyAtomic(src, dst);
+  else rmSync(dst, { force: true });
+  return existsSync(src);
+}
+
 /** Write www/precache.json: {version, files: [{url, sha256, bytes}]} for the service worker. */
 export function writePrecache(www) {
   const files = listFiles(www)
@@ -113,6 +123,7 @@ function main() {
     }
     copyOrt(args.www);
     const meta = copyBundle(args.bundle, args.www);
+    copyVectors(args.www);
     const { version, files } = writePrecache(args.www);
     const total = files.reduce((s, f) => s + f.bytes, 0);
     console.log(`built ${args.www}: ${meta.actions.n}-action bundle, ${files.length} files, `

@@ -3,17 +3,17 @@
 // playwright-core with a fake camera playing a Y4M clip, runs the app, and writes what it saw
 // as JSON for tests/test_android_e2e.py to judge against the Python runtime:
 //
-//   node tools/e2e_driver.mjs --clip clip.y4m --out result.json [--run-s 8] [--vectors FILE]
+//   node tools/e2e_driver.mjs --clip clip.y4m --out result.json [--run-s 8] [--www DIR]
 //                            [--chromium /usr/bin/chromium]
 //
-// Phases: load (service worker ready) -> shared test vectors replayed in the page -> Start,
-// run the clip for --run-s seconds while sampling the audio graph every 100 ms -> freeze the
+// Phases: load (service worker ready) -> the app's self-test (shared test vectors) -> Start
+// (with a synthetic gyroscope turning right at 3 deg/s), run the clip for --run-s seconds while sampling the audio graph every 100 ms -> freeze the
 // camera (the <video> stops presenting frames) and time the stop cue -> collect the decision
 // trace and the frames the model saw -> stop the server, reload, Start again (offline).
 // The driver asserts nothing; it exits non-zero only when it could not run.
 
 import { spawn } from 'node:child_process';
-import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
+import { mkdtempSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { dirname, join, resolve } from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -25,19 +25,18 @@ const CHROMIUM_FLAGS = ['--headless=new', '--no-sandbox', '--disable-gpu', '--di
   '--use-fake-device-for-media-stream', '--use-fake-ui-for-media-stream', '--autoplay-policy=no-user-gesture-required'];
 
 function parseArgs(argv) {
-  const args = { runS: 8, chromium: '/usr/bin/chromium', vectors: null, www: join(ROOT, 'www') };
+  const args = { runS: 8, chromium: '/usr/bin/chromium', www: join(ROOT, 'www') };
   for (let i = 0; i < argv.length; i += 2) {
     const [k, v] = [argv[i], argv[i + 1]];
     if (v === undefined) throw new Error(`missing value for ${k}`);
     if (k === '--clip') args.clip = resolve(v);
     else if (k === '--out') args.out = resolve(v);
     else if (k === '--run-s') args.runS = Number(v);
-    else if (k === '--vectors') args.vectors = resolve(v);
     else if (k === '--chromium') args.chromium = v;
     else if (k === '--www') args.www = resolve(v);
     else throw new Error(`unknown argument ${k}`);
   }
-  if (!args.clip || !args.out) throw new Error('usage: driver.mjs --clip clip.y4m --out result.json [--run-s S] [--vectors FILE]');
+  if (!args.clip || !args.out) throw new Error('usage: e2e_driver.mjs --clip clip.y4m --out result.json [--run-s S] [--www DIR]');
   return args;
 }
 
@@ -130,7 +129,7 @@ async function main() {
       window.__vibrations = [];
       navigator.vibrate = (p) => { window.__vibrations.push(p); return true; };
     });
-    const url = `${server.url}?test=1`;
+    const url = `${server.url}?test=1&gyro=1`;
     await page.goto(url);
     await waitFor(page, () => window.crossingAssist?.ready && window.crossingAssist.offline === 'ready', null, 60000, 'the app and its service worker');
 
@@ -139,12 +138,16 @@ async function main() {
     result.installability = (await cdp.send('Page.getInstallabilityErrors')).installabilityErrors;
     result.manifest_errors = (await cdp.send('Page.getAppManifest')).errors;
 
-    if (args.vectors) {
-      const vectors = JSON.parse(readFileSync(args.vectors, 'utf8'));
-      result.vectors = await page.evaluate(async (v) => (await import('./js/vectors.js')).replayVectors(v), vectors);
-    }
+    // The app's self-test button: the shared test vectors replayed in this browser.
+    await page.click('#selftest');
+    result.vectors = await waitFor(page, () => window.crossingAssist.selftest, null, 30000, 'the self-test');
+    result.vectors_text = await page.textContent('#selftest-result');
 
     await page.click('#start');
+    // A gyroscope reporting a slow, steady right turn (3 deg/s = rotation of -3 deg/s about the
+    // phone's upward y axis), at 60 Hz as phones do.
+    await page.evaluate(() => setInterval(() => window.dispatchEvent(new DeviceMotionEvent('devicemotion',
+      { rotationRate: { alpha: 0, beta: 0, gamma: -3 }, interval: 16 })), 16));
     await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'frame'), null, 20000, 'the first frame decision');
     const samples = [];
     const tEnd = Date.now() + args.runS * 1000;

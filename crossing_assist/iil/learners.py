@@ -4,8 +4,10 @@ risk critic), Forward Training's one policy per time block and SMILe's mixture o
 Every learner has ``act(obs, t, rng) -> (action, uncertainty >= 0)``, ``fit(data, episode,
 rng) -> dict`` (online batch learning after each episode, AdaGrad, lr 1e-3 by default),
 ``observe_episode(trace)`` and ``state_dict()/load_state_dict()`` for resumable runs.
-Observations are H x W x 3 uint8 frames. Discrete actions are trained with cross-entropy and
-their uncertainty is the mutual information (nats) of the MC samples; continuous (Box)
+Observations are H x W x 3 uint8 frames. Discrete actions are trained with cross-entropy; the MC-dropout
+learner's uncertainty is the predictive entropy (nats) of its mean over samples (an untrained
+net is uncertain by it, while its samples still agree), an ensemble's is the mutual
+information of its members; continuous (Box)
 actions are regressed in [-1, 1] with MSE and their uncertainty is the mean per-dimension
 variance over samples (in normalised units), as in the thesis's code.
 """
@@ -43,12 +45,16 @@ class ActionCodec:
         lab = np.asarray(labels, dtype=np.float32).reshape(-1, self.n_out)
         return torch.as_tensor(2 * (lab - self.low) / (self.high - self.low) - 1)
 
-    def decode(self, out: torch.Tensor):
-        """``out``: samples x 1 x n_out -> (action, uncertainty) for one observation."""
+    def decode(self, out: torch.Tensor, measure: str = "entropy"):
+        """``out``: samples x 1 x n_out -> (action, uncertainty) for one observation. Discrete:
+        ``measure`` is ``"entropy"`` (predictive entropy of the mean, nats: high for an
+        untrained net too) or ``"mutual_info"`` (disagreement between samples/members)."""
         if self.discrete:
             probs = torch.softmax(out[:, 0], dim=-1).double().numpy()  # T x A
             mean = probs.mean(0)
-            ent = -(mean * np.log(mean + 1e-12)).sum()
+            ent = float(-(mean * np.log(mean + 1e-12)).sum())
+            if measure == "entropy":
+                return int(mean.argmax()), max(ent, 0.0)
             per = -(probs * np.log(probs + 1e-12)).sum(1).mean()
             return int(mean.argmax()), float(max(ent - per, 0.0))
         vals = torch.tanh(out[:, 0]).double().numpy()  # T x d
@@ -153,7 +159,7 @@ class EnsembleLearner:
             for m in self.members:
                 m.net.eval()
                 outs.append(m.net(to_tensor(obs), samples=1, mc=False)[0])
-        return self.codec.decode(torch.stack(outs))
+        return self.codec.decode(torch.stack(outs), measure="mutual_info")
 
     def fit(self, data, episode, rng, only_episode=None):
         stats = []

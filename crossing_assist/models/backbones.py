@@ -67,6 +67,12 @@ class Backbone(nn.Module):
             x = block(x)
         return x
 
+    def forward_from_to(self, x: torch.Tensor, start: int, stop: int) -> torch.Tensor:
+        """Run blocks ``[start, stop)``."""
+        for block in self.blocks[start:stop]:
+            x = block(x)
+        return x
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.forward_features(x)
 

@@ -98,6 +98,15 @@ def compute_features(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: 
     probe = backbone.forward_until(torch.zeros(1, 3, *size), frozen_blocks)
     feats = np.lib.format.open_memmap(tmp / "feats.npy", mode="w+", dtype=np.float16,
                                       shape=(n, *probe.shape[1:]))
+    base = _shallower(backbone, frozen_blocks, size, variants, fov_deg, ds, Path(cache_dir))
+    if base is not None:  # run only blocks [k, frozen) on an existing shallower entry
+        k, src = base
+        for i in tqdm(range(0, n, batch_size), desc=f"{desc} (from block {k})", disable=not progress):
+            x = torch.from_numpy(np.array(src.feats[i:i + batch_size])).float()
+            feats[i:i + batch_size] = backbone.forward_from_to(x, k, frozen_blocks).numpy().astype(np.float16)
+        for name in ("labels", "far_x", "row", "variant"):
+            np.save(tmp / f"{name}.npy", getattr(src, name))
+        return _finish(feats, tmp, path, key, n, backbone, frozen_blocks, size, variants, ds)
     labels, far_x, rows, vids = [], [], [], []
     buf: list[np.ndarray] = []
     done = 0
@@ -121,12 +130,28 @@ def compute_features(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: 
                 flush()
     if buf:
         flush()
-    feats.flush()
-    del feats
     np.save(tmp / "labels.npy", np.asarray(labels, np.int64))
     np.save(tmp / "far_x.npy", np.asarray(far_x, np.float64))
     np.save(tmp / "row.npy", np.asarray(rows, np.int64))
     np.save(tmp / "variant.npy", np.asarray(vids, np.int64))
+    return _finish(feats, tmp, path, key, n, backbone, frozen_blocks, size, variants, ds)
+
+
+def _shallower(backbone: Backbone, frozen_blocks: int, size: tuple[int, int], variants: tuple[Variant, ...],
+               fov_deg: float, ds: Dataset, cache_dir: Path) -> tuple[int, FeatureSet] | None:
+    """The deepest complete entry for the same frames and weights with fewer frozen blocks."""
+    for k in range(frozen_blocks - 1, 0, -1):
+        p = cache_dir / cache_key(backbone, k, size, variants, fov_deg, ds)
+        if (p / "meta.json").is_file():
+            return k, _open(p)
+    return None
+
+
+def _finish(feats: np.ndarray, tmp: Path, path: Path, key: str, n: int, backbone: Backbone,
+            frozen_blocks: int, size: tuple[int, int], variants: tuple[Variant, ...], ds: Dataset) -> FeatureSet:
+    """Flush the features, write meta.json last, move the entry into place atomically."""
+    feats.flush()
+    del feats
     meta = {"key": key, "n": n, "backbone": backbone.facts.name, "frozen_blocks": frozen_blocks,
             "size": list(size), "variants": [v.tag for v in variants], "root": str(ds.root)}
     (tmp / "meta.json").write_text(json.dumps(meta, indent=1))

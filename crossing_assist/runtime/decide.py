@@ -128,36 +128,47 @@ class Decider:
         self.hold_t = 0.0
         self.hold_turned = 0.0
 
-    def step(self, t: float, obs: Observation | None, yaw_rate_dps: float = 0.0) -> Decision:
-        """Advance to time ``t`` (s) with this frame's outputs (``None`` = no new frame: a tick)."""
+    def _evidence(self, t: float, obs: Observation | None) -> float:
+        """Step 4: tempered Bayes update with this frame; returns the weight used."""
+        if obs is None or not obs.ok:
+            return 0.0
         cfg = self.cfg
-        dt = 0.0 if self.t_prev is None else max(0.0, t - self.t_prev)
+        w = frame_weight(obs, self.c_frame, cfg.threshold)
+        since = cfg.filter.tau_evidence_s if self.t_last_ok is None else t - self.t_last_ok
+        w *= min(1.0, max(0.0, since) / cfg.filter.tau_evidence_s)
+        if w > 0.0:
+            q = bf.bin_likelihood(obs.probs, self.space)
+            self.belief = bf.update(self.belief, q, w, cfg.filter.eps)
+        self.t_last_ok = t
+        return w
+
+    def _hold(self, t: float) -> tuple[float | None, float, float]:
+        """Step 6: the hold's heading (None when unusable), uncertainty and coefficient."""
+        if self.hold_heading is None or not abs(self.hold_heading) < 90.0:
+            return None, math.inf, 0.0
+        g = self.cfg.gate
+        u_f = (t - self.hold_t) / g.hold_time_s + self.hold_turned / g.hold_turn_deg
+        return self.hold_heading, u_f, alpha(u_f, g.saturation)
+
+    def step(self, t: float, obs: Observation | None, yaw_rate_dps: float = 0.0) -> Decision:
+        """Advance to time ``t`` (s) with this frame's outputs (``None`` = no new frame: a tick).
+
+        The numbered steps are those of docs/readme_runtime.md ("Decision logic")."""
+        cfg = self.cfg
+        dt = 0.0 if self.t_prev is None else max(0.0, t - self.t_prev)  # 1
         self.t_prev = t if self.t_prev is None else max(t, self.t_prev)
         psi = yaw_rate_dps * dt
-        self.belief = bf.predict(self.belief, dt, yaw_rate_dps, cfg.fov_deg, cfg.filter)
-        if self.hold_heading is not None:
+        self.belief = bf.predict(self.belief, dt, yaw_rate_dps, cfg.fov_deg, cfg.filter)  # 2
+        if self.hold_heading is not None:  # 3
             self.hold_heading -= psi
             self.hold_turned += abs(psi)
-        w = 0.0
-        if obs is not None and obs.ok:
-            w = frame_weight(obs, self.c_frame, cfg.threshold)
-            since = cfg.filter.tau_evidence_s if self.t_last_ok is None else t - self.t_last_ok
-            w *= min(1.0, max(0.0, since) / cfg.filter.tau_evidence_s)
-            if w > 0.0:
-                q = bf.bin_likelihood(obs.probs, self.space)
-                self.belief = bf.update(self.belief, q, w, cfg.filter.eps)
-            self.t_last_ok = t
-        a_l, h_l = bf.belief_heading(self.belief, self.space, cfg.fov_deg)
+        w = self._evidence(t, obs)  # 4
+        a_l, h_l = bf.belief_heading(self.belief, self.space, cfg.fov_deg)  # 5
         u_l = bf.belief_entropy(self.belief, self.space) if h_l is not None else math.inf
         al_l = alpha(u_l, self.c_learner)
-        if self.hold_heading is not None and abs(self.hold_heading) < 90.0:
-            u_f = (t - self.hold_t) / cfg.gate.hold_time_s + self.hold_turned / cfg.gate.hold_turn_deg
-        else:
-            u_f = math.inf
-        al_f = alpha(u_f, cfg.gate.saturation)
-        h_f = self.hold_heading if math.isfinite(u_f) else None
-        m = mix(h_l, al_l, h_f, al_f, cfg.gate)
-        if obs is not None and not obs.ok:
+        h_f, u_f, al_f = self._hold(t)  # 6
+        m = mix(h_l, al_l, h_f, al_f, cfg.gate)  # 7
+        if obs is not None and not obs.ok:  # 8
             reason = REASON_FAILED
         elif self.t_last_ok is None or t - self.t_last_ok > cfg.watchdog_s:
             reason = REASON_STALE
@@ -165,7 +176,7 @@ class Decider:
             reason = REASON_UNCERTAIN if m.state == GATE_STOP else REASON_OK
             if h_l is not None and al_l >= cfg.gate.alpha_min:  # refresh the hold from fresh evidence
                 self.hold_heading, self.hold_t, self.hold_turned = h_l, t, 0.0
-        stop = reason != REASON_OK
+        stop = reason != REASON_OK  # 9
         heading = None if stop else m.heading_deg
         q = (m.confidence - cfg.gate.alpha_min) / (1.0 - cfg.gate.alpha_min)
         rate = cfg.rate_min_hz + min(1.0, max(0.0, q)) * (cfg.rate_max_hz - cfg.rate_min_hz)

@@ -101,86 +101,119 @@ def _mux(video: Path, wav: Path, out: Path) -> Path | None:
     if ffmpeg is None:
         return None
     tmp = out.with_name(f".{out.stem}.tmp{out.suffix}")
-    cmd = [ffmpeg, "-loglevel", "error", "-y", "-i", str(video), "-i", str(wav), "-c:v", "copy",
-           "-c:a", "aac", "-shortest", str(tmp)]
-    if subprocess.run(cmd, capture_output=True).returncode != 0:
-        tmp.unlink(missing_ok=True)
-        return None
-    os.replace(tmp, out)
-    return out
+    base = [ffmpeg, "-loglevel", "error", "-y", "-i", str(video), "-i", str(wav)]
+    for vcodec in (["-c:v", "libx264", "-pix_fmt", "yuv420p"], ["-c:v", "copy"]):  # H.264 plays everywhere
+        cmd = base + vcodec + ["-c:a", "aac", "-shortest", str(tmp)]
+        try:
+            done = subprocess.run(cmd, capture_output=True, timeout=600).returncode == 0
+        except (OSError, subprocess.TimeoutExpired):
+            done = False
+        if done:
+            os.replace(tmp, out)
+            return out
+    tmp.unlink(missing_ok=True)
+    return None
+
+
+class _Recorder:
+    """Collects one run's outputs: WAV samples on the video's timeline, trace lines, video."""
+
+    def __init__(self, cfg: OfflineConfig, engine: Engine, fps: float) -> None:
+        self.cfg, self.engine, self.fps = cfg, engine, fps
+        self.out = Path(cfg.out_dir)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.player = CuePlayer(cfg.beacon)
+        self.chunks: list[np.ndarray] = []
+        self.pos = 0  # samples rendered so far
+        self.gates: Counter = Counter()
+        self.reasons: Counter = Counter()
+        self.failed = 0
+        self.headings: list[float | None] = []
+        self.writer = None
+        self.tmp_video = self.out / ".annotated.tmp.mp4"
+        self.trace = tempfile.NamedTemporaryFile("w", dir=self.out, prefix=".trace.", suffix=".jsonl", delete=False)
+
+    def audio_until(self, t_end: float) -> None:
+        """Play the current cue up to ``t_end`` seconds."""
+        n = round(t_end * self.cfg.beacon.sample_rate) - self.pos
+        if n > 0:
+            self.chunks.append(self.player.render(n))
+            self.pos += n
+
+    def add(self, i: int, t: float, frame: np.ndarray, step: Step) -> None:
+        """Record frame ``i`` (taken at ``t`` s): its cue plays from ``t`` to the next frame."""
+        self.audio_until(t)
+        self.player.set_loop(step.loop)
+        d = step.decision
+        self.headings.append(d.heading_deg)
+        self.gates[d.gate] += 1
+        self.reasons[d.reason] += 1
+        self.failed += not step.prediction.ok
+        self.trace.write(json.dumps(trace_record(i, step)) + "\n")
+        if self.cfg.annotate:
+            img = annotate(frame, step.prediction, d, self.engine.space, self.engine.bundle.fov_deg)
+            if self.writer is None:
+                h, w = img.shape[:2]
+                self.writer = cv2.VideoWriter(str(self.tmp_video), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (w, h))
+            self.writer.write(img)
+
+    def close(self) -> None:
+        self.trace.close()
+        if self.writer is not None:
+            self.writer.release()
+
+    def abort(self) -> None:
+        """Remove the temporary files of an unfinished run."""
+        self.close()
+        Path(self.trace.name).unlink(missing_ok=True)
+        self.tmp_video.unlink(missing_ok=True)
+
+    def finish(self, n: int) -> dict:
+        """Write the final files atomically; returns name -> path (or a note)."""
+        self.close()
+        self.audio_until(n / self.fps)
+        out = self.out
+        outputs: dict = {"beacon": write_wav(out / "beacon.wav", np.concatenate(self.chunks),
+                                             self.cfg.beacon.sample_rate)}
+        os.chmod(self.trace.name, 0o644)
+        os.replace(self.trace.name, out / "trace.jsonl")
+        outputs["trace"] = out / "trace.jsonl"
+        if self.cfg.annotate:
+            os.replace(self.tmp_video, out / "annotated.mp4")
+            outputs["annotated"] = out / "annotated.mp4"
+            if self.cfg.mux:
+                muxed = _mux(out / "annotated.mp4", outputs["beacon"], out / "annotated_with_audio.mp4")
+                outputs["with_audio"] = muxed or "skipped (no working ffmpeg; play annotated.mp4 with beacon.wav)"
+        return outputs
 
 
 def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     """Run the whole demo on ``cfg.video``; writes the outputs into ``cfg.out_dir``."""
     from tqdm import tqdm
 
-    from crossing_assist.runtime.sources import VideoSource
+    from crossing_assist.runtime.sources import SourceError, VideoSource
 
     engine = engine or Engine(cfg.bundle)
     source = VideoSource(cfg.video, max_width=cfg.max_width)
     pipeline = Pipeline(engine, beacon_cfg=cfg.beacon)
-    out = Path(cfg.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    sr = cfg.beacon.sample_rate
-    player = CuePlayer(cfg.beacon)
-    chunks: list[np.ndarray] = []
-    gates: Counter = Counter()
-    reasons: Counter = Counter()
-    state = {"writer": None, "failed": 0, "pos": 0}
-    headings: list[float | None] = []
-    tmp_video = out / ".annotated.tmp.mp4"
-    trace_tmp = tempfile.NamedTemporaryFile("w", dir=out, prefix=".trace.", suffix=".jsonl", delete=False)
-
-    def flush_audio(t_end: float) -> None:  # play the current cue up to t_end (seconds)
-        n = round(t_end * sr) - state["pos"]
-        if n > 0:
-            chunks.append(player.render(n))
-            state["pos"] += n
-
-    def sink(i: int, t: float, frame: np.ndarray, step: Step) -> None:
-        flush_audio(t)
-        player.set_loop(step.loop)
-        headings.append(step.decision.heading_deg)
-        gates[step.decision.gate] += 1
-        reasons[step.decision.reason] += 1
-        state["failed"] += not step.prediction.ok
-        trace_tmp.write(json.dumps(trace_record(i, step)) + "\n")
-        if cfg.annotate:
-            img = annotate(frame, step.prediction, step.decision, engine.space, engine.bundle.fov_deg)
-            if state["writer"] is None:
-                h, w = img.shape[:2]
-                state["writer"] = cv2.VideoWriter(str(tmp_video), cv2.VideoWriter_fourcc(*"mp4v"),
-                                                  source.fps, (w, h))
-            state["writer"].write(img)
-        bar.update(1)
-
+    rec = _Recorder(cfg, engine, source.fps)
     t0 = time.perf_counter()
-    total = source.frame_count or None
-    with tqdm(total=total, unit="frame", disable=not cfg.progress, leave=False, desc="crossing-demo") as bar:
+    with tqdm(total=source.frame_count or None, unit="frame", disable=not cfg.progress, leave=False,
+              desc="crossing-demo") as bar:
+        def sink(i: int, t: float, frame: np.ndarray, step: Step) -> None:
+            rec.add(i, t, frame, step)
+            bar.update(1)
+
         try:
             n = run_frames(source, pipeline, sink=sink)
-        finally:
-            trace_tmp.close()
-            if state["writer"] is not None:
-                state["writer"].release()
+        except BaseException:
+            rec.abort()
+            raise
     if n == 0:
-        Path(trace_tmp.name).unlink(missing_ok=True)
-        from crossing_assist.runtime.sources import SourceError
+        rec.abort()
         raise SourceError(f"video {cfg.video} has no readable frames")
-    video_s = n / source.fps
-    flush_audio(video_s)
-    wall = time.perf_counter() - t0
-    outputs = {"beacon": write_wav(out / "beacon.wav", np.concatenate(chunks), sr)}
-    os.chmod(trace_tmp.name, 0o644)
-    os.replace(trace_tmp.name, out / "trace.jsonl")
-    outputs["trace"] = out / "trace.jsonl"
-    if cfg.annotate:
-        os.replace(tmp_video, out / "annotated.mp4")
-        outputs["annotated"] = out / "annotated.mp4"
-        if cfg.mux:
-            muxed = _mux(out / "annotated.mp4", outputs["beacon"], out / "annotated_with_audio.mp4")
-            outputs["with_audio"] = muxed if muxed else "skipped (ffmpeg not found; play annotated.mp4 with beacon.wav)"
+    outputs = rec.finish(n)
     truth = load_truth(cfg.video)
-    return Summary(frames=n, video_s=video_s, wall_s=wall, gates=dict(gates), reasons=dict(reasons),
-                   failed=state["failed"], outputs={k: str(v) for k, v in outputs.items()},
-                   truth=compare(truth, headings) if truth else None)
+    return Summary(frames=n, video_s=n / source.fps, wall_s=time.perf_counter() - t0, gates=dict(rec.gates),
+                   reasons=dict(rec.reasons), failed=rec.failed, outputs={k: str(v) for k, v in outputs.items()},
+                   truth=compare(truth, rec.headings) if truth else None)

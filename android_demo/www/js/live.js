@@ -65,3 +65,50 @@ export class Watchdog {
     return { stale: false, fired: false };
   }
 }
+
+/**
+ * The user's turn rate (degrees per second, positive = turning right, the Decider's
+ * yaw_rate_dps) from DeviceMotionEvent.rotationRate (deg/s around the device axes: alpha about
+ * z out of the screen, beta about x to the screen's right, gamma about y up the screen;
+ * right-handed). The phone is held upright, screen towards the user, so the world's vertical
+ * is the device's y axis in portrait (screen angle 0), -y upside down (180), +x when the
+ * device is turned a quarter counter-clockwise (90) and -x a quarter clockwise (270). Turning
+ * right is a negative rotation about the upward axis. Null rates give 0.
+ */
+export function yawRateFromRotation(rotationRate, screenAngleDeg = 0) {
+  const beta = rotationRate?.beta ?? 0;
+  const gamma = rotationRate?.gamma ?? 0;
+  switch (((Math.round(screenAngleDeg / 90) % 4) + 4) % 4) {
+    case 1: return -beta;
+    case 2: return gamma;
+    case 3: return beta;
+    default: return -gamma;
+  }
+}
+
+/**
+ * Integrates gyroscope samples into the turn made between two decision steps, so that the
+ * Decider's psi = yaw_rate_dps * dt is the angle actually turned, however the sensor's rate
+ * and the frame rate compare.
+ */
+export class YawIntegrator {
+  constructor() {
+    this.angle = 0; // degrees turned right since the last take()
+    this.lastSample = null; // time (s) of the last sample
+  }
+
+  /** A sample: turn rate (deg/s, + right) at time t (s); integrates over the time since the last one. */
+  add(rateDps, t) {
+    if (this.lastSample !== null && t > this.lastSample && Number.isFinite(rateDps)) {
+      this.angle += rateDps * Math.min(t - this.lastSample, 0.2); // a gap over 0.2 s: the sensor paused
+    }
+    this.lastSample = t;
+  }
+
+  /** Mean turn rate (deg/s) over the dt seconds since the previous step; resets the angle. */
+  take(dt) {
+    const rate = dt > 0 ? this.angle / dt : 0;
+    this.angle = 0;
+    return rate;
+  }
+}

@@ -7,7 +7,7 @@
 // max(1, |expected|); the belief element by element.
 
 import { headingToPan, spaceGroups } from './actions.js';
-import { Decider, itdSeconds, panGains } from './logic.js';
+import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains } from './logic.js';
 
 const SUPPORTED_VERSION = 1;
 
@@ -32,9 +32,14 @@ export function compareDecision(got, expected, tol) {
   return out;
 }
 
-/** An observation from its JSON form (uncertainty null = infinite). */
-function obsFromJson(o) {
+/**
+ * An observation from its JSON form (uncertainty null = infinite). When the step carries the
+ * graph's raw outputs, the uncertainty is derived from them with the app's own
+ * observationFromOutputs (the bundle's measure), as the live app does.
+ */
+function obsFromJson(o, measure) {
   if (o === null) return null;
+  if (o.ok && o.probs && 'entropy' in o) return observationFromOutputs(o, measure);
   return { ok: o.ok, probs: o.probs, uncertainty: o.uncertainty === null ? Infinity : o.uncertainty };
 }
 
@@ -58,8 +63,13 @@ export function replayVectors(vectors) {
   };
   for (const sc of vectors.scenarios) {
     const decider = new Decider(sc.config);
+    const { measure } = decisionConfig(sc.config);
     sc.steps.forEach((row, i) => {
-      const got = decider.step(row.t, obsFromJson(row.obs), row.yaw_rate_dps);
+      const obs = obsFromJson(row.obs, measure);
+      if (obs && row.obs.ok && !close(obs.uncertainty, row.obs.uncertainty, tol)) {
+        fail({ scenario: sc.name, step: i, field: 'obs.uncertainty', got: obs.uncertainty, expected: row.obs.uncertainty });
+      }
+      const got = decider.step(row.t, obs, row.yaw_rate_dps);
       steps += 1;
       for (const [k, v] of Object.entries(row.expect)) {
         if (typeof v === 'number' && typeof got[k] === 'number') {

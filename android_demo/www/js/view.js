@@ -98,6 +98,11 @@ export class HelperView {
     this.el('levelR').value = r;
   }
 
+  turning(rateDps) {
+    const side = rateDps >= 0 ? 'right' : 'left';
+    this.el('turning').textContent = rateDps === null ? 'gyroscope off' : `${fmt(Math.abs(rateDps), 0)}°/s ${side}`;
+  }
+
   speed(fps, ms) {
     this.el('speed').textContent = `${fmt(fps, 1)} frames/s, model ${fmt(ms, 0)} ms/frame`;
   }

@@ -74,7 +74,7 @@ def _load_photos(cfg: CrossingConfig, rng: np.random.Generator) -> list[tuple[np
 
 class CrossingEnv(gym.Env):
     metadata = {"render_modes": []}
-    iil_defaults = {"expert_threshold": 1.0, "learner_threshold": 0.1, "ensemble_threshold": 0.1,
+    iil_defaults = {"expert_threshold": 1.0, "learner_threshold": 1.0, "ensemble_threshold": 0.05,
                     "hg_threshold": 0.5}
 
     def __init__(self, cfg: CrossingConfig = CrossingConfig(), photo_seed: int = 0):

@@ -12,7 +12,7 @@ class ToyLaneEnv(gym.Env):
     Reward ``0.5 - |x|`` per step (negative beyond 0.5: a penalty)."""
 
     metadata = {"render_modes": []}
-    iil_defaults = {"expert_threshold": 1.0, "learner_threshold": 0.05, "ensemble_threshold": 0.05,
+    iil_defaults = {"expert_threshold": 1.0, "learner_threshold": 0.5, "ensemble_threshold": 0.05,
                     "hg_threshold": 1.0}
 
     def __init__(self, size: int = 16, drift: float = 0.15):
