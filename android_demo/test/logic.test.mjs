@@ -10,7 +10,7 @@ import { fileURLToPath } from 'node:url';
 
 import { actionHeading, headingToPan, spaceGroups, spaceNames } from '../www/js/actions.js';
 import { BundleError, parseBundleMeta } from '../www/js/bundle.js';
-import { sameFrame, Watchdog } from '../www/js/live.js';
+import { sameFrame, Watchdog, YawIntegrator, yawRateFromRotation } from '../www/js/live.js';
 import { cueFor, Decider, decisionConfig, observationFromOutputs } from '../www/js/logic.js';
 import { rgbaToRgb } from '../www/js/model.js';
 import { replayVectors } from '../www/js/vectors.js';
@@ -163,4 +163,26 @@ test('status line: stop reasons and coarse directions', () => {
   assert.match(statusMessage({ stop: false, heading_deg: 3 })[0], /straight/);
   assert.match(statusMessage({ stop: false, heading_deg: -15 })[0], /slightly left/);
   assert.match(statusMessage({ stop: false, heading_deg: 35 })[0], /Turn right/);
+});
+
+test('gyroscope: turning right is a positive yaw rate in every screen orientation', () => {
+  // Turning right = negative rotation about the world's upward axis (right-handed).
+  assert.equal(yawRateFromRotation({ alpha: 5, beta: 7, gamma: -30 }, 0), 30); // portrait: up = +y
+  assert.equal(yawRateFromRotation({ alpha: 5, beta: -30, gamma: 7 }, 90), 30); // quarter CCW: up = +x
+  assert.equal(yawRateFromRotation({ alpha: 5, beta: 7, gamma: 30 }, 180), 30); // upside down: up = -y
+  assert.equal(yawRateFromRotation({ alpha: 5, beta: 30, gamma: 7 }, 270), 30); // quarter CW: up = -x
+  assert.equal(yawRateFromRotation({ alpha: 5, beta: 30, gamma: 7 }, -90), 30);
+  assert.equal(yawRateFromRotation(null, 0), 0);
+  assert.equal(yawRateFromRotation({ alpha: null, beta: null, gamma: null }, 0), 0);
+});
+
+test('gyroscope: the integrator gives the mean turn rate between two steps', () => {
+  const y = new YawIntegrator();
+  // 60 Hz samples; each rate covers the interval before its sample: 14 intervals at 20 deg/s, 16 at 40
+  for (let i = 0; i <= 30; i += 1) y.add(i < 15 ? 20 : 40, i / 60);
+  assert.ok(Math.abs(y.take(0.5) - (20 * 14 + 40 * 16) / 60 / 0.5) < 1e-9);
+  assert.equal(y.take(0.1), 0); // reset by take()
+  y.add(10, 1.0); // after a 0.5 s sensor gap: at most 0.2 s is integrated
+  assert.ok(Math.abs(y.take(1) - 10 * 0.2) < 1e-9);
+  assert.equal(y.take(0), 0);
 });

@@ -117,3 +117,14 @@ def format_conformal_report(rep: dict[str, Any], target: float | None = None) ->
     tgt = f" (target {target:.1%})" if target is not None else ""
     return (f"conformal sets (threshold {rep['threshold']:.4f}, n={rep['n']}): coverage {rep['coverage']:.1%}{tgt}, "
             f"mean size {rep['mean_size']:.2f}, median {rep['median_size']:.0f}, empty {rep['empty']:.1%}")
+
+
+def bundle_conformal_report(bundle_dir: str | os.PathLike | Bundle, probs: np.ndarray,
+                            labels: np.ndarray) -> dict[str, Any]:
+    """:func:`conformal_report` at the bundle's own threshold, with its target ``coverage`` and
+    the calibration's size, for ``crossing-eval --bundle`` (``labels``: action indices [N])."""
+    bundle = bundle_dir if isinstance(bundle_dir, Bundle) else read_bundle(bundle_dir, verify_hash=False)
+    conf = bundle.calibration.conformal
+    rep = conformal_report(probs, labels, conf.threshold)
+    rep.update({"target_coverage": conf.coverage, "calibration_frames": conf.n_frames})
+    return rep

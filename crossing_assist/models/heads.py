@@ -23,7 +23,7 @@ from torch import nn
 
 from ..actions import N_BINS
 
-HEAD_KINDS = ("spatial", "thesis", "thesis_fc")
+HEAD_KINDS = ("spatial", "columns", "thesis", "thesis_fc")
 
 
 class HeadError(ValueError):
@@ -36,6 +36,11 @@ def mc_dropout(x: torch.Tensor, p: float, active: bool) -> torch.Tensor:
         return x
     keep = (torch.rand_like(x) >= p).to(x.dtype)
     return x * keep * (1.0 / (1.0 - p))
+
+
+def pool_rows(features: torch.Tensor) -> torch.Tensor:
+    """N x C x h x w -> N x 2C x w: mean and max over the rows, the columns kept."""
+    return torch.cat([features.mean(2), features.amax(2)], 1)
 
 
 class Head(nn.Module):
@@ -80,12 +85,12 @@ class SpatialHead(Head):
                  hidden: int = 256, columns: int = N_BINS):
         super().__init__(in_channels, n_actions, p)
         self.columns = int(columns)
-        self.reduce = nn.Conv2d(in_channels, width, 1)
+        self.reduce = nn.Conv1d(2 * in_channels, width, 1)
         self.fc1 = nn.Linear(width * self.columns, hidden)
         self.fc2 = nn.Linear(hidden, n_actions)
 
     def trunk(self, features: torch.Tensor) -> torch.Tensor:
-        z = F.relu(self.reduce(features)).mean(2, keepdim=True)          # N x W x 1 x w
+        z = F.relu(self.reduce(pool_rows(features))).unsqueeze(2)         # N x W x 1 x w
         z = F.interpolate(z, size=(1, self.columns), mode="bilinear", align_corners=False)
         return z.flatten(1)                                               # N x (width * 12)
 
@@ -105,6 +110,42 @@ class SpatialHead(Head):
             zc[:, :, c] = 0
             drops.append(base - self.fc2(F.relu(self.fc1(zc.flatten(1)))))
         return torch.stack(drops, -1)
+
+
+class ColumnHead(Head):
+    """Translation-equivariant localiser: a score per feature column (with +-1 column of
+    context), resampled to the 12 strips; ``unknown`` scored from pooled features; an action
+    covering several strips gets the log-sum-exp of their scores."""
+
+    kind = "columns"
+
+    def __init__(self, in_channels: int, n_actions: int, p: float = 0.5, width: int = 128):
+        super().__init__(in_channels, n_actions, p)
+        from ..actions import get_space
+
+        self.reduce = nn.Conv1d(2 * in_channels, width, 1)
+        self.context = nn.Conv1d(width, width, 3, padding=1)
+        self.score = nn.Conv1d(width, 1, 1)
+        self.bias = nn.Parameter(torch.zeros(N_BINS))          # per-strip prior
+        self.unknown = nn.Linear(width, 1)
+        groups = torch.zeros(n_actions - 1, N_BINS)
+        for a in range(1, n_actions):
+            for b in get_space(n_actions).action_bins(a):
+                groups[a - 1, b - 1] = 1.0
+        self.register_buffer("groups_mask", torch.log(groups.clamp_min(1e-30)), persistent=False)
+
+    def trunk(self, features: torch.Tensor) -> torch.Tensor:
+        z = F.relu(self.reduce(pool_rows(features)))                      # N x W x w
+        return F.relu(self.context(z))                                    # N x W x w
+
+    def tail(self, z: torch.Tensor, mc: bool) -> torch.Tensor:
+        z = mc_dropout(z, self.p, mc)
+        cols = self.score(z)                                              # N x 1 x w
+        bins = F.interpolate(cols.unsqueeze(2), size=(1, N_BINS), mode="bilinear",
+                             align_corners=False).flatten(1) + self.bias  # N x 12
+        known = torch.logsumexp(bins.unsqueeze(1) + self.groups_mask, -1)  # N x (A - 1)
+        unknown = self.unknown(z.mean(2))                                 # N x 1
+        return torch.cat([unknown, known], 1)
 
 
 class ThesisHead(Head):
@@ -148,7 +189,7 @@ class ThesisFCHead(Head):
         return torch.einsum("nchw,ac->nahw", features, self.fc.weight)
 
 
-_KINDS = {"spatial": SpatialHead, "thesis": ThesisHead, "thesis_fc": ThesisFCHead}
+_KINDS = {"spatial": SpatialHead, "columns": ColumnHead, "thesis": ThesisHead, "thesis_fc": ThesisFCHead}
 
 
 def create_head(kind: str, in_channels: int, n_actions: int, *, p: float = 0.5) -> Head:

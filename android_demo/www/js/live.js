@@ -78,12 +78,8 @@ export class Watchdog {
 export function yawRateFromRotation(rotationRate, screenAngleDeg = 0) {
   const beta = rotationRate?.beta ?? 0;
   const gamma = rotationRate?.gamma ?? 0;
-  switch (((Math.round(screenAngleDeg / 90) % 4) + 4) % 4) {
-    case 1: return -beta;
-    case 2: return gamma;
-    case 3: return beta;
-    default: return -gamma;
-  }
+  const up = [['gamma', 1], ['beta', 1], ['gamma', -1], ['beta', -1]][((Math.round(screenAngleDeg / 90) % 4) + 4) % 4];
+  return -up[1] * (up[0] === 'beta' ? beta : gamma) + 0; // + 0: no -0
 }
 
 /**
