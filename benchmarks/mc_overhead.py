@@ -145,6 +145,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--backbones", default=",".join(list_backbones()), help="comma-separated names")
     p.add_argument("--repeats", type=int, default=BenchConfig.repeats, help="rounds")
     p.add_argument("--block", type=int, default=BenchConfig.block, help="calls per graph per round")
+    p.add_argument("--head", default=BenchConfig.head, help="head kind (spatial | columns | thesis)")
     p.add_argument("--no-int8", dest="int8", action="store_false")
     p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                    help="wall: default session options; cpu: 1 thread, thread CPU time (busy machines)")
@@ -155,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         print(f"error: unknown backbone(s) {unknown}; valid: {', '.join(list_backbones())}", file=sys.stderr)
         return 2
-    cfg = BenchConfig(backbones=names, repeats=a.repeats, block=a.block, int8=a.int8, clock=a.clock)
+    cfg = BenchConfig(backbones=names, repeats=a.repeats, block=a.block, int8=a.int8, clock=a.clock, head=a.head)
     what = "default session options, wall time" if cfg.clock == "wall" else "1 intra-op thread, thread CPU time"
     print(f"onnxruntime {ort.__version__}, {what}, single-frame calls, {cfg.repeats} rounds of {cfg.block}",
           file=sys.stderr)
@@ -164,6 +165,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.time()
         rows.append(bench_backbone(name, cfg))
         print(f"{name}: T=16 / det = {rows[-1]['ratio']['mc16']:.3f} ({time.time() - t0:.0f} s)", file=sys.stderr)
+    print(f"head: {cfg.head}, T={cfg.samples}, p={cfg.p}, weights: {cfg.weights}; {what}")
     print(table(rows, cfg.int8))
     if a.json:
         Path(a.json).write_text(json.dumps(rows, indent=2))

@@ -342,6 +342,9 @@ def write_bundle(bundle_dir: str | os.PathLike, onnx_bytes: bytes, meta: Mapping
     parse_meta(full, root)  # refuse bad metadata before touching the disk
     root.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.tmp-", dir=root.parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes 0700; a bundle is an ordinary folder
     try:
         with open(tmp / full["model_file"], "wb") as f:
             f.write(onnx_bytes)

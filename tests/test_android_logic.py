@@ -244,3 +244,11 @@ def test_server_bad_port_is_one_line_error() -> None:
                           timeout=30)
     assert proc.returncode == 2 and proc.stderr.strip().count("\n") == 0
     assert proc.stderr.startswith("error: invalid --port")
+
+
+def test_npm_scripts_point_at_existing_tools() -> None:
+    scripts = json.loads((DEMO / "package.json").read_text())["scripts"]
+    assert {"build", "serve", "test", "bench"} <= set(scripts)
+    for cmd in scripts.values():
+        target = cmd.split()[-1] if cmd.startswith("node --test") else cmd.split()[1]
+        assert (DEMO / target).exists(), cmd

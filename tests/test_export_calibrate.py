@@ -128,3 +128,13 @@ def test_uncalibrated_defaults_are_safe():
     assert c.threshold == 0.0 and c.n_frames == 0 and c.temperature == 1.0
     assert c.uncertainty_threshold == pytest.approx(math.log(13) / 2)
     assert c.to_json()["conformal"]["threshold"] == 0.0
+
+
+@pytest.mark.parametrize("module", ["crossing_assist.export", "crossing_assist.export.calibrate",
+                                    "crossing_assist.export.evaluate"])
+def test_torch_free_export_modules(module):
+    import subprocess
+    import sys
+
+    code = f"import sys, {module}; sys.exit(3 if 'torch' in sys.modules else 0)"
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 0, f"{module} imported torch"

@@ -188,3 +188,17 @@ def test_cli_exports_int8_and_reports(work, tmp_path):
     assert b.precision == "int8" and b.metrics["int8_vs_fp32"]["size_ratio"] < 1
     out = predict_bundle(tmp_path / "b8", [np.zeros((40, 48, 3), np.uint8)])
     assert (out["mutual_info"] >= 0).all()
+
+
+def test_cli_flags_cover_every_config_field():
+    from dataclasses import fields
+
+    from crossing_assist.export.cli import build_parser
+
+    parser = build_parser()
+    dests = {a.dest for a in parser._actions}
+    assert {f.name for f in fields(ExportConfig)} <= dests
+    args = parser.parse_args(["--run", "r", "--out", "o"])
+    for f in fields(ExportConfig):
+        if f.name not in ("run", "out"):
+            assert getattr(args, f.name) == f.default, f.name

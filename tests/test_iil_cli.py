@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from crossing_assist.iil.envs.duckietown import duckietown_available
+
 CLI = [sys.executable, "-m", "crossing_assist.iil.cli"]
 
 
@@ -43,3 +45,10 @@ def test_user_errors_get_one_line(tmp_path, args, message):
     r = _run(*args, cwd=tmp_path)
     assert r.returncode == 2
     assert r.stderr.startswith("error: ") and message in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.skipif(duckietown_available()[0], reason="Duckietown is available here: the run would start")
+def test_duckietown_unavailable_is_one_line(tmp_path):
+    r = _run("run", "--env", "duckietown", "--algo", "dagger", "--out", tmp_path / "o", "--quiet")
+    assert r.returncode == 2 and r.stderr.startswith("error: Duckietown is not available here")
+    assert not (tmp_path / "o").exists()

@@ -54,7 +54,7 @@ def _cfg(tiny: Path, out: Path, **kw) -> TrainConfig:
 
 
 def test_run_folder_has_everything_and_best_loads(tiny, tmp_path):
-    out = train(_cfg(tiny, tmp_path / "run", yaw=(10.0,), smoothing=0.1, balance="weights"))
+    out = train(_cfg(tiny, tmp_path / "run", yaw=(10.0,), smoothing=0.1, balance="weights", aux_x=1.0))
     for name in ("args.yaml", "results.csv", "results.png", "weights/best.pt", "weights/last.pt"):
         assert (out / name).is_file(), name
     with open(out / "results.csv") as fh:

@@ -73,13 +73,13 @@ def bar_frame(width: int, height: int, strip: float | None, grey: int = 110,
 def bar_clip(width: int = 160, height: int = 120, fps: int = 10, *, noise: int = 3, seed: int = 0
              ) -> tuple[list[np.ndarray], list[float | None], list[bool]]:
     """The test clip: frames, the bar's strip in each (None = no bar) and whether the frame is
-    part of the frozen segment. 2 s at strip 3, 2 s sweeping to strip 10, 2 s at strip 10,
-    1.5 s of plain grey, then 2 s of one frame (bar at strip 10) repeated exactly: 9.5 s.
+    part of the frozen segment. 3 s at strip 3, 2 s sweeping to strip 10, 2.5 s at strip 10,
+    1.5 s of plain grey, then 2 s of one frame (bar at strip 10) repeated exactly: 11 s.
     Live frames get uniform integer noise in [-noise, noise] (``seed`` fixes it)."""
     rng = np.random.default_rng(seed)
-    strips: list[float | None] = [3.0] * (2 * fps)
+    strips: list[float | None] = [3.0] * (3 * fps)
     strips += [3.0 + 7.0 * (i + 1) / (2 * fps) for i in range(2 * fps)]
-    strips += [10.0] * (2 * fps)
+    strips += [10.0] * int(2.5 * fps)
     strips += [None] * int(1.5 * fps)
     frames = []
     for s in strips:

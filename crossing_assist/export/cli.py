@@ -27,6 +27,7 @@ HELP = {
     "parity_tol": "largest allowed |probs| difference in the parity check",
     "batch": "frames per batch",
     "threads": "CPU threads for PyTorch",
+    "seed": "seed of the PyTorch dropout masks drawn while calibrating",
     "progress": "progress bars",
 }
 

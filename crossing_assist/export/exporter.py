@@ -17,6 +17,7 @@ Steps (:func:`export_bundle`):
 
 from __future__ import annotations
 
+import hashlib
 import math
 import shlex
 import sys
@@ -62,6 +63,7 @@ class ExportConfig:
     parity_tol: float = PARITY_TOL
     batch: int = 32
     threads: int = 2
+    seed: int = 0                   # PyTorch's dropout masks while calibrating (global RNG untouched)
     progress: bool = True
 
     def __post_init__(self) -> None:
@@ -182,6 +184,14 @@ def _probe_frames(data: Labelled | None, spec: GraphSpec, n: int) -> np.ndarray:
     return rng.integers(0, 256, (4, h + 16, w + 24, 3), dtype=np.uint8)
 
 
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
 def _meta(policy, ckpt: Path, spec: GraphSpec, calib: cal.CalibrationResult, precision: str,
           metrics: dict, cfg: ExportConfig) -> dict:
     c = policy.config
@@ -199,7 +209,8 @@ def _meta(policy, ckpt: Path, spec: GraphSpec, calib: cal.CalibrationResult, pre
         "training": {"backbone": c.get("backbone"), "head": c.get("head"),
                      "weights_source": c.get("weights_source"), "licence": c.get("licence"),
                      "data": c.get("data"), "counts": c.get("counts", {}),
-                     "majority_action": c.get("majority_action"), "checkpoint": str(ckpt)},
+                     "majority_action": c.get("majority_action"), "checkpoint": str(ckpt),
+                     "checkpoint_sha256": _sha256(ckpt)},
         "metrics": metrics,
         "package_version": crossing_assist.__version__,
         "provenance": {"command": " ".join(shlex.quote(a) for a in sys.argv) if sys.argv else "",
@@ -220,6 +231,37 @@ def _measure(probs_out: dict, data: Labelled, threshold: float, n_actions: int, 
     return out
 
 
+def _fit_and_measure(model: Any, meta: dict, part_cal: Labelled, part_eval: Labelled, cfg: ExportConfig,
+                     temperature: float, majority: int | None, log: Callable[[str], None]
+                     ) -> tuple[cal.CalibrationResult, dict]:
+    """Fit the conformal and gate thresholds on the shipped graph's onnxruntime outputs for the
+    calibration part; measure on the evaluation part and on both together (the full split)."""
+    import tempfile
+
+    n = meta["actions"]["n"]
+    with tempfile.TemporaryDirectory(prefix="crossing-export-") as tmp:
+        set_metadata(model, meta)
+        bundle = read_bundle(write_bundle(Path(tmp) / "bundle", model_bytes(model), meta))
+        got_cal = predict_bundle(bundle, part_cal.images, batch=cfg.batch, progress=cfg.progress)
+        got_eval = predict_bundle(bundle, part_eval.images, batch=cfg.batch, progress=cfg.progress)
+    correct = got_cal["probs"].argmax(1) == part_cal.actions
+    calib = cal.CalibrationResult(
+        temperature=temperature, coverage=cfg.coverage,
+        threshold=cal.conformal_threshold(got_cal["probs"], part_cal.actions, cfg.coverage),
+        n_frames=len(part_cal.actions), measure=cfg.measure,
+        uncertainty_threshold=cal.uncertainty_threshold(got_cal[cfg.measure], correct))
+    both = Labelled(part_cal.images + part_eval.images, np.r_[part_cal.actions, part_eval.actions],
+                    np.r_[part_cal.far_x, part_eval.far_x], np.r_[part_cal.sources, part_eval.sources])
+    got_both = {k: np.concatenate([got_cal[k], got_eval[k]]) for k in got_cal}
+    metrics = {"calibration_part": _measure(got_cal, part_cal, calib.threshold, n, majority),
+               "evaluation_part": _measure(got_eval, part_eval, calib.threshold, n, majority),
+               "evaluation_sources": sorted(set(part_eval.sources.tolist())),
+               "full_split": _measure(got_both, both, calib.threshold, n, majority)}
+    log(f"{cfg.calib_split} through onnxruntime (T={meta['mc']['samples']}): accuracy "
+        f"{metrics['full_split']['accuracy']:.4f} on {len(both.actions)} frames")
+    return calib, metrics
+
+
 def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> ExportResult:
     """Run the whole pipeline (module docstring) and return where the bundle went."""
     torch.set_num_threads(max(1, cfg.threads))
@@ -234,8 +276,10 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
         part_cal, part_eval = data.take(i_cal), data.take(i_eval)
         log(f"calibration: {len(i_cal)} frames from {sorted(set(part_cal.sources.tolist()))}; "
             f"evaluation: {len(i_eval)} frames from {sorted(set(part_eval.sources.tolist()))}")
-        logits = torch_logits(BundleGraph(policy, _spec(policy.config, cfg.samples, p)), part_cal.images,
-                              cfg.batch, cfg.progress)
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(cfg.seed)
+            logits = torch_logits(BundleGraph(policy, _spec(policy.config, cfg.samples, p)), part_cal.images,
+                                  cfg.batch, cfg.progress)
         temperature = cal.fit_temperature(logits, part_cal.actions)
         log(f"temperature {temperature:.3f} (calibration NLL {cal.nll(logits, part_cal.actions):.4f} -> "
             f"{cal.nll(logits, part_cal.actions, temperature):.4f})")
@@ -261,27 +305,14 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     if parity > cfg.parity_tol:
         raise ExportError(f"parity check failed: max |probs diff| {parity:.2e} > {cfg.parity_tol:g}; "
                           "the ONNX graph does not reproduce the PyTorch model")
-    # Write once (uncalibrated thresholds) so that the shipped graph is what we measure.
     out = Path(cfg.out)
-    meta = _meta(policy, ckpt, spec, cal.CalibrationResult(temperature, cfg.coverage, 0.0, 0, cfg.measure,
-                                                           calib.uncertainty_threshold), precision, {}, cfg)
     if data is not None:
-        set_metadata(model, meta)
-        write_bundle(out, model_bytes(model), meta)
-        got_cal = predict_bundle(out, part_cal.images, batch=cfg.batch, progress=cfg.progress)
-        correct = got_cal["probs"].argmax(1) == part_cal.actions
-        calib = cal.CalibrationResult(
-            temperature=temperature, coverage=cfg.coverage,
-            threshold=cal.conformal_threshold(got_cal["probs"], part_cal.actions, cfg.coverage),
-            n_frames=len(part_cal.actions), measure=cfg.measure,
-            uncertainty_threshold=cal.uncertainty_threshold(got_cal[cfg.measure], correct))
-        got_eval = predict_bundle(out, part_eval.images, batch=cfg.batch, progress=cfg.progress)
-        metrics = {"calibration_part": _measure(got_cal, part_cal, calib.threshold, n, majority),
-                   "evaluation_part": _measure(got_eval, part_eval, calib.threshold, n, majority),
-                   "evaluation_sources": sorted(set(part_eval.sources.tolist())),
-                   "checkpoint": policy_metrics(ckpt)}
+        provisional = cal.CalibrationResult(temperature, cfg.coverage, 0.0, 0, cfg.measure, calib.uncertainty_threshold)
+        meta = _meta(policy, ckpt, spec, provisional, precision, {}, cfg)
+        calib, metrics = _fit_and_measure(model, meta, part_cal, part_eval, cfg, temperature, majority, log)
+        metrics["checkpoint"] = policy_metrics(ckpt)
         if cfg.int8:
-            metrics["int8_vs_fp32"] = compare_precisions(out, fp32_model, part_eval, cfg.batch)
+            metrics["int8_vs_fp32"] = compare_precisions(model, fp32_model, meta, part_eval, cfg.batch)
     metrics["parity_max_abs"] = parity
     meta = _meta(policy, ckpt, spec, calib, precision, metrics, cfg)
     set_metadata(model, meta)
@@ -310,20 +341,23 @@ def _latency_ms(sess: Any, frame: np.ndarray, repeats: int = 10) -> float:
     return float(np.median(times) * 1000)
 
 
-def compare_precisions(bundle_dir: Path, fp32_model: Any, data: Labelled, batch: int) -> dict:
+def compare_precisions(model: Any, fp32_model: Any, meta: dict, data: Labelled, batch: int,
+                       repeats: int = 5) -> dict:
     """Size (bytes), single-frame latency (ms, median of 10, default session options) and
-    evaluation-part accuracy of the int8 bundle against its fp32 graph."""
+    evaluation-part accuracy (mean over ``repeats`` MC runs) of the int8 graph against fp32."""
     import onnxruntime as ort
 
-    bundle = read_bundle(bundle_dir)
-    b32 = model_bytes(fp32_model)
-    s32 = ort.InferenceSession(b32)
-    s8 = ort.InferenceSession(str(bundle.model_path))
+    from crossing_assist.bundle import parse_meta
+
+    bundle = parse_meta(meta, need_bytes=False)
+    b32, b8 = model_bytes(fp32_model), model_bytes(model)
+    s32, s8 = ort.InferenceSession(b32), ort.InferenceSession(b8)
     acc = {}
-    for name, sess in (("fp32", s32), ("int8", s8)):
-        probs = predict_bundle(bundle, data.images, batch=batch, session=sess)["probs"]
-        acc[name] = float((probs.argmax(1) == data.actions).mean())
+    for name, sess in (("fp32", s32), ("int8", s8)):  # mean over repeats: MC noise moves argmaxes
+        acc[name] = float(np.mean([(predict_bundle(bundle, data.images, batch=batch, session=sess)["probs"]
+                                    .argmax(1) == data.actions).mean() for _ in range(repeats)]))
     frame = data.images[0][None]
-    return {"size_fp32": len(b32), "size_int8": bundle.model_size, "size_ratio": bundle.model_size / len(b32),
+    return {"size_fp32": len(b32), "size_int8": len(b8), "size_ratio": len(b8) / len(b32),
             "ms_fp32": _latency_ms(s32, frame), "ms_int8": _latency_ms(s8, frame),
-            "accuracy_fp32": acc["fp32"], "accuracy_int8": acc["int8"], "n": int(len(data.actions))}
+            "accuracy_fp32": acc["fp32"], "accuracy_int8": acc["int8"], "n": int(len(data.actions)),
+            "accuracy_repeats": repeats}

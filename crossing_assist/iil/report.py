@@ -80,9 +80,12 @@ def _fmt(vals: np.ndarray, digits: int = 1) -> str:
 
 
 def table(runs: list[RunSeries]) -> tuple[str, list[dict]]:
-    """Table 3: per algorithm, means per episode over all episodes (± sd over seeds)."""
+    """Table 3: per algorithm, means per episode over all episodes (± sd over seeds), plus the
+    environment's reward terms (``term_*`` columns of the runs) per episode."""
     head = ["env", "algorithm", "seeds", "episodes", "reward / ep", "queries / ep", "queries % horizon (ep ≥ 3)",
             "penalties / ep", "out-of-bounds / run", "expert steps / ep", "reward, last ep"]
+    terms = sorted({k for r in runs for row in r.rows for k in row if k.startswith("term_")})
+    head += [f"{t[5:]} term / ep" for t in terms]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     rows = []
     for (env, algo), series in _groups(runs).items():
@@ -98,6 +101,9 @@ def table(runs: list[RunSeries]) -> tuple[str, list[dict]]:
                "out-of-bounds / run": _fmt(oob),
                "expert steps / ep": _fmt(_per_seed(series, "expert_steps", slice(0, n_ep))),
                "reward, last ep": _fmt(_per_seed(series, "reward", slice(n_ep - 1, n_ep)))}
+        for t in terms:
+            has = all(t in s.rows[0] for s in series)
+            row[f"{t[5:]} term / ep"] = _fmt(_per_seed(series, t, slice(0, n_ep))) if has else "-"
         rows.append(row)
         lines.append("| " + " | ".join(str(row[k]) for k in head) + " |")
     return "\n".join(lines) + "\n", rows

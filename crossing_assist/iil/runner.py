@@ -71,10 +71,10 @@ def run(cfg: RunConfig, out: Path, *, progress: Callable[[int], None] | None = N
         on_episode: Callable[[dict], None] | None = None, env=None) -> Path:
     """Run (or continue) ``cfg`` under ``out``; returns the run folder."""
     folder = cfg.folder(out)
-    (folder / "data").mkdir(parents=True, exist_ok=True)
     env = env or make_env(cfg.env)
     setup = create(cfg.algo, env, horizon=cfg.horizon, episodes=cfg.episodes, seed=cfg.seed,
                    params=cfg.params, cfg=cfg.learner)
+    (folder / "data").mkdir(parents=True, exist_ok=True)
     want = _config_json(cfg)
     meta_path = folder / "config.json"
     if meta_path.exists():

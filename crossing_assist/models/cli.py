@@ -79,6 +79,7 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--unfreeze", type=int, default=d["unfreeze"], help="train the last N backbone blocks")
     p.add_argument("--balance", default=d["balance"], help="none | weights | sampler")
     p.add_argument("--smoothing", type=float, default=d["smoothing"], help="label mass given to neighbouring bins")
+    p.add_argument("--aux-x", type=float, default=d["aux_x"], help="weight of the far_x regression auxiliary loss")
     p.add_argument("--select-on", default=d["select_on"], help="val | holdout | last: which set picks best.pt")
     p.add_argument("--holdout", default="", help="comma-separated train sources held out for selection")
     p.add_argument("--seed", type=int, default=d["seed"])
@@ -101,7 +102,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             epochs=a.epochs, batch_size=a.batch_size, optimizer=a.optimizer, lr=a.lr,
             weight_decay=a.weight_decay, p=a.p, mirror=a.mirror, yaw=tuple(a.yaw), fov_deg=a.fov_deg,
             input_size=(224, 298) if a.four_three else a.input_size, unfreeze=a.unfreeze, balance=a.balance,
-            smoothing=a.smoothing, select_on=a.select_on,
+            smoothing=a.smoothing, aux_x=a.aux_x, select_on=a.select_on,
             holdout=tuple(s.strip() for s in a.holdout.split(",") if s.strip()), seed=a.seed,
             threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
         out = train(cfg, resume=a.resume)
@@ -145,3 +146,16 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         return 0
 
     return _run(go)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m crossing_assist.models.cli train|eval ...`` (same as the console scripts)."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if not args or args[0] not in ("train", "eval"):
+        print("error: usage: python -m crossing_assist.models.cli train|eval [options]", file=sys.stderr)
+        return 2
+    return train_main(args[1:]) if args[0] == "train" else eval_main(args[1:])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

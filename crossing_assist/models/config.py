@@ -42,6 +42,7 @@ class TrainConfig:
     unfreeze: int = 0                   # last backbone blocks trained (0 = frozen backbone)
     balance: str = "none"               # none | weights (class-weighted loss) | sampler
     smoothing: float = 0.0              # label mass moved to the neighbouring bins
+    aux_x: float = 0.0                  # weight of the |E[x] - far_x| auxiliary loss
     select_on: str = "val"              # val | holdout | last: which set picks best.pt
     holdout: tuple[str, ...] = ()       # train sources held out for model selection
     seed: int = 0
@@ -62,6 +63,7 @@ class TrainConfig:
             (self.unfreeze >= 0, f"unfreeze {self.unfreeze}; valid: >= 0"),
             (self.balance in BALANCE, f"balance {self.balance!r}; valid: {', '.join(BALANCE)}"),
             (0 <= self.smoothing < 1, f"smoothing {self.smoothing}; valid: 0 <= s < 1"),
+            (self.aux_x >= 0, f"aux_x {self.aux_x}; valid: >= 0"),
             (self.select_on in SELECT_ON, f"select_on {self.select_on!r}; valid: {', '.join(SELECT_ON)}"),
             (self.select_on != "holdout" or bool(self.holdout), "select_on holdout needs --holdout SOURCE"),
             (all(0 < abs(a) < 45 for a in self.yaw), f"yaw {self.yaw}; valid: angles with 0 < |a| < 45"),

@@ -70,9 +70,11 @@ class Head(nn.Module):
         mc = self.training if mc is None else bool(mc)
         z = self.trunk(features)
         n = z.shape[0]
+        if not mc:  # every sample is the same: compute one, repeat it (exactly identical)
+            return self.tail(z, False).unsqueeze(0).expand(samples, n, self.n_actions)
         if samples > 1:
             z = z.unsqueeze(0).expand(samples, *z.shape).reshape(samples * n, *z.shape[1:])
-        logits = self.tail(z, mc)
+        logits = self.tail(z, True)
         return logits.reshape(samples, n, self.n_actions)
 
 

@@ -91,6 +91,18 @@ def _targets(actions: torch.Tensor, n: int, smoothing: float) -> torch.Tensor:
     return t * (1 - smoothing * known) + smoothing * known * nb
 
 
+def far_x_loss(logits: torch.Tensor, far_x: torch.Tensor, n_actions: int) -> torch.Tensor:
+    """Mean |E[x] - far_x| (fraction of width) over frames with a known goal, where E[x] is
+    the mean action centre under the softmax restricted to known actions; 0 if none known."""
+    space = get_space(n_actions)
+    centres = torch.tensor([space.action_center_x(a) for a in range(1, n_actions)], dtype=logits.dtype)
+    ex = (logits[:, 1:].softmax(-1) * centres).sum(-1)
+    known = ~torch.isnan(far_x)
+    if not bool(known.any()):
+        return logits.sum() * 0.0
+    return (ex[known] - far_x[known]).abs().mean()
+
+
 def _class_weights(actions: np.ndarray, n: int) -> torch.Tensor:
     """Inverse-frequency weights (mean 1 over present classes; absent classes 0)."""
     counts = np.bincount(actions, minlength=n).astype(np.float64)
@@ -277,6 +289,9 @@ def _run_epoch(policy: Policy, opt: torch.optim.Optimizer, tr: Split, start: int
         logp = logits.log_softmax(-1)
         per = -(target * (logp if weights is None else logp * weights)).sum(-1)
         loss = per.mean()
+        if cfg.aux_x > 0:
+            fx = torch.from_numpy(tr.far_x[idx.numpy()]).float()
+            loss = loss + cfg.aux_x * far_x_loss(logits, fx, cfg.actions)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()

@@ -229,7 +229,7 @@ async function selfTest() {
     const r = replayVectors(await resp.json());
     app.selftest = r;
     out.textContent = r.nFailures === 0
-      ? `Decision logic OK: ${r.steps} decisions and ${r.checks} beacon checks match the Python runtime.`
+      ? `Decision logic OK: ${r.steps} decisions and ${r.checks} beacon and action checks match the Python runtime.`
       : `Decision logic MISMATCH: ${r.nFailures} differences (first: ${JSON.stringify(r.failures[0])}). Do not rely on this app.`;
   } catch (err) {
     app.selftest = { error: err.message };

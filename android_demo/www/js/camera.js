@@ -46,13 +46,15 @@ export class FrameGrabber {
     this.taken = 0; // the `presented` count at the last grab
     this.waiters = [];
     this.lastTime = -1;
+    this.closed = false;
     if ('requestVideoFrameCallback' in HTMLVideoElement.prototype) {
       const onFrame = () => {
+        if (this.closed) return;
         this.presented += 1;
         this.wake();
-        video.requestVideoFrameCallback(onFrame);
+        this.handle = video.requestVideoFrameCallback(onFrame);
       };
-      video.requestVideoFrameCallback(onFrame);
+      this.handle = video.requestVideoFrameCallback(onFrame);
     } else {
       // Fallback: a frame is new when the video's clock moved.
       this.poll = setInterval(() => {
@@ -106,6 +108,8 @@ export class FrameGrabber {
   }
 
   close() {
+    this.closed = true;
+    if (this.handle !== undefined) this.video.cancelVideoFrameCallback(this.handle);
     if (this.poll) clearInterval(this.poll);
     this.wake();
   }

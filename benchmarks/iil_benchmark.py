@@ -1,0 +1,57 @@
+"""Reproduce docs/iil: the crossing benchmark (all 13 algorithms) and the Duckietown benchmark
+(the thesis's eight), then the reports. Resumable: re-running continues unfinished runs.
+
+    python benchmarks/iil_benchmark.py crossing            # .venv, ~15 min a seed on 2 busy cores
+    python benchmarks/iil_benchmark.py duckietown --seeds 1 2 3 --horizon 512
+    python benchmarks/iil_benchmark.py report
+
+Duckietown runs under .venv-duckietown (see docs/readme_iil.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+MAIN_PY = REPO / ".venv" / "bin" / "python"
+DT_PY = REPO / ".venv-duckietown" / "bin" / "python"
+RUNS = REPO / "runs" / "iil"
+
+
+def _cli(python: Path, *args: str) -> None:
+    cmd = [str(python), "-m", "crossing_assist.iil.cli", *args]
+    print("+", " ".join(cmd), flush=True)
+    subprocess.run(cmd, check=True, cwd=REPO)
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("what", choices=["crossing", "duckietown", "report"])
+    p.add_argument("--seeds", nargs="+", default=["1", "2", "3"])
+    p.add_argument("--episodes", default="10")
+    p.add_argument("--horizon", default=None, help="crossing: 128, duckietown: 256 (as run for docs/iil)")
+    a = p.parse_args()
+    if a.what == "crossing":
+        for s in a.seeds:  # seed by seed, so that a partial result holds complete seeds
+            _cli(Path(sys.executable), "run", "--env", "crossing", "--algo", "all", "--episodes", a.episodes,
+                 "--horizon", a.horizon or "128", "--lr", "0.01", "--seeds", s, "--out", str(RUNS / "crossing"))
+    elif a.what == "duckietown":
+        if not DT_PY.exists():
+            print("error: .venv-duckietown is missing; see docs/readme_iil.md", file=sys.stderr)
+            return 2
+        h = a.horizon or "256"
+        for s in a.seeds:
+            _cli(DT_PY, "run", "--env", "duckietown", "--algo", "thesis", "--episodes", a.episodes, "--horizon", h,
+                 "--epochs", "2", "--seeds", s, "--out", str(RUNS / f"duckietown-h{h}"))
+    else:
+        for name in ("crossing", "duckietown-h256"):
+            if (RUNS / name).exists():
+                _cli(Path(sys.executable), "report", str(RUNS / name), "--out", str(REPO / "docs" / "iil" / name))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# Export the default run to the embedded default bundle (crossing_assist/assets/default_bundle/).
+#
+#   scripts/build_default_bundle.sh                 # runs/default -> the embedded bundle
+#   RUN=runs/x OUT=/tmp/b scripts/build_default_bundle.sh
+#
+# The run is built by scripts/build_default_model.sh (weights/best.pt). Calibration uses PTL's
+# val split, cut by photographer: about half calibrates (temperature, conformal threshold,
+# gate threshold), the other half measures. int8 (convolutions only) is kept when its accuracy
+# on the measuring half is within 1 point of fp32's; otherwise the fp32 bundle ships.
+# Provenance (command, time, checkpoint SHA-256, calibration data) lands in bundle.json.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+PY=${PY:-.venv/bin/python}
+RUN=${RUN:-runs/default}
+PTL=${PTL:-../shared/data/ptl}
+DATA=${DATA:-runs/data/ptl}                       # PTL as a dataset (manifest.csv)
+OUT=${OUT:-crossing_assist/assets/default_bundle}
+SAMPLES=${SAMPLES:-16}
+MAX_INT8_DROP=${MAX_INT8_DROP:-0.01}
+
+if [ ! -f "$RUN/weights/best.pt" ]; then
+    echo "error: $RUN/weights/best.pt not found; run scripts/build_default_model.sh first" >&2
+    exit 2
+fi
+if [ ! -f "$DATA/manifest.csv" ]; then
+    echo "importing PTL from $PTL into $DATA (images referenced, not copied)" >&2
+    "$PY" -m crossing_assist.data_tools.cli import-ptl "$PTL" --out "$DATA" --images reference --quiet
+fi
+
+TMP=$(mktemp -d "${TMPDIR:-/tmp}/default_bundle.XXXXXX")
+trap 'rm -rf "$TMP"' EXIT
+
+"$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/int8" --samples "$SAMPLES" \
+    --calib-data "$DATA" --calib-split val --int8 --quiet
+
+CHOICE=$("$PY" - "$TMP/int8/bundle.json" "$MAX_INT8_DROP" <<'PYEOF'
+import json, sys
+m = json.load(open(sys.argv[1]))["metrics"]["int8_vs_fp32"]
+drop = m["accuracy_fp32"] - m["accuracy_int8"]
+print("int8" if drop <= float(sys.argv[2]) else "fp32")
+print(f"int8 {m['accuracy_int8']:.3f} vs fp32 {m['accuracy_fp32']:.3f} on {m['n']} held-out frames, "
+      f"size {m['size_int8'] / 1e6:.1f} / {m['size_fp32'] / 1e6:.1f} MB", file=sys.stderr)
+PYEOF
+)
+
+if [ "$CHOICE" = "int8" ]; then
+    SRC="$TMP/int8"
+else
+    echo "int8 loses more than $MAX_INT8_DROP accuracy: shipping fp32" >&2
+    "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/fp32" --samples "$SAMPLES" \
+        --calib-data "$DATA" --calib-split val --quiet
+    SRC="$TMP/fp32"
+fi
+
+# Replace the embedded bundle in one rename (write_bundle validates and swaps atomically).
+"$PY" - "$SRC" "$OUT" <<'PYEOF'
+import json, sys
+from pathlib import Path
+from crossing_assist.bundle import read_bundle, write_bundle
+src, out = Path(sys.argv[1]), Path(sys.argv[2])
+b = read_bundle(src)
+meta = json.loads((src / "bundle.json").read_text())
+write_bundle(out, b.model_path.read_bytes(), meta)
+ev = b.metrics["evaluation_part"]
+print(f"default bundle written: {out} ({b.model_size / 1e6:.1f} MB, {b.precision}, held-out accuracy "
+      f"{ev['accuracy']:.3f}, coverage {ev['coverage']:.3f} at target {b.calibration.conformal.coverage})")
+PYEOF

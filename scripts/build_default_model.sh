@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Build the app's DEFAULT policy (13 actions, EfficientNet-Lite0, frozen backbone) into runs/default/.
+#
+# Data: PTL train (real photos, ../shared/data/ptl) + a few hundred synthetic street corners
+# from `crossing-data synth` (with `unknown` frames, so the demo's synthetic clip is understood).
+# Selection: fixed epoch count (--select-on last), chosen beforehand on a photographer-held-out
+# part of PTL train, never on PTL val. PTL val is reported after training.
+#
+# Usage: scripts/build_default_model.sh [PTL_DIR]      (run from the repository root)
+set -euo pipefail
+PTL=${1:-../shared/data/ptl}
+PY=${PY:-.venv/bin/python}
+HEAD=${HEAD:-columns}
+EPOCHS=${EPOCHS:-12}
+mkdir -p runs/data
+[ -f runs/data/ptl/manifest.csv ] || $PY -m crossing_assist.data_tools.cli import-ptl "$PTL" --out runs/data/ptl --images reference --quiet
+[ -f runs/data/synth/manifest.csv ] || $PY -m crossing_assist.data_tools.cli synth --out runs/data/synth --frames 300 --seed 1 \
+    --unknown-fraction 0.25 --val-fraction 0.2 --quiet
+# One dataset folder whose manifest references both (paths relative to runs/data/default).
+$PY - <<'PYEOF'
+from dataclasses import replace
+from crossing_assist.data_tools.manifest import read_manifest, write_manifest
+rows = []
+for name in ("ptl", "synth"):
+    ds = read_manifest(f"runs/data/{name}")
+    for r in ds.rows:
+        rows.append(replace(r, image=f"../{name}/{r.image}"))
+write_manifest("runs/data/default", rows)
+print(f"runs/data/default: {len(rows)} rows")
+PYEOF
+rm -rf runs/default
+$PY -m crossing_assist.models.cli train --data runs/data/default --out runs/default --backbone efficientnet_lite0 \
+    --head "$HEAD" --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --weight-decay 1e-4 --smoothing 0.1 \
+    --select-on last --seed 0 --quiet
+$PY -m crossing_assist.models.cli eval --run runs/default --data runs/data/ptl --split val --quiet
+$PY -m crossing_assist.models.cli eval --run runs/default --data runs/data/synth --split val --out runs/default/eval_synth_val --quiet
