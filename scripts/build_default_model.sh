@@ -10,26 +10,14 @@
 set -euo pipefail
 PTL=${1:-../shared/data/ptl}
 PY=${PY:-.venv/bin/python}
-HEAD=${HEAD:-columns}
+HEAD=${HEAD:-spatial}
 EPOCHS=${EPOCHS:-12}
 mkdir -p runs/data
 [ -f runs/data/ptl/manifest.csv ] || $PY -m crossing_assist.data_tools.cli import-ptl "$PTL" --out runs/data/ptl --images reference --quiet
 [ -f runs/data/synth/manifest.csv ] || $PY -m crossing_assist.data_tools.cli synth --out runs/data/synth --frames 300 --seed 1 \
     --unknown-fraction 0.25 --val-fraction 0.2 --quiet
-# One dataset folder whose manifest references both (paths relative to runs/data/default).
-$PY - <<'PYEOF'
-from dataclasses import replace
-from crossing_assist.data_tools.manifest import read_manifest, write_manifest
-rows = []
-for name in ("ptl", "synth"):
-    ds = read_manifest(f"runs/data/{name}")
-    for r in ds.rows:
-        rows.append(replace(r, image=f"../{name}/{r.image}"))
-write_manifest("runs/data/default", rows)
-print(f"runs/data/default: {len(rows)} rows")
-PYEOF
 rm -rf runs/default
-$PY -m crossing_assist.models.cli train --data runs/data/default --out runs/default --backbone efficientnet_lite0 \
+$PY -m crossing_assist.models.cli train --data runs/data/ptl --extra-data runs/data/synth --out runs/default --backbone efficientnet_lite0 \
     --head "$HEAD" --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --weight-decay 1e-4 --smoothing 0.1 \
     --select-on last --seed 0 --quiet
 $PY -m crossing_assist.models.cli eval --run runs/default --data runs/data/ptl --split val --quiet

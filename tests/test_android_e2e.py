@@ -254,10 +254,11 @@ SAMPLE_CLIP = REPO / "crossing_assist" / "assets" / "sample_clip.mp4"
 def test_default_bundle_on_the_sample_clip_agrees_with_python(tmp_path: Path) -> None:
     """The embedded bundle (MC dropout: outputs are random) on the embedded clip, in Chromium.
 
-    Tolerance, stated for sampling noise: on frames where onnxruntime's top probability is
-    >= 0.5 the app's top action is the same on >= 80% of them; entropies differ by <= 0.15 nats
-    at the median; the Python Decider fed the Python engine's outputs for the app's frames at
-    the app's times agrees with the app on stop/go and side on >= 80% of the decisions.
+    Tolerance, stated for sampling noise: on >= 90% of the app's frames its top action is one
+    of the top actions of 5 onnxruntime runs on the same frame; entropies differ by <= 0.15
+    nats at the median; the Python Decider fed the Python engine's outputs for the app's
+    frames at the app's times agrees with the app on stop/go and side on >= 80% of the
+    decisions (measured with an interim EfficientNet-Lite0 96x96 bundle: 94%).
     """
     if not (DEFAULT_BUNDLE / "bundle.json").is_file() or not SAMPLE_CLIP.is_file():
         pytest.skip("the default bundle or the sample clip is not in crossing_assist/assets yet")
@@ -285,21 +286,18 @@ def test_default_bundle_on_the_sample_clip_agrees_with_python(tmp_path: Path) ->
     run = {"result": result}
     engine = Engine(DEFAULT_BUNDLE)
     py = Decider(engine.decision_config())
-    top_same = top_n = agree = total = 0
+    top_in = agree = total = 0
     dent = []
     for entry, rgb in _app_steps_in_order(run):
-        pred = engine.predict(rgb)
-        app_probs = np.asarray(entry["outputs"]["probs"])
-        if pred.probs.max() >= 0.5:
-            top_n += 1
-            top_same += int(np.argmax(app_probs) == np.argmax(pred.probs))
-        dent.append(abs(entry["outputs"]["entropy"] - pred.entropy))
-        d = py.step(entry["t"], pred.observation(), entry["yaw_rate_dps"]).to_json()
+        preds = [engine.predict(rgb) for _ in range(5)]
+        top_in += int(np.argmax(entry["outputs"]["probs"])) in {int(np.argmax(p.probs)) for p in preds}
+        dent.append(abs(entry["outputs"]["entropy"] - preds[0].entropy))
+        d = py.step(entry["t"], preds[0].observation(), entry["yaw_rate_dps"]).to_json()
         a = entry["decision"]
         total += 1
         same_side = d["stop"] or a["stop"] or math.copysign(1, d["heading_deg"]) == math.copysign(1, a["heading_deg"])
         agree += (d["stop"] == a["stop"]) and same_side
-    assert top_n == 0 or top_same >= 0.8 * top_n, f"top action agrees on {top_same}/{top_n} confident frames"
+    assert top_in >= 0.9 * total, f"the app's top action is among onnxruntime's on {top_in}/{total} frames"
     assert float(np.median(dent)) <= 0.15
     assert agree >= 0.8 * total, f"{agree}/{total} decisions agree"
     assert result["offline"]["loaded"] and result["offline"]["decisions"] >= 5

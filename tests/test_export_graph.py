@@ -1,8 +1,8 @@
 """The one-pass MC-dropout ONNX graph, run under onnxruntime with DEFAULT session options.
 
-Fast tests use a tiny real ``Backbone`` (BatchNorm running statistics measured on data, not
-the init values) with the models engineer's real heads; the slow test repeats the key checks
-on EfficientNet-Lite0 with its shipped ImageNet weights.
+Fast tests use the real ``Policy`` and heads on a tiny ``Backbone`` (BatchNorm running
+statistics measured on data, not the init values); the slow test repeats the key checks on
+EfficientNet-Lite0 with its shipped ImageNet weights, for every head kind.
 """
 
 import numpy as np
@@ -14,23 +14,13 @@ from torch import nn
 
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, mc_summaries, model_bytes
 from crossing_assist.models.backbones import Backbone, BackboneFacts, create_backbone
-from crossing_assist.models.heads import create_head
+from crossing_assist.models.heads import HEAD_KINDS, create_head
+from crossing_assist.models.policy import Policy, policy_config
 
 MEAN, STD = (0.485, 0.456, 0.406), (0.229, 0.224, 0.225)
 
 
-class StandInPolicy(nn.Module):
-    """Backbone + head with the contract's ``forward(x, samples, mc) -> (T, N, A)``."""
-
-    def __init__(self, backbone: Backbone, head: nn.Module):
-        super().__init__()
-        self.backbone, self.head = backbone, head
-
-    def forward(self, x, samples=1, mc=None):
-        return self.head(self.backbone.forward_features(x), samples=samples, mc=mc)
-
-
-def tiny_policy(kind: str = "spatial", n_actions: int = 13, seed: int = 0) -> StandInPolicy:
+def tiny_policy(kind: str = "spatial", n_actions: int = 13, seed: int = 0) -> Policy:
     torch.manual_seed(seed)
     blocks = [
         nn.Sequential(nn.Conv2d(3, 8, 3, stride=2, padding=1), nn.BatchNorm2d(8, momentum=None), nn.ReLU()),
@@ -45,7 +35,8 @@ def tiny_policy(kind: str = "spatial", n_actions: int = 13, seed: int = 0) -> St
         for _ in range(4):
             x = torch.from_numpy(rng.normal(0, 1, (16, 3, 32, 32)).astype(np.float32)).cumsum(-1) / 4
             backbone(x)
-    policy = StandInPolicy(backbone, create_head(kind, 16, n_actions, p=0.5)).eval()
+    policy = Policy(backbone, create_head(kind, 16, n_actions, p=0.5),
+                    policy_config(backbone, kind, n_actions, input_size=(32, 32))).eval()
     with torch.no_grad():  # make the logits spread out so that dropout visibly changes them
         for prm in policy.head.parameters():
             prm.mul_(3.0)
@@ -183,12 +174,13 @@ def test_graph_refuses_head_without_random_masks():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["spatial", "thesis", "thesis_fc"])
+@pytest.mark.parametrize("kind", HEAD_KINDS)
 def test_real_pretrained_backbone_keeps_dropout_random(kind):
     """EfficientNet-Lite0 with its shipped ImageNet weights (real BatchNorm statistics)."""
     torch.manual_seed(0)
     backbone = create_backbone("efficientnet_lite0", weights="imagenet")
-    policy = StandInPolicy(backbone, create_head(kind, backbone.num_features, 13, p=0.5)).eval()
+    policy = Policy(backbone, create_head(kind, backbone.num_features, 13, p=0.5),
+                    policy_config(backbone, kind, 13, input_size=(96, 96))).eval()
     spec = GraphSpec(size=(96, 96), mean=backbone.facts.mean, std=backbone.facts.std, samples=16, p=0.5)
     sess = session(policy, spec)
     x = frames(n=2, h=120, w=160)
@@ -200,3 +192,18 @@ def test_real_pretrained_backbone_keeps_dropout_random(kind):
     with torch.no_grad():
         want = BundleGraph(policy, det)(torch.from_numpy(x))[0].numpy()
     np.testing.assert_allclose(out["probs"], want, atol=1e-4)
+
+
+def test_default_head_exports_random_and_exact():
+    from crossing_assist.models.config import TrainConfig
+
+    policy = tiny_policy(TrainConfig.head, n_actions=8)
+    mc = session(policy, GraphSpec(size=(32, 32), mean=MEAN, std=STD, samples=16, p=0.5))
+    x = frames(n=2)
+    a, b = run(mc, x), run(mc, x)
+    assert a["probs"].shape == (2, 8) and np.abs(a["probs"] - b["probs"]).max() > 1e-5
+    assert (a["variance"].max(1) > 0).all()
+    det = GraphSpec(size=(32, 32), mean=MEAN, std=STD, samples=1, p=0.0)
+    with torch.no_grad():
+        want = BundleGraph(policy, det)(torch.from_numpy(x))[0].numpy()
+    np.testing.assert_allclose(run(session(policy, det), x)["probs"], want, atol=1e-4)

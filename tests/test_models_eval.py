@@ -47,3 +47,13 @@ def test_eval_cli_errors_are_one_line(tiny_run, tmp_path):
     assert r.returncode == 2 and "no test rows" in r.stderr
     r = subprocess.run([*EVAL, "--data", str(data), "--bundle", str(tmp_path)], capture_output=True, text=True)
     assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr
+
+
+def test_eval_mirror_tta_averages_each_frame_with_its_mirror(tiny_run, tmp_path):
+    data, run, root = tiny_run
+    _, plain = evaluate(EvalConfig(data=str(data), run=str(run), examples=0, cache_dir=str(root / "cache"),
+                                   progress=False, out=str(tmp_path / "a")))
+    _, tta = evaluate(EvalConfig(data=str(data), run=str(run), examples=0, tta_mirror=True, progress=False,
+                                 cache_dir=str(root / "cache"), out=str(tmp_path / "b")))
+    assert tta["n"] == plain["n"] == 6 and tta["tta_mirror"] is True
+    assert np.array(tta["confusion"]).sum() == 6

@@ -45,7 +45,7 @@ def test_p_is_settable_and_zero_p_is_deterministic():
     head = create_head("spatial", 8, 13, p=0.5)
     head.p = 0.0
     out = head(torch.rand(2, 8, 7, 7), samples=3, mc=True)
-    assert torch.equal(out[0], out[2])
+    assert torch.allclose(out[0], out[2], atol=1e-6)
 
 
 def test_mc_dropout_keeps_the_mean():
@@ -58,7 +58,7 @@ def test_mc_dropout_keeps_the_mean():
 
 
 def test_spatial_head_works_for_any_feature_width():
-    head = create_head("spatial", 8, 8).eval()
+    head = create_head("spatial_mlp", 8, 8).eval()
     for w in (7, 10, 14):
         assert head(torch.rand(2, 8, 7, w), mc=False).shape == (1, 2, 8)
     assert head.column_maps(torch.rand(2, 8, 7, 10)).shape == (2, 8, 12)
@@ -69,3 +69,23 @@ def test_bad_head_arguments():
         create_head("global", 8, 13)
     with pytest.raises(HeadError, match="dropout p"):
         create_head("spatial", 8, 13, p=1.0)
+
+
+def test_spatial_head_is_translation_aware_and_groups_strips():
+    """Moving the evidence to another column moves the predicted strip; 4/8-action logits are
+    the log-sum-exp of their strips' scores."""
+    torch.manual_seed(0)
+    head = create_head("spatial", 4, 13, p=0.0).eval()
+    with torch.no_grad():
+        head.reduce.weight.zero_(); head.reduce.bias.zero_(); head.reduce.weight[0, 0, 0] = 1.0
+        head.context.weight.zero_(); head.context.bias.zero_(); head.context.weight[0, 0, 1] = 1.0
+        head.score.weight.zero_(); head.score.weight[0, 0, 0] = 5.0
+    feats = torch.zeros(2, 4, 7, 12)
+    feats[0, 0, :, 1] = 1.0    # evidence in column 1 (strip 2)
+    feats[1, 0, :, 9] = 1.0    # column 9 (strip 10)
+    assert head(feats, mc=False)[0].argmax(-1).tolist() == [2, 10]
+    h4 = create_head("spatial", 4, 4, p=0.0).eval()
+    h4.load_state_dict({k: v for k, v in head.state_dict().items() if not k.startswith("unknown")} |
+                       {k: v for k, v in h4.state_dict().items() if k.startswith("unknown")})
+    strips = head.strip_scores(head.trunk(feats))
+    assert torch.allclose(h4(feats, mc=False)[0][:, 1], torch.logsumexp(strips[:, 0:4], -1), atol=1e-5)

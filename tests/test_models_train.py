@@ -54,7 +54,9 @@ def _cfg(tiny: Path, out: Path, **kw) -> TrainConfig:
 
 
 def test_run_folder_has_everything_and_best_loads(tiny, tmp_path):
-    out = train(_cfg(tiny, tmp_path / "run", yaw=(10.0,), smoothing=0.1, balance="weights", aux_x=1.0))
+    extra = make_tiny_dataset(tmp_path / "extra", n_train=3, n_val=1, seed=1)
+    out = train(_cfg(tiny, tmp_path / "run", yaw=(10.0,), smoothing=0.1, balance="weights", aux_x=1.0,
+                     extra_data=(str(extra),)))
     for name in ("args.yaml", "results.csv", "results.png", "weights/best.pt", "weights/last.pt"):
         assert (out / name).is_file(), name
     with open(out / "results.csv") as fh:
@@ -64,7 +66,7 @@ def test_run_folder_has_everything_and_best_loads(tiny, tmp_path):
     policy = load_policy(out / "weights" / "best.pt")
     assert policy.config["input_size"] == [64, 64] and policy.n_actions == 13
     # mirrored + yaw +-10 -> 6 variants of the 8 train frames
-    assert policy.config["counts"]["train_samples"] == 8 * 6
+    assert policy.config["counts"]["train_samples"] == (8 + 3) * 6 and policy.config["counts"]["extra_train"] == 3
     logits = policy(torch.zeros(2, 3, 64, 64), samples=3, mc=False)
     assert logits.shape == (3, 2, 13)
 

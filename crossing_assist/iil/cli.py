@@ -55,6 +55,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--ensemble", type=int, default=d.ensemble)
     r.add_argument("--expert-threshold", type=float, default=None, help="U_T where alpha = 1/2")
     r.add_argument("--learner-threshold", type=float, default=None, help="U_L where alpha = 1/2")
+    r.add_argument("--binary-expert", type=float, default=None, metavar="RISK",
+                   help="the thesis's expert: act (U=0) only above this risk, else no action (U=inf)")
     r.add_argument("--threads", type=int, default=1, help="torch CPU threads (1 is fastest for this small net)")
     r.add_argument("--quiet", action="store_true")
     rep = sub.add_parser("report", help="Table 3 (markdown/CSV) and Figures 4.4-4.7 from run folders")
@@ -64,20 +66,21 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_run(a: argparse.Namespace) -> int:
+    if a.episodes < 1 or a.horizon < 1:
+        raise RunError(f"--episodes={a.episodes} and --horizon={a.horizon} must both be >= 1")
     import torch  # noqa: PLC0415
     from tqdm import tqdm  # noqa: PLC0415
 
     from .algorithms import AlgoParams  # noqa: PLC0415
     from .runner import RunConfig, run  # noqa: PLC0415
 
-    if a.episodes < 1 or a.horizon < 1:
-        raise RunError(f"--episodes={a.episodes} and --horizon={a.horizon} must both be >= 1")
     torch.set_num_threads(max(1, a.threads))
     algos = _algos(a.algo)
     learner = LearnerConfig(lr=a.lr, epochs=a.epochs, mc_samples=a.mc_samples, ensemble=a.ensemble)
     params = AlgoParams(expert_threshold=a.expert_threshold, learner_threshold=a.learner_threshold)
     configs = [RunConfig(env=a.env, algo=al, seed=s, episodes=a.episodes, horizon=a.horizon,
-                         learner=learner, params=params) for al in algos for s in a.seeds]
+                         learner=learner, params=params, expert_binary_risk=a.binary_expert)
+               for al in algos for s in a.seeds]
     bar = tqdm(total=len(configs) * a.episodes * a.horizon, unit="step", disable=a.quiet, file=sys.stderr)
     for cfg in configs:
         bar.set_description(f"{cfg.algo} seed {cfg.seed}")

@@ -39,15 +39,21 @@ def risk_to_uncertainty(risk: float, scale: float = 1.0) -> float:
 
 
 class OracleExpert:
-    """Scripted expert over an environment with ``oracle() -> (action, risk in [0, 1])``."""
+    """Scripted expert over an environment with ``oracle() -> (action, risk in [0, 1])``.
 
-    def __init__(self, env, scale: float = 1.0):
-        self.env, self.scale = env, float(scale)
+    ``binary_risk=None`` (default): always answers, with the continuous uncertainty
+    :func:`risk_to_uncertainty`. ``binary_risk=r0``: the thesis's expert - it intervenes (action,
+    U = 0) only when the risk exceeds ``r0`` and otherwise gives nothing (None, inf)."""
+
+    def __init__(self, env, scale: float = 1.0, binary_risk: float | None = None):
+        self.env, self.scale, self.binary_risk = env, float(scale), binary_risk
 
     def act(self, obs: np.ndarray) -> tuple[object | None, float]:
         action, risk = self.env.unwrapped.oracle()
         if action is None:
             return None, math.inf
+        if self.binary_risk is not None:
+            return (action, 0.0) if risk > self.binary_risk else (None, math.inf)
         return action, risk_to_uncertainty(risk, self.scale)
 
 

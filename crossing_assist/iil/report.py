@@ -120,19 +120,21 @@ def figures(runs: list[RunSeries], out: Path) -> list[Path]:
     for env in envs:
         groups = {k: v for k, v in _groups(runs).items() if k[0] == env}
         for metric, title in METRICS:
-            fig, ax = plt.subplots(figsize=(7, 4))
-            for (_, algo), series in groups.items():
+            fig, ax = plt.subplots(figsize=(9, 4))
+            for k, ((_, algo), series) in enumerate(groups.items()):
+                color = plt.cm.tab20(k % 20)
+                style = "-" if algo in ORDER[:10] else "--"
                 n_ep = min(len(s.rows) for s in series)
                 vals = np.array([[r[metric] for r in s.rows[:n_ep]] for s in series], dtype=float)
                 x = np.arange(1, n_ep + 1)
                 m = vals.mean(0)
-                ax.plot(x, m, marker="o", ms=3, label=algo)
+                ax.plot(x, m, style, marker="o", ms=3, label=algo, color=color)
                 if len(series) > 1:
                     sd = vals.std(0, ddof=1)
-                    ax.fill_between(x, m - sd, m + sd, alpha=0.12)
+                    ax.fill_between(x, m - sd, m + sd, alpha=0.10, color=color)
             ax.set(xlabel="episode", ylabel=metric.replace("_", " "), title=f"{title} ({env})")
             ax.grid(alpha=0.3)
-            ax.legend(fontsize=7, ncol=2)
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
             fig.tight_layout()
             slug = env.split(" ")[0]
             path = Path(out) / f"fig_{slug}_{metric}.png"

@@ -45,6 +45,7 @@ class RunConfig:
     learner: LearnerConfig = field(default_factory=LearnerConfig)
     params: AlgoParams = field(default_factory=AlgoParams)
     expert_scale: float = 1.0
+    expert_binary_risk: float | None = None  # None: continuous confidence; r0: the thesis's 0/inf expert
 
     def folder(self, out: Path) -> Path:
         return Path(out) / self.env / self.algo / f"seed{self.seed}"
@@ -90,7 +91,7 @@ def run(cfg: RunConfig, out: Path, *, progress: Callable[[int], None] | None = N
     rng = np.random.default_rng(cfg.seed)
     data, rows = Aggregate(), []
     done = _resume(folder, setup, data, rng, rows)
-    expert = OracleExpert(env, cfg.expert_scale)
+    expert = OracleExpert(env, cfg.expert_scale, cfg.expert_binary_risk)
     for i in range(done + 1, cfg.episodes + 1):
         res = run_episode(env, expert, setup, i, cfg.horizon, rng, progress)
         row = {"episode": i, **res.metrics, **aggregate_and_learn(res, setup, data, i, rng)}

@@ -61,6 +61,7 @@ def train_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="crossing-train", description="Train a crossing policy (frozen backbone, cached features).")
     p.add_argument("--data", required=True, help="dataset folder (manifest.csv)")
     p.add_argument("--out", required=True, help="run folder, e.g. runs/lite0_spatial")
+    p.add_argument("--extra-data", action="append", default=[], help="another dataset folder whose train rows are added (repeatable)")
     p.add_argument("--backbone", default=d["backbone"])
     p.add_argument("--weights", default=d["weights"], help="imagenet | none | PATH to a state dict")
     p.add_argument("--head", default=d["head"], help="spatial | thesis")
@@ -98,7 +99,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         from .train import train
 
         cfg = TrainConfig(
-            data=a.data, out=a.out, backbone=a.backbone, weights=a.weights, head=a.head, actions=a.actions,
+            data=a.data, out=a.out, extra_data=tuple(a.extra_data), backbone=a.backbone, weights=a.weights, head=a.head, actions=a.actions,
             epochs=a.epochs, batch_size=a.batch_size, optimizer=a.optimizer, lr=a.lr,
             weight_decay=a.weight_decay, p=a.p, mirror=a.mirror, yaw=tuple(a.yaw), fov_deg=a.fov_deg,
             input_size=(224, 298) if a.four_three else a.input_size, unfreeze=a.unfreeze, balance=a.balance,
@@ -122,6 +123,7 @@ def eval_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output folder (default RUN/eval_SPLIT or BUNDLE/eval_SPLIT)")
     p.add_argument("--samples", type=int, default=1, help="MC dropout samples for checkpoints (1 = deterministic)")
     p.add_argument("--examples", type=int, default=12, help="frames on the example sheet")
+    p.add_argument("--tta-mirror", action="store_true", help="average each frame with its mirror image (checkpoints)")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--cache-dir", default=_DEFAULTS["cache_dir"])
     p.add_argument("--quiet", action="store_true")
@@ -139,7 +141,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         if bool(a.run) == bool(a.bundle):
             raise ConfigError("Invalid arguments: give exactly one of --run DIR and --bundle DIR")
         cfg = EvalConfig(run=a.run, bundle=a.bundle, data=a.data, split=a.split, out=a.out, samples=a.samples,
-                         examples=a.examples, threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
+                         examples=a.examples, tta_mirror=a.tta_mirror, threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
         out, m = evaluate(cfg)
         print(f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f}), "
               f"bin MAE {m['bin_mae']:.3f} -> {out / 'metrics.json'}")

@@ -25,6 +25,7 @@ class TrainConfig:
 
     data: str
     out: str
+    extra_data: tuple[str, ...] = ()    # more dataset folders whose train rows are added
     backbone: str = "efficientnet_lite0"
     weights: str = "imagenet"
     head: str = "spatial"

@@ -38,6 +38,7 @@ class EvalConfig:
     out: str | None = None
     samples: int = 1
     examples: int = 12
+    tta_mirror: bool = False
     threads: int = 2
     cache_dir: str = "runs/.cache"
     progress: bool = True
@@ -96,12 +97,16 @@ def _eval_checkpoint(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, 
     ck = load_checkpoint(path)
     c = policy.config
     start = int(c.get("frozen_blocks", len(policy.backbone.blocks)))
-    fs = compute_features(policy.backbone, start, part, tuple(c["input_size"]), make_variants(False),
+    fs = compute_features(policy.backbone, start, part, tuple(c["input_size"]), make_variants(cfg.tta_mirror),
                           float(c["fov_deg"]), Path(cfg.cache_dir), progress=cfg.progress, desc=f"features {cfg.split}")
     split = Split(torch.from_numpy(np.array(fs.feats)), fs.labels, fs.far_x)
     probs = predict_split(policy, split, start, samples=cfg.samples)
+    if cfg.tta_mirror:  # average each frame with its mirror image (actions mapped back)
+        space = get_space(policy.n_actions)
+        back = [space.mirror_action(a) for a in range(policy.n_actions)]
+        probs = 0.5 * (probs[0::2] + probs[1::2][:, back])
     info = {"source": "checkpoint", "checkpoint": str(path), "epoch": int(ck.get("epoch", 0)),
-            "samples": cfg.samples, "majority_from": "train" if "majority_action" in c else "eval labels",
+            "samples": cfg.samples, "tta_mirror": cfg.tta_mirror, "majority_from": "train" if "majority_action" in c else "eval labels",
             "backbone": c["backbone"], "head": c["head"]}
     return probs, info, policy
 

@@ -7,9 +7,12 @@ by ``1 / (1 - p)``), which exports to ONNX as ``RandomUniformLike`` and is never
 export or graph optimisation (``nn.Dropout`` is; see ``DESIGN.md``).
 
 Kinds
-    ``spatial`` (default): 1x1 conv + ReLU, mean over feature-map *rows only* (the horizontal
-    axis is the task), columns resampled to 12 (one per bin, whatever the input width), then
-    dropout -> linear -> ReLU -> dropout -> linear to the actions.
+    ``spatial`` (default): features pooled over *rows only* (mean and max; the horizontal axis
+    is the task), 1x1 conv + ReLU, a 3-column context conv + ReLU (trunk), then dropout and a
+    score per column, resampled to the 12 strips (+ a learned per-strip prior); ``unknown``
+    from the column-pooled features; multi-strip actions take the log-sum-exp of their strips.
+    ``spatial_mlp``: rows-only pooling, 1x1 conv + ReLU, columns resampled to 12, then
+    dropout -> linear -> ReLU -> dropout -> linear (not translation equivariant).
     ``thesis``: the thesis's head, 3x3x32 conv (ReLU) -> dropout -> 1x1x|A| conv -> ReLU ->
     global mean; the softmax is applied to these pooled scores by the loss / the consumer.
     ``thesis_fc``: the thesis's ResNet-50 head, global mean -> dropout -> fully connected.
@@ -23,7 +26,7 @@ from torch import nn
 
 from ..actions import N_BINS
 
-HEAD_KINDS = ("spatial", "columns", "thesis", "thesis_fc")
+HEAD_KINDS = ("spatial", "spatial_mlp", "thesis", "thesis_fc")
 
 
 class HeadError(ValueError):
@@ -78,10 +81,10 @@ class Head(nn.Module):
         return logits.reshape(samples, n, self.n_actions)
 
 
-class SpatialHead(Head):
-    """Keeps the horizontal axis: per-column features (12 columns) feed an MLP."""
+class SpatialMLPHead(Head):
+    """Keeps the horizontal axis: per-column features (resampled to 12 columns) feed an MLP."""
 
-    kind = "spatial"
+    kind = "spatial_mlp"
 
     def __init__(self, in_channels: int, n_actions: int, p: float = 0.5, width: int = 128,
                  hidden: int = 256, columns: int = N_BINS):
@@ -114,12 +117,12 @@ class SpatialHead(Head):
         return torch.stack(drops, -1)
 
 
-class ColumnHead(Head):
+class SpatialHead(Head):
     """Translation-equivariant localiser: a score per feature column (with +-1 column of
     context), resampled to the 12 strips; ``unknown`` scored from pooled features; an action
     covering several strips gets the log-sum-exp of their scores."""
 
-    kind = "columns"
+    kind = "spatial"
 
     def __init__(self, in_channels: int, n_actions: int, p: float = 0.5, width: int = 128):
         super().__init__(in_channels, n_actions, p)
@@ -140,11 +143,20 @@ class ColumnHead(Head):
         z = F.relu(self.reduce(pool_rows(features)))                      # N x W x w
         return F.relu(self.context(z))                                    # N x W x w
 
+    def strip_scores(self, z: torch.Tensor) -> torch.Tensor:
+        """Trunk output N x W x w -> a score per strip, N x 12."""
+        cols = self.score(z)                                              # N x 1 x w
+        return F.interpolate(cols.unsqueeze(2), size=(1, N_BINS), mode="bilinear",
+                             align_corners=False).flatten(1) + self.bias
+
+    def column_maps(self, features: torch.Tensor) -> torch.Tensor:
+        """Where the head sees the goal: the strip scores, N x A x 12 (the same for every action)."""
+        bins = self.strip_scores(self.trunk(features))
+        return bins.unsqueeze(1).expand(bins.shape[0], self.n_actions, N_BINS)
+
     def tail(self, z: torch.Tensor, mc: bool) -> torch.Tensor:
         z = mc_dropout(z, self.p, mc)
-        cols = self.score(z)                                              # N x 1 x w
-        bins = F.interpolate(cols.unsqueeze(2), size=(1, N_BINS), mode="bilinear",
-                             align_corners=False).flatten(1) + self.bias  # N x 12
+        bins = self.strip_scores(z)                                       # N x 12
         known = torch.logsumexp(bins.unsqueeze(1) + self.groups_mask, -1)  # N x (A - 1)
         unknown = self.unknown(z.mean(2))                                 # N x 1
         return torch.cat([unknown, known], 1)
@@ -191,7 +203,7 @@ class ThesisFCHead(Head):
         return torch.einsum("nchw,ac->nahw", features, self.fc.weight)
 
 
-_KINDS = {"spatial": SpatialHead, "columns": ColumnHead, "thesis": ThesisHead, "thesis_fc": ThesisFCHead}
+_KINDS = {"spatial": SpatialHead, "spatial_mlp": SpatialMLPHead, "thesis": ThesisHead, "thesis_fc": ThesisFCHead}
 
 
 def create_head(kind: str, in_channels: int, n_actions: int, *, p: float = 0.5) -> Head:

@@ -79,6 +79,13 @@ def _to_split(fs: FeatureSet, n_actions: int) -> Split:
     return Split(feats, get_space(n_actions).bins_to_actions(fs.labels), fs.far_x)
 
 
+def _concat(a: Split, b: Split) -> Split:
+    if a.feats.shape[1:] != b.feats.shape[1:]:
+        raise ConfigError(f"Invalid extra data: feature shapes differ ({tuple(a.feats.shape[1:])} vs {tuple(b.feats.shape[1:])})")
+    return Split(torch.cat([a.feats, b.feats]), np.concatenate([a.actions, b.actions]),
+                 np.concatenate([a.far_x, b.far_x]))
+
+
 def _targets(actions: torch.Tensor, n: int, smoothing: float) -> torch.Tensor:
     """Soft targets: 1 - s on the true action, s shared by its known neighbours (a +- 1)."""
     t = F.one_hot(actions, n).float()
@@ -221,11 +228,17 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     fs = lambda d, v, name: compute_features(policy.backbone, start, d, size, v, cfg.fov_deg, cache,  # noqa: E731
                                              progress=cfg.progress, desc=f"features {name}")
     tr = _to_split(fs(train_ds, variants, "train"), cfg.actions)
+    n_extra = 0
+    for extra in cfg.extra_data:  # cached per folder, so adding data never recomputes the main set
+        ex = read_manifest(extra).split("train")
+        if len(ex):
+            tr = _concat(tr, _to_split(fs(ex, variants, f"train {Path(extra).name}"), cfg.actions))
+            n_extra += len(ex)
     plain = make_variants(False)
     val = _to_split(fs(val_ds, plain, "val"), cfg.actions) if val_ds is not None else None
     sel = val if sel_ds is val_ds else (_to_split(fs(sel_ds, plain, "holdout"), cfg.actions) if sel_ds else None)
     majority = int(np.bincount(tr.actions, minlength=cfg.actions).argmax())
-    policy.config["counts"] = {"train": int(len(train_ds)), "train_samples": int(len(tr.actions)),
+    policy.config["counts"] = {"train": int(len(train_ds)), "extra_train": n_extra, "train_samples": int(len(tr.actions)),
                                "val": int(len(val_ds or ())), "holdout": int(len(sel_ds or ())) if cfg.holdout else 0}
     policy.config["majority_action"] = majority
     _train_mode(policy, start)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,7 +37,8 @@ SHARED_PTL = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "p
 
 @dataclass(frozen=True)
 class CrossingConfig:
-    """``photos``: a PTL folder, ``"auto"`` (../shared/data/ptl when present) or None (synthetic)."""
+    """``photos``: a PTL folder, ``"auto"`` ($CROSSING_PTL_DIR, else ../shared/data/ptl, when
+    present; otherwise synthetic frames) or None (synthetic)."""
 
     photos: str | None = "auto"
     n_photos: int = 48
@@ -53,7 +55,8 @@ class CrossingConfig:
 
 
 def _load_photos(cfg: CrossingConfig, rng: np.random.Generator) -> list[tuple[np.ndarray, float]]:
-    root = SHARED_PTL if cfg.photos == "auto" else Path(cfg.photos)
+    env_dir = os.environ.get("CROSSING_PTL_DIR")
+    root = (Path(env_dir) if env_dir else SHARED_PTL) if cfg.photos == "auto" else Path(cfg.photos)
     labels = root / "labels.csv"
     if not labels.is_file():
         if cfg.photos == "auto":
