@@ -231,6 +231,17 @@ def test_stalled_camera_triggers_the_stop_cue(run: dict) -> None:
     assert len(f["vibrations"]) >= 2  # at Start (nothing known yet) and at the freeze
 
 
+def test_screen_reader_sees_named_controls_and_a_live_status(run: dict) -> None:
+    """The accessibility tree (what TalkBack reads): a named Start button first after the
+    heading and the status line, a status live region, named gyroscope and self-test controls."""
+    aria = run["result"]["aria"]
+    lines = [line.strip() for line in aria.splitlines()]
+    assert lines.index('- button "Start"') < lines.index('- region "View for a sighted helper":'), aria
+    assert any(line.startswith("- status: Ready") for line in lines), aria
+    assert 'checkbox "Use the gyroscope for turns' in aria, aria
+    assert '- button "Check the decision logic"' in lines, aria
+
+
 def test_app_is_installable(run: dict) -> None:
     """Chromium's own installability check (what offers "Install app" on Android) finds nothing."""
     assert run["result"]["installability"] == [], run["result"]["installability"]

@@ -95,12 +95,12 @@ def test_crossing_with_real_ptl_photos(ptl_dir):
     assert env.true_bin() < x_to_bin(env.photos[env.photo][1])  # the far end moved left
 
 
-def test_binary_expert_answers_only_above_its_risk():
+def test_binary_expert_is_certain_only_above_its_risk():
     env = CrossingEnv(CrossingConfig(photos=None))
     env.reset(seed=0)
     binary = OracleExpert(env, binary_risk=0.5)
     env.y, env.s, env.phi = 0.0, 0.0, 0.0
-    assert binary.act(None) == (None, math.inf)          # safe: the thesis's expert stays silent
+    assert binary.act(None) == (env.oracle()[0], math.inf)  # safe: the thesis's expert does not care
     env.y = 1.2                                          # 80 % of the half width: it intervenes, certain
     action, u = binary.act(None)
     assert action == env.oracle()[0] and u == 0.0

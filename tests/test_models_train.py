@@ -108,9 +108,10 @@ def test_resume_after_kill_mid_epoch(tmp_path):
             "--batch-size", "2", "--unfreeze", "13", "--cache-dir", str(tmp_path / "cache"), "--quiet"]
     proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     last = out / "weights" / "last.pt"
-    deadline = time.time() + 120
+    deadline = time.time() + 600
     while time.time() < deadline and not (last.is_file() and load_checkpoint(last)["epoch"] >= 2):
         time.sleep(0.2)
+    assert last.is_file() and load_checkpoint(last)["epoch"] >= 2, "training too slow to reach epoch 2"
     time.sleep(0.2)  # inside the next epoch (40 steps through the whole unfrozen backbone)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
@@ -145,3 +146,14 @@ def test_cache_is_reused_and_deeper_entries_derive_from_shallower(tiny, tmp_path
     # a different variant list or input size is a different entry
     other = compute_features(bb, 6, ds, (64, 64), make_variants(False), 90.0, tmp_path / "c", progress=False)
     assert other.path != a.path and other.feats.shape[0] == len(ds)
+
+
+def test_holdout_sources_are_masked_from_one_cache(tiny, tmp_path):
+    out = train(_cfg(tiny, tmp_path / "run", epochs=1, holdout=("src:0",), select_on="holdout"))
+    counts = load_policy(out / "weights" / "best.pt").config["counts"]
+    # train rows 0..7, sources i % 3: src:0 holds rows 0, 3, 6 -> 5 rows x 2 (mirror) train, 3 held-out frames
+    assert counts["train_samples"] == 10 and counts["holdout_frames"] == 3
+    assert len(list((tmp_path / "cache").iterdir())) == 2   # train split + val, no extra entry
+    from crossing_assist.models.config import ConfigError
+    with pytest.raises(ConfigError, match="not among train sources"):
+        train(_cfg(tiny, tmp_path / "run2", holdout=("ptl:nobody",), select_on="holdout"))

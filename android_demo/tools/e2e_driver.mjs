@@ -133,6 +133,8 @@ async function main() {
     await page.goto(url);
     await waitFor(page, () => window.crossingAssist?.ready && window.crossingAssist.offline === 'ready', null, 60000, 'the app and its service worker');
 
+    // What a screen reader gets: the page's accessibility tree.
+    result.aria = await page.locator('body').ariaSnapshot();
     // What Chrome on a phone would say about installing the app ("Add to Home screen").
     const cdp = await context.newCDPSession(page);
     result.installability = (await cdp.send('Page.getInstallabilityErrors')).installabilityErrors;

@@ -56,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--expert-threshold", type=float, default=None, help="U_T where alpha = 1/2")
     r.add_argument("--learner-threshold", type=float, default=None, help="U_L where alpha = 1/2")
     r.add_argument("--binary-expert", type=float, default=None, metavar="RISK",
-                   help="the thesis's expert: act (U=0) only above this risk, else no action (U=inf)")
+                   help="the thesis's expert: U = 0 above this risk, U = inf below it (no continuous confidence)")
     r.add_argument("--threads", type=int, default=1, help="torch CPU threads (1 is fastest for this small net)")
     r.add_argument("--quiet", action="store_true")
     rep = sub.add_parser("report", help="Table 3 (markdown/CSV) and Figures 4.4-4.7 from run folders")

@@ -42,8 +42,9 @@ class OracleExpert:
     """Scripted expert over an environment with ``oracle() -> (action, risk in [0, 1])``.
 
     ``binary_risk=None`` (default): always answers, with the continuous uncertainty
-    :func:`risk_to_uncertainty`. ``binary_risk=r0``: the thesis's expert - it intervenes (action,
-    U = 0) only when the risk exceeds ``r0`` and otherwise gives nothing (None, inf)."""
+    :func:`risk_to_uncertainty`. ``binary_risk=r0``: the thesis's expert, whose uncertainty is
+    only 0 (risk above ``r0``: it wants to intervene) or inf (otherwise); its action is still
+    there when asked (the thesis's teacher labels every state it is asked about)."""
 
     def __init__(self, env, scale: float = 1.0, binary_risk: float | None = None):
         self.env, self.scale, self.binary_risk = env, float(scale), binary_risk
@@ -53,7 +54,7 @@ class OracleExpert:
         if action is None:
             return None, math.inf
         if self.binary_risk is not None:
-            return (action, 0.0) if risk > self.binary_risk else (None, math.inf)
+            return action, (0.0 if risk > self.binary_risk else math.inf)
         return action, risk_to_uncertainty(risk, self.scale)
 
 

@@ -84,7 +84,8 @@ def run(cfg: RunConfig, out: Path, *, progress: Callable[[int], None] | None = N
         if diff:
             raise RunError(f"{folder}: holds a run with a different {diff[0]} ({have.get(diff[0])!r} vs "
                            f"{want[diff[0]]!r}); use another --out or delete the folder")
-    meta = {"run": want, "strategies": setup.describe(), "versions": versions(),
+    meta = {"run": want, "params_resolved": asdict(cfg.params.resolved(env)), "strategies": setup.describe(),
+            "versions": versions(),
             "env": {"name": cfg.env, "source": getattr(env.unwrapped, "source", cfg.env)},
             "command": " ".join(sys.argv)}
     _atomic_write(meta_path, json.dumps(meta, indent=2, default=str))

@@ -51,27 +51,36 @@ class Split:
     far_x: np.ndarray            # (M,) float64
 
 
-def _split_sets(cfg: TrainConfig, ds: Dataset) -> tuple[Dataset, Dataset | None, Dataset | None]:
-    """(train, selection, val); the selection set is val, held-out train sources, or none."""
+def _check_sets(cfg: TrainConfig, ds: Dataset) -> tuple[Dataset, Dataset | None]:
+    """(the whole train split, val or None), checking holdout sources and the selection set."""
     train = ds.split("train")
     hold = set(cfg.holdout)
     unknown = hold - {r.source for r in train.rows}
     if unknown:
         raise ConfigError(f"Invalid holdout: {', '.join(sorted(unknown))} not among train sources "
                           f"({', '.join(train.sources())})")
-    sel = Dataset(ds.root, tuple(r for r in train.rows if r.source in hold)) if hold else None
-    train = Dataset(ds.root, tuple(r for r in train.rows if r.source not in hold))
+    if not any(r.source not in hold for r in train.rows):
+        raise ConfigError(f"Invalid data: {ds.root} has no train rows (after holding out {sorted(hold)})")
     val = ds.split("val")
     val = val if len(val) else None
-    if len(train) == 0:
-        raise ConfigError(f"Invalid data: {ds.root} has no train rows (after holding out {sorted(hold)})")
-    if cfg.select_on == "val":
-        if val is None:
-            raise ConfigError(f"Invalid select_on val: {ds.root} has no val rows; use --select-on last or --holdout")
-        sel = val
-    elif cfg.select_on == "last":
-        sel = sel if hold else None
-    return train, sel, val
+    if cfg.select_on == "val" and val is None:
+        raise ConfigError(f"Invalid select_on val: {ds.root} has no val rows; use --select-on last or --holdout")
+    return train, val
+
+
+def _take(split: Split, mask: np.ndarray) -> Split:
+    idx = torch.from_numpy(np.flatnonzero(mask))
+    return Split(split.feats[idx], split.actions[mask], split.far_x[mask])
+
+
+def _hold_out(full: Split, fs: FeatureSet, train_ds: Dataset, hold: tuple[str, ...]) -> tuple[Split, Split | None]:
+    """Split the cached train samples by source: (training samples, held-out identity frames).
+
+    The whole train split is cached once; holding sources out is a mask, never a new cache."""
+    if not hold:
+        return full, None
+    held_row = np.array([r.source in hold for r in train_ds.rows])[fs.row]
+    return _take(full, ~held_row), _take(full, held_row & (fs.variant == 0))
 
 
 def _to_split(fs: FeatureSet, n_actions: int) -> Split:
@@ -220,26 +229,27 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     elif last_path.is_file():
         raise ConfigError(f"Invalid --out: {out} already holds a run; pass --resume or pick a new --out")
     ds = read_manifest(cfg.data)
-    train_ds, sel_ds, val_ds = _split_sets(cfg, ds)
+    train_ds, val_ds = _check_sets(cfg, ds)
     policy, start = _build(cfg)
     size = tuple(policy.config["input_size"])
     variants = make_variants(cfg.mirror, cfg.yaw)
     cache = Path(cfg.cache_dir)
     fs = lambda d, v, name: compute_features(policy.backbone, start, d, size, v, cfg.fov_deg, cache,  # noqa: E731
                                              progress=cfg.progress, desc=f"features {name}")
-    tr = _to_split(fs(train_ds, variants, "train"), cfg.actions)
+    train_fs = fs(train_ds, variants, "train")
+    tr, held = _hold_out(_to_split(train_fs, cfg.actions), train_fs, train_ds, cfg.holdout)
     n_extra = 0
     for extra in cfg.extra_data:  # cached per folder, so adding data never recomputes the main set
         ex = read_manifest(extra).split("train")
         if len(ex):
             tr = _concat(tr, _to_split(fs(ex, variants, f"train {Path(extra).name}"), cfg.actions))
             n_extra += len(ex)
-    plain = make_variants(False)
-    val = _to_split(fs(val_ds, plain, "val"), cfg.actions) if val_ds is not None else None
-    sel = val if sel_ds is val_ds else (_to_split(fs(sel_ds, plain, "holdout"), cfg.actions) if sel_ds else None)
+    val = _to_split(fs(val_ds, make_variants(False), "val"), cfg.actions) if val_ds is not None else None
+    sel = val if cfg.select_on == "val" else held
     majority = int(np.bincount(tr.actions, minlength=cfg.actions).argmax())
-    policy.config["counts"] = {"train": int(len(train_ds)), "extra_train": n_extra, "train_samples": int(len(tr.actions)),
-                               "val": int(len(val_ds or ())), "holdout": int(len(sel_ds or ())) if cfg.holdout else 0}
+    policy.config["counts"] = {"train_split": int(len(train_ds)), "extra_train": n_extra,
+                               "train_samples": int(len(tr.actions)), "val": int(len(val_ds or ())),
+                               "holdout_frames": int(len(held.actions)) if held is not None else 0}
     policy.config["majority_action"] = majority
     _train_mode(policy, start)
     opt = _optimizer(cfg, policy)
