@@ -1,7 +1,8 @@
 """Reproduce docs/iil: the crossing benchmark (all 13 algorithms) and the Duckietown benchmark
 (the thesis's eight), then the reports. Resumable: re-running continues unfinished runs.
 
-    python benchmarks/iil_benchmark.py crossing            # .venv, ~15 min a seed on 2 busy cores
+    python benchmarks/iil_benchmark.py crossing            # .venv, ~12 min a seed on 2 busy cores
+    python benchmarks/iil_benchmark.py crossing-binary     # the thesis's 0/inf expert
     python benchmarks/iil_benchmark.py duckietown --seeds 1 2 3 --horizon 512
     python benchmarks/iil_benchmark.py report
 
@@ -29,7 +30,7 @@ def _cli(python: Path, *args: str) -> None:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("what", choices=["crossing", "duckietown", "report"])
+    p.add_argument("what", choices=["crossing", "crossing-binary", "duckietown", "report"])
     p.add_argument("--seeds", nargs="+", default=["1", "2", "3"])
     p.add_argument("--episodes", default="10")
     p.add_argument("--horizon", default=None, help="crossing: 128, duckietown: 256 (as run for docs/iil)")
@@ -38,6 +39,11 @@ def main() -> int:
         for s in a.seeds:  # seed by seed, so that a partial result holds complete seeds
             _cli(Path(sys.executable), "run", "--env", "crossing", "--algo", "all", "--episodes", a.episodes,
                  "--horizon", a.horizon or "128", "--lr", "0.01", "--seeds", s, "--out", str(RUNS / "crossing"))
+    elif a.what == "crossing-binary":  # the thesis's 0/inf expert, UPMS family against DAgger / HG-DAgger
+        for s in a.seeds:
+            _cli(Path(sys.executable), "run", "--env", "crossing", "--algo", "dagger,upms,upms-ne,upms-sl,upms-ne-sl,hg-dagger",
+                 "--episodes", a.episodes, "--horizon", a.horizon or "128", "--lr", "0.01", "--binary-expert", "0.5",
+                 "--seeds", s, "--out", str(RUNS / "crossing-binary"))
     elif a.what == "duckietown":
         if not DT_PY.exists():
             print("error: .venv-duckietown is missing; see docs/readme_iil.md", file=sys.stderr)
@@ -47,7 +53,7 @@ def main() -> int:
             _cli(DT_PY, "run", "--env", "duckietown", "--algo", "thesis", "--episodes", a.episodes, "--horizon", h,
                  "--epochs", "2", "--seeds", s, "--out", str(RUNS / f"duckietown-h{h}"))
     else:
-        for name in ("crossing", "duckietown-h256"):
+        for name in ("crossing", "crossing-binary", "duckietown-h256"):
             if (RUNS / name).exists():
                 _cli(Path(sys.executable), "report", str(RUNS / name), "--out", str(REPO / "docs" / "iil" / name))
     return 0

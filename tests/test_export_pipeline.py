@@ -13,7 +13,7 @@ import torch
 from crossing_assist.bundle import BundleError, embedded_meta, read_bundle
 from crossing_assist.data_tools.images import save_rgb
 from crossing_assist.data_tools.manifest import Row, write_manifest
-from crossing_assist.export.evaluate import open_session, predict_bundle
+from crossing_assist.export.evaluate import bundle_conformal_report, open_session, predict_bundle
 from crossing_assist.export.exporter import ExportConfig, ExportError, export_bundle
 from crossing_assist.models.backbones import create_backbone
 from crossing_assist.models.checkpoint import save_checkpoint
@@ -202,3 +202,16 @@ def test_cli_flags_cover_every_config_field():
     for f in fields(ExportConfig):
         if f.name not in ("run", "out"):
             assert getattr(args, f.name) == f.default, f.name
+
+
+def test_bundle_conformal_report_uses_the_bundles_threshold(work):
+    root, _ = work
+    b = read_bundle(root / "bundle")
+    probs = np.full((4, N_ACTIONS), 1 / N_ACTIONS, np.float32)
+    probs[:, 1] += 0.3
+    probs[:, 2] -= 0.3
+    rep = bundle_conformal_report(root / "bundle", probs, np.array([1, 2, 1, 0]))
+    assert rep["target_coverage"] == 0.9 and rep["calibration_frames"] == 20
+    assert rep["threshold"] == b.calibration.conformal.threshold
+    in_set = probs >= b.calibration.conformal.threshold
+    assert rep["coverage"] == pytest.approx(np.mean([in_set[0, 1], in_set[1, 2], in_set[2, 1], in_set[3, 0]]))

@@ -52,3 +52,16 @@ def test_duckietown_unavailable_is_one_line(tmp_path):
     r = _run("run", "--env", "duckietown", "--algo", "dagger", "--out", tmp_path / "o", "--quiet")
     assert r.returncode == 2 and r.stderr.startswith("error: Duckietown is not available here")
     assert not (tmp_path / "o").exists()
+
+
+def test_cli_defaults_match_the_config_dataclasses():
+    from crossing_assist.iil.cli import build_parser
+    from crossing_assist.iil.config import LearnerConfig
+    from crossing_assist.iil.runner import RunConfig
+
+    a = build_parser().parse_args(["run", "--env", "toy", "--algo", "dagger", "--out", "x"])
+    run, learner = RunConfig(env="toy", algo="dagger", seed=1), LearnerConfig()
+    assert (a.episodes, a.horizon) == (run.episodes, run.horizon) == (10, 512)
+    assert (a.lr, a.epochs, a.mc_samples, a.ensemble) == (learner.lr, learner.epochs, learner.mc_samples,
+                                                          learner.ensemble)
+    assert a.lr == 1e-3  # the thesis's AdaGrad learning rate
