@@ -3,7 +3,8 @@
 
     python benchmarks/iil_benchmark.py crossing            # .venv, ~12 min a seed on 2 busy cores
     python benchmarks/iil_benchmark.py crossing-binary     # the thesis's 0/inf expert
-    python benchmarks/iil_benchmark.py duckietown --seeds 1 2 3 --horizon 512
+    python benchmarks/iil_benchmark.py duckietown                     # as run: 3 seeds x 10 x 256 steps
+    python benchmarks/iil_benchmark.py duckietown-peers --seeds 1     # as run: 1 seed
     python benchmarks/iil_benchmark.py report
 
 Duckietown runs under .venv-duckietown (see docs/readme_iil.md).
@@ -30,7 +31,7 @@ def _cli(python: Path, *args: str) -> None:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("what", choices=["crossing", "crossing-binary", "duckietown", "report"])
+    p.add_argument("what", choices=["crossing", "crossing-binary", "duckietown", "duckietown-peers", "report"])
     p.add_argument("--seeds", nargs="+", default=["1", "2", "3"])
     p.add_argument("--episodes", default="10")
     p.add_argument("--horizon", default=None, help="crossing: 128, duckietown: 256 (as run for docs/iil)")
@@ -52,10 +53,16 @@ def main() -> int:
         for s in a.seeds:
             _cli(DT_PY, "run", "--env", "duckietown", "--algo", "thesis", "--episodes", a.episodes, "--horizon", h,
                  "--epochs", "2", "--seeds", s, "--out", str(RUNS / f"duckietown-h{h}"))
+    elif a.what == "duckietown-peers":  # Forward Training, SMILe and the three peers, as affordable
+        for algo in ("hg-dagger", "smile", "forward", "thrifty-dagger", "ensemble-dagger"):
+            _cli(DT_PY, "run", "--env", "duckietown", "--algo", algo, "--episodes", a.episodes, "--horizon",
+                 a.horizon or "256", "--epochs", "2", "--seeds", *a.seeds, "--out", str(RUNS / "duckietown-peers-h256"))
     else:
-        for name in ("crossing", "crossing-binary", "duckietown-h256"):
-            if (RUNS / name).exists():
-                _cli(Path(sys.executable), "report", str(RUNS / name), "--out", str(REPO / "docs" / "iil" / name))
+        names = {"crossing": "crossing", "crossing-binary": "crossing-binary", "duckietown-h256": "duckietown",
+                 "duckietown-peers-h256": "duckietown-peers"}
+        for run_name, doc_name in names.items():
+            if (RUNS / run_name).exists():
+                _cli(Path(sys.executable), "report", str(RUNS / run_name), "--out", str(REPO / "docs" / "iil" / doc_name))
     return 0
 
 

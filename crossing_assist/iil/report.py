@@ -131,7 +131,8 @@ def figures(runs: list[RunSeries], out: Path) -> list[Path]:
                 ax.plot(x, m, style, marker="o", ms=3, label=algo, color=color)
                 if len(series) > 1:
                     sd = vals.std(0, ddof=1)
-                    ax.fill_between(x, m - sd, m + sd, alpha=0.10, color=color)
+                    lo = m - sd if metric == "reward" else np.maximum(m - sd, 0.0)  # counts are >= 0
+                    ax.fill_between(x, lo, m + sd, alpha=0.10, color=color)
             ax.set(xlabel="episode", ylabel=metric.replace("_", " "), title=f"{title} ({env})")
             ax.grid(alpha=0.3)
             ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
