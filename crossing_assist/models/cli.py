@@ -124,7 +124,7 @@ def eval_parser() -> argparse.ArgumentParser:
     p.add_argument("--samples", type=int, default=1, help="MC dropout samples for checkpoints (1 = deterministic)")
     p.add_argument("--examples", type=int, default=12, help="frames on the example sheet")
     p.add_argument("--tta-mirror", action="store_true", help="average each frame with its mirror image (checkpoints)")
-    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--threads", type=int, default=1)
     p.add_argument("--cache-dir", default=_DEFAULTS["cache_dir"])
     p.add_argument("--quiet", action="store_true")
     return p

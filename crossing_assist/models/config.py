@@ -47,7 +47,7 @@ class TrainConfig:
     select_on: str = "val"              # val | holdout | last: which set picks best.pt
     holdout: tuple[str, ...] = ()       # train sources held out for model selection
     seed: int = 0
-    threads: int = 2
+    threads: int = 1                    # torch threads; 1 is fastest on a busy shared CPU
     cache_dir: str = "runs/.cache"
     progress: bool = True
 
