@@ -27,8 +27,10 @@ def tiny_run(tmp_path_factory):
 
 def test_eval_writes_metrics_and_plots(tiny_run):
     data, run, root = tiny_run
+    entries = sorted((root / "cache").iterdir())
     out, m = evaluate(EvalConfig(data=str(data), run=str(run), examples=4, cache_dir=str(root / "cache"),
                                  progress=False))
+    assert sorted((root / "cache").iterdir()) == entries   # val features reused from training
     saved = json.loads((out / "metrics.json").read_text())
     for key in ("accuracy", "bin_mae", "bin_mae_ci95", "majority_accuracy", "balanced_accuracy", "top3_accuracy",
                 "far_x_error", "nll", "ece", "confusion", "reliability"):

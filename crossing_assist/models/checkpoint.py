@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -85,6 +86,8 @@ def load_policy(path: str | os.PathLike) -> Policy:
     try:
         policy = Policy.from_config(data["config"])
         policy.load_state_dict(data["state_dict"])
+        if data["config"].get("weights_source"):  # the weights are those the run started from
+            policy.backbone.facts = replace(policy.backbone.facts, weights_source=str(data["config"]["weights_source"]))
     except (KeyError, ValueError, RuntimeError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise CheckpointError(f"{path}: checkpoint does not fit its config: {first}") from None
