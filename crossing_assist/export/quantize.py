@@ -1,7 +1,8 @@
 """int8: onnxruntime static QDQ quantisation of the convolutions only.
 
-Only ``Conv`` nodes are quantised (weights per channel, activations per tensor, MinMax
-calibration on real frames). The resize/normalise front, the head's fully connected layers,
+Only ``Conv`` nodes are quantised (weights per channel, activations per tensor, ranges from
+the 99.99th percentile of the activations on real frames: on the default model MinMax ranges
+cost 1.7 accuracy points on PTL val's held-out half, the percentile 0.3). The resize/normalise front, the head's fully connected layers,
 the random masks and the softmax/log tail stay float32: quantising the tail made mutual
 information negative in a trial, and it is a negligible share of the compute.
 """
@@ -16,6 +17,8 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 
 from crossing_assist.bundle import INPUT_NAME
+
+PERCENTILE = 99.99
 
 
 class _Frames:
@@ -40,7 +43,8 @@ def quantize_convs(model: Any, frames: Sequence[np.ndarray], *, batch: int = 8) 
     The metadata of ``model`` is carried over.
     """
     import onnx
-    from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+    from onnxruntime.quantization import (CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType,
+                                          quantize_static)
 
     if len(frames) == 0:
         raise ValueError("int8 quantisation needs calibration frames; pass --calib-data")
@@ -59,7 +63,8 @@ def quantize_convs(model: Any, frames: Sequence[np.ndarray], *, batch: int = 8) 
             str(src), str(dst), Reader(frames, batch),
             quant_format=QuantFormat.QDQ, op_types_to_quantize=["Conv"], per_channel=True,
             activation_type=QuantType.QInt8, weight_type=QuantType.QInt8,
-            extra_options={"ActivationSymmetric": False, "WeightSymmetric": True},
+            calibrate_method=CalibrationMethod.Percentile,
+            extra_options={"ActivationSymmetric": False, "WeightSymmetric": True, "CalibPercentile": PERCENTILE},
         )
         out = onnx.load_model(str(dst))
     del out.metadata_props[:]
