@@ -9,6 +9,8 @@ information negative in a trial, and it is a negligible share of the compute.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import logging
 import tempfile
 from pathlib import Path
@@ -52,6 +54,10 @@ def quantize_convs(model: Any, frames: Sequence[np.ndarray], *, batch: int = 8) 
     if len(shapes) != 1:
         frames = [f for f in frames if np.shape(f) == np.shape(frames[0])]
 
+    # The percentile calibrator stacks all batches: they must have one size.
+    batch = min(batch, len(frames))
+    frames = frames[: len(frames) // batch * batch]
+
     class Reader(_Frames, CalibrationDataReader):
         pass
 
@@ -59,13 +65,14 @@ def quantize_convs(model: Any, frames: Sequence[np.ndarray], *, batch: int = 8) 
     with tempfile.TemporaryDirectory(prefix="crossing-int8-") as tmp:
         src, dst = Path(tmp) / "fp32.onnx", Path(tmp) / "int8.onnx"
         onnx.save_model(model, str(src))
-        quantize_static(
-            str(src), str(dst), Reader(frames, batch),
-            quant_format=QuantFormat.QDQ, op_types_to_quantize=["Conv"], per_channel=True,
-            activation_type=QuantType.QInt8, weight_type=QuantType.QInt8,
-            calibrate_method=CalibrationMethod.Percentile,
-            extra_options={"ActivationSymmetric": False, "WeightSymmetric": True, "CalibPercentile": PERCENTILE},
-        )
+        with contextlib.redirect_stdout(io.StringIO()):  # the calibrator prints progress to stdout
+            quantize_static(
+                str(src), str(dst), Reader(frames, batch),
+                quant_format=QuantFormat.QDQ, op_types_to_quantize=["Conv"], per_channel=True,
+                activation_type=QuantType.QInt8, weight_type=QuantType.QInt8,
+                calibrate_method=CalibrationMethod.Percentile,
+                extra_options={"ActivationSymmetric": False, "WeightSymmetric": True, "CalibPercentile": PERCENTILE},
+            )
         out = onnx.load_model(str(dst))
     del out.metadata_props[:]
     for p in model.metadata_props:
