@@ -7,7 +7,7 @@
     python benchmarks/iil_benchmark.py duckietown-peers --seeds 1     # as run: 1 seed
     python benchmarks/iil_benchmark.py report
 
-Duckietown runs under .venv-duckietown (see docs/readme_iil.md).
+Duckietown runs under .venv-duckietown (see docs/iil.md).
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ def main() -> int:
                  "--seeds", s, "--out", str(RUNS / "crossing-binary"))
     elif a.what == "duckietown":
         if not DT_PY.exists():
-            print("error: .venv-duckietown is missing; see docs/readme_iil.md", file=sys.stderr)
+            print("error: .venv-duckietown is missing; see docs/iil.md", file=sys.stderr)
             return 2
         h = a.horizon or "256"
         for s in a.seeds:

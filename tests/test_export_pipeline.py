@@ -97,7 +97,7 @@ def test_predict_bundle_is_random_and_well_formed(work):
     np.testing.assert_allclose(a["probs"].sum(1), 1, atol=1e-5)
     assert np.abs(a["probs"] - b["probs"]).max() > 1e-5 and (a["variance"] > 0).any()
     # onnxruntime seeds unseeded random ops identically in every new session: a fresh session
-    # replays the same masks (documented in docs/readme_export.md).
+    # replays the same masks (documented in docs/export.md).
     np.testing.assert_array_equal(predict_bundle(root / "bundle", images)["probs"], a["probs"])
     with pytest.raises(ValueError, match="image 0"):
         predict_bundle(root / "bundle", [np.zeros((8, 8), np.uint8)])
@@ -215,3 +215,22 @@ def test_bundle_conformal_report_uses_the_bundles_threshold(work):
     assert rep["threshold"] == b.calibration.conformal.threshold
     in_set = probs >= b.calibration.conformal.threshold
     assert rep["coverage"] == pytest.approx(np.mean([in_set[0, 1], in_set[1, 2], in_set[2, 1], in_set[3, 0]]))
+
+
+def test_crossing_eval_on_a_bundle_reports_metrics_and_coverage(work, tmp_path):
+    """What a user runs to check what they ship: crossing-eval --bundle, through onnxruntime."""
+    root, _ = work
+    out = tmp_path / "eval"
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(root / "bundle"),
+                        "--data", str(root / "data"), "--split", "val", "--out", str(out), "--quiet"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "conformal sets: coverage" in r.stdout
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["source"] == "bundle" and m["n"] == 30
+    b = read_bundle(root / "bundle")
+    c = m["conformal"]
+    assert c["n"] == 30 and c["threshold"] == b.calibration.conformal.threshold and c["target_coverage"] == 0.9
+    assert 0.0 <= c["coverage"] <= 1.0 and sum(c["size_hist"]) == 30
+    for name in ("confusion_matrix.png", "reliability.png"):
+        assert (out / name).stat().st_size > 0

@@ -145,6 +145,10 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         out, m = evaluate(cfg)
         print(f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f}), "
               f"bin MAE {m['bin_mae']:.3f} -> {out / 'metrics.json'}")
+        if "conformal" in m:
+            c = m["conformal"]
+            print(f"conformal sets: coverage {c['coverage']:.3f} (target {c['target_coverage']:.2f}), "
+                  f"mean size {c['mean_size']:.2f} actions, empty {c['empty']:.3f}")
         return 0
 
     return _run(go)

@@ -8,6 +8,8 @@ map of the predicted action: the thesis's Figures 3.4-3.6).
 
 from __future__ import annotations
 
+from typing import Any
+
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -111,7 +113,7 @@ def _eval_checkpoint(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, 
     return probs, info, policy
 
 
-def _eval_bundle(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, int]:
+def _eval_bundle(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, Any]:
     try:
         from ..export.evaluate import predict_bundle
     except ImportError:
@@ -122,9 +124,17 @@ def _eval_bundle(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, int]
     bundle = read_bundle(cfg.bundle)
     images = [load_rgb(part.image_path(r)) for r in part.rows]
     out = predict_bundle(cfg.bundle, images, progress=cfg.progress)
-    info = {"source": "bundle", "bundle": str(cfg.bundle), "majority_from": "eval labels",
-            "samples": int(bundle.mc.samples)}
-    return np.asarray(out["probs"], dtype=np.float64), info, int(bundle.actions.n)
+    majority = bundle.training.get("majority_action")
+    info = {"source": "bundle", "bundle": str(cfg.bundle), "samples": int(bundle.mc.samples),
+            "majority_from": "train" if majority is not None else "eval labels"}
+    return np.asarray(out["probs"], dtype=np.float64), info, bundle
+
+
+def _bundle_conformal(bundle, probs: np.ndarray, labels: np.ndarray) -> dict:
+    """Empirical coverage and set sizes of the bundle's conformal sets on these frames."""
+    from ..export.evaluate import bundle_conformal_report
+
+    return bundle_conformal_report(bundle, probs, labels)
 
 
 def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
@@ -139,11 +149,13 @@ def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
         n_actions, majority = policy.n_actions, policy.config.get("majority_action")
         default_out = _checkpoint_path(cfg.run).parent.parent / f"eval_{cfg.split}"
     else:
-        probs, info, n_actions = _eval_bundle(cfg, part)
-        majority = None
+        probs, info, bundle = _eval_bundle(cfg, part)
+        n_actions, majority = int(bundle.actions.n), bundle.training.get("majority_action")
         default_out = Path(cfg.bundle) / f"eval_{cfg.split}"
     labels = get_space(n_actions).bins_to_actions(part.labels())
     m = compute_metrics(probs, labels, n_actions, part.far_x(), majority=majority)
+    if cfg.bundle is not None:
+        m["conformal"] = _bundle_conformal(bundle, probs, labels)
     m.update({"split": cfg.split, "data": str(cfg.data), **info})
     out = Path(cfg.out) if cfg.out else default_out
     out.mkdir(parents=True, exist_ok=True)

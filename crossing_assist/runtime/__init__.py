@@ -2,7 +2,7 @@
 
 numpy + onnxruntime + opencv (+ soundfile); sounddevice is imported only when a live stream
 opens. Never imports torch or the ``models``/``export``/``iil`` subpackages. See
-docs/readme_runtime.md for the decision logic's full specification.
+docs/runtime.md for the decision logic's full specification.
 """
 
 from crossing_assist.runtime.audio import AudioDeviceError, LiveAudio, write_wav

@@ -3,7 +3,7 @@
 State: ``b`` (13,) float64, a probability vector; ``b[0]`` = unknown (goal not in view), ``b[k]``
 = goal in strip ``k`` (1..12). Each step of ``dt`` seconds first *predicts* (yaw shift, spatial
 diffusion, forgetting), then *updates* with the frame's evidence. Every formula is written
-out in docs/readme_runtime.md ("Decision logic"); the phone app reproduces it from
+out in docs/runtime.md ("Decision logic"); the phone app reproduces it from
 android_demo/test_vectors.json, so change nothing here without regenerating the vectors.
 
 * yaw shift: the user turned right by ``psi = yaw_rate * dt`` degrees, so every bin centre

@@ -1,6 +1,6 @@
 """The decision logic: filter + gate + freshness, one deterministic step at a time.
 
-:class:`Decider` is the whole state machine the phone app ports (docs/readme_runtime.md,
+:class:`Decider` is the whole state machine the phone app ports (docs/runtime.md,
 "Decision logic"; vectors in android_demo/test_vectors.json). Its inputs are the model outputs
 of a frame (an :class:`Observation`), the time ``t`` in seconds and the yaw rate in degrees per
 second (positive = the user turns right); its output is a :class:`Decision`. Its only state is
@@ -153,7 +153,7 @@ class Decider:
     def step(self, t: float, obs: Observation | None, yaw_rate_dps: float = 0.0) -> Decision:
         """Advance to time ``t`` (s) with this frame's outputs (``None`` = no new frame: a tick).
 
-        The numbered steps are those of docs/readme_runtime.md ("Decision logic")."""
+        The numbered steps are those of docs/runtime.md ("Decision logic")."""
         cfg = self.cfg
         dt = 0.0 if self.t_prev is None else max(0.0, t - self.t_prev)  # 1
         self.t_prev = t if self.t_prev is None else max(t, self.t_prev)

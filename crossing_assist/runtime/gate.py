@@ -30,7 +30,7 @@ GATE_STOP = "stop"
 
 @dataclass(frozen=True)
 class GateConfig:
-    """Gate parameters (see module docstring and docs/readme_runtime.md).
+    """Gate parameters (see module docstring and docs/runtime.md).
 
     ``alpha_min``: below it for both policies the decision is impossible (stop); also the
     learner coefficient at which the hold is refreshed. ``hold_time_s`` / ``hold_turn_deg``:

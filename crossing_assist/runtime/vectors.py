@@ -150,7 +150,7 @@ def build_vectors(seed: int = 20240601) -> dict:
         "version": VERSION,
         "generator": "python -m crossing_assist.runtime.vectors",
         "tolerance": 1e-9,
-        "spec": "docs/readme_runtime.md (Decision logic)",
+        "spec": "docs/runtime.md (Decision logic)",
         "scenarios": scenarios,
         "beacon": {
             "config": dataclasses.asdict(bcfg),

@@ -1,6 +1,6 @@
 // The decision logic shared with the Python runtime, ported line by line from
 // crossing_assist/runtime/belief.py (temporal filter), gate.py (UPMS gate) and decide.py
-// (freshness / watchdog and the Decider state machine). docs/readme_runtime.md
+// (freshness / watchdog and the Decider state machine). docs/runtime.md
 // ("Decision logic") states every formula; android_demo/test_vectors.json (generated from the
 // Python runtime) is reproduced by test/logic.test.mjs in Node and by the browser test.
 //

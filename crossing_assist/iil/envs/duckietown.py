@@ -2,7 +2,7 @@
 
 Needs ``duckietown-gym-daffy==6.1.34`` with ``pyglet>=1.5,<1.6`` and ``numpy<1.24`` (its
 dynamics build a ragged array), so it lives in its own virtualenv (``.venv-duckietown``; see
-docs/readme_iil.md), never in the project's ``.venv``. Rendering uses pyglet's headless EGL
+docs/iil.md), never in the project's ``.venv``. Rendering uses pyglet's headless EGL
 mode (Mesa works, no X server).
 
 * Observation: the 160 x 120 camera frame, resized to ``obs_size`` (default 80 x 60) uint8 RGB.
@@ -63,7 +63,7 @@ class DuckietownLaneEnv(gym.Env):
                  ref_velocity: float = 0.7, following_distance: float = 0.24):
         ok, why = duckietown_available()
         if not ok:
-            raise RuntimeError(f"Duckietown is not available here: {why}; see docs/readme_iil.md")
+            raise RuntimeError(f"Duckietown is not available here: {why}; see docs/iil.md")
         _preload_torch_compiler()
         from gym_duckietown.envs import DuckietownEnv  # noqa: PLC0415
 
