@@ -10,8 +10,6 @@ and :func:`augment.yaw`; this command is for inspecting them or for tools that c
 
 from __future__ import annotations
 
-import os
-import shutil
 from dataclasses import dataclass, replace
 from pathlib import Path, PurePosixPath
 
@@ -20,7 +18,14 @@ from tqdm import tqdm
 from crossing_assist.actions import DEFAULT_FOV_DEG
 from crossing_assist.data_tools.augment import OUT_OF_FRAME_MODES, mirror, yaw
 from crossing_assist.data_tools.images import load_rgb, save_rgb
-from crossing_assist.data_tools.manifest import SPLITS, ManifestError, Row, read_manifest, write_manifest
+from crossing_assist.data_tools.manifest import (
+    SPLITS,
+    ManifestError,
+    Row,
+    read_manifest,
+    write_manifest,
+)
+from crossing_assist.fileio import link_or_copy
 
 
 @dataclass(frozen=True)
@@ -36,14 +41,6 @@ class AugmentConfig:
     progress: bool = True
 
 
-def _link_or_copy(src: Path, dst: Path) -> None:
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    if dst.exists():
-        dst.unlink()
-    try:
-        os.link(src, dst)
-    except OSError:
-        shutil.copy2(src, dst)
 
 
 def _out_name(row: Row, index: int, tag: str) -> str:
@@ -67,7 +64,7 @@ def augment_dataset(cfg: AugmentConfig) -> Path:
     rows: list[Row] = []
     for i, row in enumerate(tqdm(ds.rows, desc="augment", unit="img", disable=not cfg.progress)):
         orig = _out_name(row, i, "")
-        _link_or_copy(ds.image_path(row), out / orig)
+        link_or_copy(ds.image_path(row), out / orig)
         rows.append(replace(row, image=orig))
         if row.split not in cfg.splits:
             continue

@@ -23,7 +23,6 @@ import csv
 import io
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 from typing import Iterable
@@ -31,6 +30,7 @@ from typing import Iterable
 import numpy as np
 
 from crossing_assist.actions import N_BINS, UNKNOWN, format_label, parse_label, x_to_bin
+from crossing_assist.fileio import atomic_write_bytes, atomic_write_text  # noqa: F401 (re-exported)
 
 MANIFEST_NAME = "manifest.csv"
 COLUMNS = ("image", "label", "far_x", "source", "split", "votes", "flags")
@@ -245,21 +245,3 @@ def write_manifest(dataset_dir: str | os.PathLike, rows: Iterable[Row]) -> Path:
     return path
 
 
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` via a temporary file in the same folder and ``os.replace``."""
-    atomic_write_bytes(path, text.encode("utf-8"))
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary file in the same folder and ``os.replace``."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.chmod(tmp, 0o644)   # mkstemp creates 0600; data files are meant to be shared
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import csv
 import os
-import shutil
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
@@ -25,6 +24,7 @@ from tqdm import tqdm
 
 from crossing_assist.actions import parse_label
 from crossing_assist.data_tools.manifest import SPLITS, Row, check_row, write_manifest
+from crossing_assist.fileio import link_or_copy
 
 REQUIRED = ("image", "split", "photographer", "far_x", "bin12")
 IMAGE_MODES = ("copy", "reference")
@@ -102,14 +102,6 @@ def read_ptl_labels(ptl_dir: Path) -> list[Row]:
     return rows
 
 
-def _place(src: Path, dst: Path) -> None:
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    if dst.exists():
-        dst.unlink()
-    try:
-        os.link(src, dst)
-    except OSError:
-        shutil.copy2(src, dst)
 
 
 def import_ptl(cfg: PTLImportConfig) -> Path:
@@ -128,7 +120,7 @@ def import_ptl(cfg: PTLImportConfig) -> Path:
         if cfg.images == "copy":
             rel = PurePosixPath(row.image)
             rel = rel if rel.parts[0] == "images" else PurePosixPath("images", rel)
-            _place(src, out / rel)
+            link_or_copy(src, out / rel)
         else:
             rel = PurePosixPath(Path(os.path.relpath(src, out)).as_posix())
         placed.append(Row(str(rel), row.label, row.far_x, row.source, row.split, row.votes, row.flags))

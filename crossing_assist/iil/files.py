@@ -5,8 +5,9 @@ from __future__ import annotations
 import csv
 import io
 import math
-import os
 from pathlib import Path
+
+from ..fileio import atomic_write_text
 
 
 class RunError(ValueError):
@@ -14,9 +15,7 @@ class RunError(ValueError):
 
 
 def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    atomic_write_text(path, text)
 
 
 def _write_csv(path: Path, rows: list[dict]) -> None:

@@ -16,7 +16,6 @@ uninterrupted run (same rng streams).
 from __future__ import annotations
 
 import json
-import os
 import platform
 import sys
 from dataclasses import asdict, dataclass, field
@@ -26,6 +25,7 @@ from typing import Callable
 import numpy as np
 import torch
 
+from ..fileio import atomic_path
 from .algorithms import AlgoParams, create
 from .data import Aggregate
 from .envs import make_env
@@ -106,10 +106,9 @@ def run(cfg: RunConfig, out: Path, *, progress: Callable[[int], None] | None = N
 
 
 def _save_state(path: Path, setup, rng: np.random.Generator, episode: int) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save({"episode": episode, "learner": setup.learner.state_dict(),
-                "rng": json.dumps(rng.bit_generator.state)}, tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        torch.save({"episode": episode, "learner": setup.learner.state_dict(),
+                    "rng": json.dumps(rng.bit_generator.state)}, tmp)
 
 
 def _resume(folder: Path, setup, data: Aggregate, rng: np.random.Generator, rows: list[dict]) -> int:

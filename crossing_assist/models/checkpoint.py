@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import torch
 
+from ..fileio import atomic_path
 from .policy import Policy
 
 FORMAT = "crossing_assist.policy"
@@ -46,17 +46,8 @@ def save_checkpoint(path: str | os.PathLike, policy: Policy, extra: dict | None 
             "metrics": _plain(extra.pop("metrics", {}), "metrics"),
             "epoch": int(extra.pop("epoch", 0))}
     data.update(extra)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            torch.save(data, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path, mode=0o600, fsync=True) as tmp:
+        torch.save(data, tmp)
     return path
 
 

@@ -5,12 +5,12 @@ Every figure is written atomically (temp file + ``os.replace``) with matplotlib'
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
 from ..actions import N_BINS, get_space
+from ..fileio import atomic_path
 
 
 def _plt():
@@ -23,10 +23,9 @@ def _plt():
 
 
 def _save(fig, path: Path) -> Path:
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    fig.savefig(tmp, dpi=100)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100)
     _plt().close(fig)
-    os.replace(tmp, path)
     return path
 
 

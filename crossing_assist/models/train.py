@@ -16,7 +16,6 @@ from __future__ import annotations
 import csv
 import io
 import math
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +28,7 @@ from tqdm import tqdm
 
 from ..actions import UNKNOWN, get_space
 from ..data_tools.manifest import Dataset, atomic_write_text, read_manifest
+from ..fileio import atomic_path
 from .backbones import create_backbone
 from .cache import FeatureSet, compute_features
 from .checkpoint import load_checkpoint, save_checkpoint
@@ -342,7 +342,6 @@ def _plot_results(out: Path) -> None:
     b.set(xlabel="epoch", ylabel="accuracy", title="accuracy")
     b.legend()
     fig.tight_layout()
-    tmp = out / ".results.png.tmp.png"
-    fig.savefig(tmp, dpi=100)
+    with atomic_path(out / "results.png") as tmp:
+        fig.savefig(tmp, dpi=100)
     plt.close(fig)
-    os.replace(tmp, out / "results.png")

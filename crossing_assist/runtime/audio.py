@@ -7,12 +7,11 @@ else: it copies prepared samples (no inference, allocation, locks or I/O).
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from crossing_assist.fileio import atomic_path
 from crossing_assist.runtime.beacon import CuePlayer
 
 
@@ -75,14 +74,6 @@ def write_wav(path: str | Path, samples: np.ndarray, sample_rate: int) -> Path:
     import soundfile as sf
 
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".wav", dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_path(path) as tmp:
         sf.write(tmp, np.clip(samples, -1.0, 1.0), int(sample_rate), subtype="PCM_16", format="WAV")
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
     return path

@@ -18,15 +18,14 @@ import argparse
 import dataclasses
 import json
 import math
-import os
 import sys
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from crossing_assist.actions import get_space, heading_to_pan
+from crossing_assist.fileio import atomic_write_text
 from crossing_assist.runtime.beacon import BeaconConfig, itd_seconds, pan_gains
 from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
 from crossing_assist.runtime.engine import measure_value
@@ -165,15 +164,7 @@ def build_vectors(seed: int = 20240601) -> dict:
 
 def write_vectors(path: str | Path, seed: int = 20240601) -> Path:
     """Write the vectors JSON atomically; returns the path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(build_vectors(seed), allow_nan=False) + "\n"
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    with os.fdopen(fd, "w", encoding="utf-8") as f:
-        f.write(text)
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, path)
-    return path
+    return atomic_write_text(path, json.dumps(build_vectors(seed), allow_nan=False) + "\n")
 
 
 def main(argv: list[str] | None = None) -> int:
