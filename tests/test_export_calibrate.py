@@ -11,10 +11,11 @@ import pytest
 
 from crossing_assist.export.calibrate import (
     conformal_threshold,
+    cross_fit,
     fit_temperature,
     nll,
     softmax_mc,
-    split_by_source,
+    source_folds,
     uncalibrated,
     uncertainty_threshold,
 )
@@ -106,21 +107,54 @@ def test_uncertainty_threshold_without_signal_is_clipped_to_the_observed_range()
     assert uncertainty_threshold(u, u < 1.0) > 0  # perfectly separable: finite and positive
 
 
-def test_split_by_source_never_shares_a_source():
+def test_source_folds_never_share_a_source_and_cover_every_frame():
     sources = np.array(["heon"] * 187 + ["img"] * 79 + ["john"] * 323 + ["sam"] * 275)
-    c, e = split_by_source(sources)
-    assert set(sources[c]).isdisjoint(sources[e])
-    assert len(c) + len(e) == len(sources) and sorted(np.r_[c, e].tolist()) == list(range(len(sources)))
-    assert 0.4 < len(c) / len(sources) < 0.6
-    c2, e2 = split_by_source(np.array(["a"] * 10 + ["b"]), 0.5)
-    assert len(c2) and len(e2)
+    folds = source_folds(sources)
+    assert len(folds) == 4  # fewer sources than folds: one source a fold
+    assert sorted(np.concatenate(folds).tolist()) == list(range(len(sources)))
+    assert [set(sources[f]) for f in folds] == [{"john"}, {"sam"}, {"heon"}, {"img"}]
+    two = source_folds(np.array(["a"] * 10 + ["b", "c", "d"]), k=2)  # largest first, to the smallest fold
+    assert [len(f) for f in two] == [10, 3]
 
 
-def test_split_by_source_with_one_source_cuts_contiguous_blocks():
-    c, e = split_by_source(["x"] * 9, 0.5)
-    assert c.tolist() == [0, 1, 2, 3] and e.tolist() == [4, 5, 6, 7, 8]
+def test_source_folds_with_one_source_cut_contiguous_blocks():
+    assert [f.tolist() for f in source_folds(["x"] * 9, k=3)] == [[0, 1, 2], [3, 4, 5], [6, 7, 8]]
     with pytest.raises(ValueError, match="at least 2"):
-        split_by_source(["x"])
+        source_folds(["x"])
+
+
+def labelled_logits(rng, n, truth_temperature=1.0):
+    """MC logits [4, n, 6] and labels drawn from the model's own probabilities (calibrated);
+    drawn at ``truth_temperature`` > 1 the labels are noisier than the model believes (a harder,
+    shifted source)."""
+    logits = mc_logits(rng, n=n)
+    p = softmax_mc(logits, truth_temperature)
+    labels = (p.cumsum(1) < rng.random((n, 1))).sum(1).clip(0, p.shape[1] - 1)
+    return logits, labels
+
+
+def test_cross_fit_coverage_is_near_the_target_on_exchangeable_sources():
+    rng = np.random.default_rng(7)
+    logits, labels = labelled_logits(rng, 4000)
+    sources = np.array([f"s{i % 5}" for i in range(4000)])
+    out = cross_fit(logits, labels, source_folds(sources), 0.9, sources)
+    assert abs(out["coverage"] - 0.9) < 0.015 and len(out["folds"]) == 5
+    assert all(abs(f["coverage"] - 0.9) < 0.04 for f in out["folds"])
+
+
+def test_cross_fit_never_calibrates_on_the_measured_fold():
+    """A hard source measured with thresholds fitted on the easy ones loses coverage; were its
+    own frames in the calibration, it would not."""
+    rng = np.random.default_rng(8)
+    easy, y_easy = labelled_logits(rng, 3000)
+    hard, y_hard = labelled_logits(rng, 1000, truth_temperature=3.0)
+    logits, labels = np.concatenate([easy, hard], 1), np.r_[y_easy, y_hard]
+    sources = np.array(["easy1", "easy2", "easy3"] * 1000 + ["hard"] * 1000)
+    out = cross_fit(logits, labels, source_folds(sources, k=4), 0.9, sources)
+    hard_fold = next(f for f in out["folds"] if f["sources"] == ["hard"])
+    assert hard_fold["coverage"] < 0.85
+    in_sample = conformal_threshold(softmax_mc(logits), labels, 0.9)
+    assert (softmax_mc(logits)[np.arange(3000, 4000), y_hard] >= in_sample).mean() > hard_fold["coverage"]
 
 
 def test_uncalibrated_defaults_are_safe():

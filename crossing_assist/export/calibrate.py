@@ -1,8 +1,9 @@
 """Calibration stored in the bundle (numpy only): temperature, conformal threshold, gate threshold.
 
-All three are fitted on a *calibration* part of the labelled validation data and measured on
-the other part; :func:`split_by_source` cuts the data by its leakage unit (photographer, video,
-place), so the two parts never share a source, let alone a frame.
+All three are fitted on the labelled validation frames. How well the procedure holds on frames
+it never saw is measured by :func:`cross_fit`: :func:`source_folds` cuts the frames by their
+leakage unit (photographer, video, place), and each fold is measured with a temperature and a
+threshold fitted on the other folds only, never on its own frames or sources.
 
 * Temperature ``tau`` minimises the negative log-likelihood of the MC-averaged probabilities
   ``mean_t softmax(logits_t / tau)`` (the bundle's ``probs``), by golden-section search on
@@ -121,37 +122,60 @@ def uncertainty_threshold(uncertainty: np.ndarray, correct: np.ndarray) -> float
     return float(max(min(max(t, lo), hi), 1e-6))
 
 
-def split_by_source(sources: list[str] | np.ndarray, frac: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
-    """Split frames into (calibration, evaluation) index arrays without sharing a source.
+def source_folds(sources: list[str] | np.ndarray, k: int = 5) -> list[np.ndarray]:
+    """Cut frames into at most ``k`` folds (index arrays) that never share a source.
 
-    Whole sources are assigned, largest first, to whichever part is further below its target
-    share (``frac`` of the frames for calibration). With a single source the frames are cut
-    into two contiguous blocks in their given order (neighbouring frames stay together).
+    Whole sources go, largest first, to the fold with the fewest frames, so no photographer,
+    video or place is on both sides of a calibrate/measure cut. With fewer sources than ``k``
+    each source is a fold; with a single source the frames are cut into ``k`` contiguous
+    blocks in their given order (neighbouring frames stay together).
     """
     sources = np.asarray(sources).astype(str)
     n = len(sources)
-    if n < 2:
-        raise ValueError(f"need at least 2 labelled frames to calibrate and measure, got {n}")
+    if n < 2 or k < 2:
+        raise ValueError(f"need at least 2 labelled frames and 2 folds to calibrate and measure, got {n} and {k}")
     names, counts = np.unique(sources, return_counts=True)
     if len(names) == 1:
-        cut = int(round(n * frac))
-        cut = min(max(cut, 1), n - 1)
-        return np.arange(cut), np.arange(cut, n)
-    order = np.argsort(-counts, kind="stable")
-    cal, n_cal, n_eval = [], 0, 0
-    for i in order:
-        placed = n_cal + n_eval + counts[i]
-        if frac * placed - n_cal >= (1 - frac) * placed - n_eval:  # calibration is further behind
-            cal.append(names[i])
-            n_cal += counts[i]
-        else:
-            n_eval += counts[i]
-    if n_eval == 0:  # every source went to calibration: move the smallest one back
-        cal.remove(names[order[-1]])
-    elif not cal:
-        cal.append(names[order[-1]])
-    mask = np.isin(sources, cal)
-    return np.flatnonzero(mask), np.flatnonzero(~mask)
+        return [b for b in np.array_split(np.arange(n), min(k, n)) if len(b)]
+    k = min(k, len(names))
+    fold_of, sizes = {}, np.zeros(k, np.int64)
+    for i in np.argsort(-counts, kind="stable"):
+        f = int(np.argmin(sizes))
+        fold_of[names[i]] = f
+        sizes[f] += counts[i]
+    which = np.array([fold_of[s] for s in sources])
+    return [np.flatnonzero(which == f) for f in range(k)]
+
+
+def cross_fit(logits: np.ndarray, labels: np.ndarray, folds: list[np.ndarray], coverage: float,
+              sources: np.ndarray | None = None) -> dict:
+    """Held-out conformal coverage of the whole calibration procedure, fold by fold.
+
+    For each fold, the temperature and the conformal threshold are fitted on the *other*
+    folds only (MC logits [T, N, A], action labels [N]) and the sets are measured on the fold.
+    Returns the pooled coverage and mean set size over all frames (each measured exactly once,
+    never with a threshold fitted on itself) and one entry per fold.
+    """
+    logits = np.asarray(logits)
+    labels = np.asarray(labels, dtype=np.int64)
+    covered = np.zeros(len(labels), bool)
+    size = np.zeros(len(labels))
+    per_fold = []
+    for idx in folds:
+        rest = np.setdiff1d(np.arange(len(labels)), idx)
+        tau = fit_temperature(logits[:, rest], labels[rest])
+        probs = softmax_mc(logits, tau)
+        t = conformal_threshold(probs[rest], labels[rest], coverage)
+        sets = probs[idx] >= t
+        covered[idx] = sets[np.arange(len(idx)), labels[idx]]
+        size[idx] = sets.sum(1)
+        entry = {"n": int(len(idx)), "coverage": float(covered[idx].mean()), "mean_set_size": float(size[idx].mean()),
+                 "temperature": tau, "threshold": t}
+        if sources is not None:
+            entry["sources"] = sorted(set(np.asarray(sources)[idx].astype(str).tolist()))
+        per_fold.append(entry)
+    return {"target": coverage, "coverage": float(covered.mean()), "mean_set_size": float(size.mean()),
+            "n": int(len(labels)), "folds": per_fold}
 
 
 @dataclass(frozen=True)

@@ -17,8 +17,8 @@ HELP = {
     "samples": "MC dropout samples T folded into the batch",
     "p": "drop probability of the sampled layers (default: the checkpoint's, 0.5 in the thesis)",
     "calib_data": "dataset folder (manifest.csv) with labelled frames to calibrate on",
-    "calib_split": "split of --calib-data to use (cut by source into calibration / evaluation parts)",
-    "calib_frac": "share of the frames (whole sources) used to calibrate; the rest measures",
+    "calib_split": "split of --calib-data to calibrate on (all of it; held-out coverage by folds of sources)",
+    "calib_folds": "folds (whole sources) for the held-out coverage: each measured with a calibration fitted on the others",
     "coverage": "target coverage of the conformal action sets",
     "measure": "the gate's uncertainty measure: entropy | mutual_info",
     "int8": "quantise the convolutions to int8 (static QDQ, calibrated on real frames)",
@@ -87,12 +87,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     for note in res.notes:
         print(f"note: {note}", file=sys.stderr)
-    ev = res.metrics.get("evaluation_part")
-    if ev:
+    full, cross = res.metrics.get("full_split"), res.metrics.get("cross_fit")
+    if full and cross:
         c = res.calibration
-        print(f"held-out part: accuracy {ev['accuracy']:.3f} (majority {ev['majority_accuracy']:.3f}), "
-              f"conformal coverage {ev['coverage']:.3f} (target {c.coverage:.2f}), mean set size "
-              f"{ev['mean_set_size']:.2f}; temperature {c.temperature:.3f}, {c.measure} threshold "
+        print(f"{full['n']} labelled frames: accuracy {full['accuracy']:.3f} (majority {full['majority_accuracy']:.3f}); "
+              f"held-out conformal coverage {cross['coverage']:.3f} (target {c.coverage:.2f}), mean set size "
+              f"{cross['mean_set_size']:.2f}; temperature {c.temperature:.3f}, {c.measure} threshold "
               f"{c.uncertainty_threshold:.3f}", file=sys.stderr)
     q = res.metrics.get("int8_vs_fp32")
     if q:

@@ -3,13 +3,14 @@
 Steps (:func:`export_bundle`):
 
 1. load the run's ``weights/best.pt`` (or a ``.pt`` file);
-2. with ``calib_data``: read the labelled split, cut it by source into a calibration part
-   and an evaluation part (:func:`~crossing_assist.export.calibrate.split_by_source`);
-   fit the temperature on PyTorch MC logits of the calibration part;
+2. with ``calib_data``: read the labelled split; compute PyTorch MC logits of every frame;
+   measure the calibration procedure by cross-fitting over folds cut by source
+   (:func:`~crossing_assist.export.calibrate.cross_fit`: each fold measured with a temperature
+   and conformal threshold fitted on the other folds), then fit the shipped temperature on all;
 3. export the MC graph with that temperature (and, with ``int8``, quantise its convolutions
    on calibration frames);
-4. run the shipped graph through onnxruntime on the calibration part to fit the conformal and
-   gate thresholds, and on the evaluation part to measure them;
+4. run the shipped graph through onnxruntime on every frame to fit the conformal and gate
+   thresholds and record its metrics;
 5. parity: a deterministic (T=1, p=0) export must match PyTorch to ``parity_tol``;
 6. write ``model.onnx`` + ``bundle.json`` atomically, with the same facts in the graph's
    metadata.
@@ -54,7 +55,7 @@ class ExportConfig:
     p: float | None = None          # None: the checkpoint's own p (0.5 by default)
     calib_data: str | None = None   # dataset folder (manifest.csv) with labelled frames
     calib_split: str = "val"
-    calib_frac: float = 0.5         # share of the frames (whole sources) used to calibrate
+    calib_folds: int = 5            # folds (whole sources) for the held-out coverage measurement
     coverage: float = 0.9
     measure: str = "entropy"
     int8: bool = False
@@ -71,7 +72,7 @@ class ExportConfig:
             (self.samples >= 1, f"--samples {self.samples}; valid: >= 1"),
             (self.p is None or 0.0 <= self.p < 1.0, f"--p {self.p}; valid: 0 <= p < 1"),
             (0.0 < self.coverage < 1.0, f"--coverage {self.coverage}; valid: 0 < coverage < 1"),
-            (0.0 < self.calib_frac < 1.0, f"--calib-frac {self.calib_frac}; valid: 0 < frac < 1"),
+            (self.calib_folds >= 2, f"--calib-folds {self.calib_folds}; valid: >= 2"),
             (self.measure in ("entropy", "mutual_info"), f"--measure {self.measure!r}; valid: entropy, mutual_info"),
             (not self.int8 or self.calib_data, "--int8 needs --calib-data (real frames to calibrate the int8 ranges)"),
         ]
@@ -232,35 +233,27 @@ def _measure(probs_out: dict, data: Labelled, threshold: float, n_actions: int, 
     return out
 
 
-def _fit_and_measure(model: Any, meta: dict, part_cal: Labelled, part_eval: Labelled, cfg: ExportConfig,
-                     temperature: float, majority: int | None, log: Callable[[str], None]
-                     ) -> tuple[cal.CalibrationResult, dict]:
-    """Fit the conformal and gate thresholds on the shipped graph's onnxruntime outputs for the
-    calibration part; measure on the evaluation part and on both together (the full split)."""
+def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, temperature: float,
+                     majority: int | None, log: Callable[[str], None]) -> tuple[cal.CalibrationResult, dict]:
+    """Fit the conformal and gate thresholds on the shipped graph's onnxruntime outputs for
+    every labelled frame and record the graph's metrics there (coverage there is in-sample:
+    the held-out figure is ``cross_fit``)."""
     import tempfile
 
-    n = meta["actions"]["n"]
     with tempfile.TemporaryDirectory(prefix="crossing-export-") as tmp:
         set_metadata(model, meta)
         bundle = read_bundle(write_bundle(Path(tmp) / "bundle", model_bytes(model), meta))
-        got_cal = predict_bundle(bundle, part_cal.images, batch=cfg.batch, progress=cfg.progress)
-        got_eval = predict_bundle(bundle, part_eval.images, batch=cfg.batch, progress=cfg.progress)
-    correct = got_cal["probs"].argmax(1) == part_cal.actions
+        got = predict_bundle(bundle, data.images, batch=cfg.batch, progress=cfg.progress)
+    correct = got["probs"].argmax(1) == data.actions
     calib = cal.CalibrationResult(
         temperature=temperature, coverage=cfg.coverage,
-        threshold=cal.conformal_threshold(got_cal["probs"], part_cal.actions, cfg.coverage),
-        n_frames=len(part_cal.actions), measure=cfg.measure,
-        uncertainty_threshold=cal.uncertainty_threshold(got_cal[cfg.measure], correct))
-    both = Labelled(part_cal.images + part_eval.images, np.r_[part_cal.actions, part_eval.actions],
-                    np.r_[part_cal.far_x, part_eval.far_x], np.r_[part_cal.sources, part_eval.sources])
-    got_both = {k: np.concatenate([got_cal[k], got_eval[k]]) for k in got_cal}
-    metrics = {"calibration_part": _measure(got_cal, part_cal, calib.threshold, n, majority),
-               "evaluation_part": _measure(got_eval, part_eval, calib.threshold, n, majority),
-               "evaluation_sources": sorted(set(part_eval.sources.tolist())),
-               "full_split": _measure(got_both, both, calib.threshold, n, majority)}
-    log(f"{cfg.calib_split} through onnxruntime (T={meta['mc']['samples']}): accuracy "
-        f"{metrics['full_split']['accuracy']:.4f} on {len(both.actions)} frames")
-    return calib, metrics
+        threshold=cal.conformal_threshold(got["probs"], data.actions, cfg.coverage),
+        n_frames=len(data.actions), measure=cfg.measure,
+        uncertainty_threshold=cal.uncertainty_threshold(got[cfg.measure], correct))
+    full = _measure(got, data, calib.threshold, meta["actions"]["n"], majority)
+    log(f"{cfg.calib_split} through onnxruntime (T={meta['mc']['samples']}): accuracy {full['accuracy']:.4f} "
+        f"on {full['n']} frames")
+    return calib, {"full_split": full}
 
 
 def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> ExportResult:
@@ -273,20 +266,18 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress) if cfg.calib_data else None
     calib, metrics, notes = cal.uncalibrated(n, cfg.measure), {}, []
     if data is not None:
-        i_cal, i_eval = cal.split_by_source(data.sources, cfg.calib_frac)
-        part_cal, part_eval = data.take(i_cal), data.take(i_eval)
-        log(f"calibration: {len(i_cal)} frames from {sorted(set(part_cal.sources.tolist()))}; "
-            f"evaluation: {len(i_eval)} frames from {sorted(set(part_eval.sources.tolist()))}")
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(cfg.seed)
-            logits = torch_logits(BundleGraph(policy, _spec(policy.config, cfg.samples, p)), part_cal.images,
+            logits = torch_logits(BundleGraph(policy, _spec(policy.config, cfg.samples, p)), data.images,
                                   cfg.batch, cfg.progress)
-        temperature = cal.fit_temperature(logits, part_cal.actions)
-        log(f"temperature {temperature:.3f} (calibration NLL {cal.nll(logits, part_cal.actions):.4f} -> "
-            f"{cal.nll(logits, part_cal.actions, temperature):.4f})")
-    else:
-        temperature = 1.0
-        notes.append("not calibrated: no --calib-data (temperature 1, every action in every conformal set)")
+        folds = cal.source_folds(data.sources, cfg.calib_folds)
+        cross = cal.cross_fit(logits, data.actions, folds, cfg.coverage, data.sources)
+        log(f"held-out conformal coverage {cross['coverage']:.3f} (target {cfg.coverage:.2f}, mean set "
+            f"{cross['mean_set_size']:.2f}) over {len(folds)} folds by source: " +
+            ", ".join(f"{'+'.join(f['sources'])} {f['coverage']:.3f}" for f in cross["folds"]))
+        temperature = cal.fit_temperature(logits, data.actions)
+        log(f"temperature {temperature:.3f} (NLL {cal.nll(logits, data.actions):.4f} -> "
+            f"{cal.nll(logits, data.actions, temperature):.4f} on {len(data.actions)} frames)")
     spec = _spec(policy.config, cfg.samples, p, temperature)
     t0 = time.time()
     model = export_graph(policy, spec)
@@ -295,10 +286,11 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     if cfg.int8:
         from crossing_assist.export.quantize import quantize_convs
 
-        rng = np.random.default_rng(0)
-        pick = rng.permutation(len(part_cal.images))[: cfg.int8_frames]
+        perm = np.random.default_rng(0).permutation(len(data.images))
+        k = min(cfg.int8_frames, len(perm) // 2)  # keep frames the ranges never saw to measure on
+        pick, unseen = np.sort(perm[:k]), np.sort(perm[k:])
         t0 = time.time()
-        model = quantize_convs(model, [part_cal.images[i] for i in sorted(pick)])
+        model = quantize_convs(model, [data.images[i] for i in pick])
         log(f"quantised the convolutions to int8 in {time.time() - t0:.1f} s")
         precision = "int8"
     parity = parity_check(policy, spec, _probe_frames(data, spec, cfg.parity_frames))
@@ -310,10 +302,11 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     if data is not None:
         provisional = cal.CalibrationResult(temperature, cfg.coverage, 0.0, 0, cfg.measure, calib.uncertainty_threshold)
         meta = _meta(policy, ckpt, spec, provisional, precision, {}, cfg)
-        calib, metrics = _fit_and_measure(model, meta, part_cal, part_eval, cfg, temperature, majority, log)
+        calib, metrics = _fit_and_measure(model, meta, data, cfg, temperature, majority, log)
+        metrics["cross_fit"] = cross
         metrics["checkpoint"] = policy_metrics(ckpt)
-        if cfg.int8:
-            metrics["int8_vs_fp32"] = compare_precisions(model, fp32_model, meta, part_eval, cfg.batch)
+        if cfg.int8:  # measured on the frames the int8 ranges were not calibrated on
+            metrics["int8_vs_fp32"] = compare_precisions(model, fp32_model, meta, data.take(unseen), cfg.batch)
     metrics["parity_max_abs"] = parity
     meta = _meta(policy, ckpt, spec, calib, precision, metrics, cfg)
     set_metadata(model, meta)
