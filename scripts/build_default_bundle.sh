@@ -6,9 +6,9 @@
 #
 # The run is built by scripts/build_default_model.sh (weights/best.pt). Calibration (temperature,
 # conformal threshold, gate threshold) is fitted on PTL's val split; its held-out coverage is
-# measured by folds of photographers, each with a calibration fitted on the others. int8
-# (convolutions only) is kept when its accuracy on the val frames its ranges never saw is within
-# 1 point of fp32's; otherwise the fp32 bundle ships.
+# measured by folds of photographers, each with a calibration fitted on the others. An int8
+# bundle (static, else weights only) is kept when its accuracy on the val frames its ranges
+# never saw is within 1 point of fp32's; otherwise the fp32 bundle ships.
 # Provenance (command, time, checkpoint SHA-256, calibration data) lands in bundle.json.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -33,23 +33,26 @@ fi
 TMP=$(mktemp -d "${TMPDIR:-/tmp}/default_bundle.XXXXXX")
 trap 'rm -rf "$TMP"' EXIT
 
-"$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/int8" --samples "$SAMPLES" \
-    --calib-data "$DATA" --calib-split val --int8 --quiet
-
-CHOICE=$("$PY" - "$TMP/int8/bundle.json" "$MAX_INT8_DROP" <<'PYEOF'
+# Keep the first candidate within MAX_INT8_DROP of fp32: static int8 (weights and
+# activations), then int8 weights only (fp32 compute), else fp32.
+SRC=""
+for MODE in static weights; do
+    "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/$MODE" --samples "$SAMPLES" \
+        --calib-data "$DATA" --calib-split val --int8 --int8-mode "$MODE" --quiet
+    KEEP=$("$PY" - "$TMP/$MODE/bundle.json" "$MAX_INT8_DROP" <<'PYEOF'
 import json, sys
 m = json.load(open(sys.argv[1]))["metrics"]["int8_vs_fp32"]
 drop = m["accuracy_fp32"] - m["accuracy_int8"]
-print("int8" if drop <= float(sys.argv[2]) else "fp32")
-print(f"int8 {m['accuracy_int8']:.3f} vs fp32 {m['accuracy_fp32']:.3f} on {m['n']} held-out frames, "
-      f"size {m['size_int8'] / 1e6:.1f} / {m['size_fp32'] / 1e6:.1f} MB", file=sys.stderr)
+print("yes" if drop <= float(sys.argv[2]) else "no")
+print(f"int8 ({m['mode']}) {m['accuracy_int8']:.3f} vs fp32 {m['accuracy_fp32']:.3f} on {m['n']} frames "
+      f"the int8 ranges never saw, size {m['size_int8'] / 1e6:.1f} / {m['size_fp32'] / 1e6:.1f} MB", file=sys.stderr)
 PYEOF
 )
-
-if [ "$CHOICE" = "int8" ]; then
-    SRC="$TMP/int8"
-else
-    echo "int8 loses more than $MAX_INT8_DROP accuracy: shipping fp32" >&2
+    if [ "$KEEP" = "yes" ]; then SRC="$TMP/$MODE"; break; fi
+    echo "int8 ($MODE) loses more than $MAX_INT8_DROP accuracy" >&2
+done
+if [ -z "$SRC" ]; then
+    echo "shipping fp32" >&2
     "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/fp32" --samples "$SAMPLES" \
         --calib-data "$DATA" --calib-split val --quiet
     SRC="$TMP/fp32"

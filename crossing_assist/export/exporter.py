@@ -59,6 +59,7 @@ class ExportConfig:
     coverage: float = 0.9
     measure: str = "entropy"
     int8: bool = False
+    int8_mode: str = "static"       # static: weights + activations; weights: int8 weights only
     int8_frames: int = 128
     parity_frames: int = 16
     parity_tol: float = PARITY_TOL
@@ -74,6 +75,7 @@ class ExportConfig:
             (0.0 < self.coverage < 1.0, f"--coverage {self.coverage}; valid: 0 < coverage < 1"),
             (self.calib_folds >= 2, f"--calib-folds {self.calib_folds}; valid: >= 2"),
             (self.measure in ("entropy", "mutual_info"), f"--measure {self.measure!r}; valid: entropy, mutual_info"),
+            (self.int8_mode in ("static", "weights"), f"--int8-mode {self.int8_mode!r}; valid: static, weights"),
             (not self.int8 or self.calib_data, "--int8 needs --calib-data (real frames to calibrate the int8 ranges)"),
         ]
         for ok, msg in checks:
@@ -290,8 +292,8 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
         k = min(cfg.int8_frames, len(perm) // 2)  # keep frames the ranges never saw to measure on
         pick, unseen = np.sort(perm[:k]), np.sort(perm[k:])
         t0 = time.time()
-        model = quantize_convs(model, [data.images[i] for i in pick])
-        log(f"quantised the convolutions to int8 in {time.time() - t0:.1f} s")
+        model = quantize_convs(model, [data.images[i] for i in pick], mode=cfg.int8_mode)
+        log(f"quantised the convolutions to int8 ({cfg.int8_mode}) in {time.time() - t0:.1f} s")
         precision = "int8"
     parity = parity_check(policy, spec, _probe_frames(data, spec, cfg.parity_frames))
     log(f"parity (fp32 graph, T=1, p=0) onnxruntime vs PyTorch: max |probs diff| = {parity:.2e} (tolerance {cfg.parity_tol:g})")
@@ -306,7 +308,8 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
         metrics["cross_fit"] = cross
         metrics["checkpoint"] = policy_metrics(ckpt)
         if cfg.int8:  # measured on the frames the int8 ranges were not calibrated on
-            metrics["int8_vs_fp32"] = compare_precisions(model, fp32_model, meta, data.take(unseen), cfg.batch)
+            metrics["int8_vs_fp32"] = {"mode": cfg.int8_mode,
+                                       **compare_precisions(model, fp32_model, meta, data.take(unseen), cfg.batch)}
     metrics["parity_max_abs"] = parity
     meta = _meta(policy, ckpt, spec, calib, precision, metrics, cfg)
     set_metadata(model, meta)
