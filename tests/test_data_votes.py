@@ -92,7 +92,7 @@ def _ls_task(tid, url, *anns):
 
 
 def test_label_studio_export(tmp_path):
-    d = _frames_dir(tmp_path)
+    _frames_dir(tmp_path)
     export = [
         _ls_task(1, "/data/local-files/?d=frames/v1/v1_t00000.000.jpg", (1, "7", False), ({"id": 2, "email": "b@x"}, "8", False),
                  (3, "7", False)),

@@ -1,7 +1,6 @@
 """crossing-train: run folder, caching, resume after a kill, corrupt checkpoints, CLI errors."""
 
 import csv
-import os
 import signal
 import subprocess
 import sys

@@ -14,7 +14,6 @@ variance over samples (in normalised units), as in the thesis's code.
 
 from __future__ import annotations
 
-import copy
 import math
 import numpy as np
 import torch

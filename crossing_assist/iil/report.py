@@ -11,7 +11,6 @@ events (the episode continues after a reset); queries = steps whose expert actio
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
