@@ -3,8 +3,8 @@
 
     python benchmarks/iil_benchmark.py crossing            # .venv, ~12 min a seed on 2 busy cores
     python benchmarks/iil_benchmark.py crossing-binary     # the thesis's 0/inf expert
-    python benchmarks/iil_benchmark.py duckietown                     # as run: 3 seeds x 10 x 256 steps
-    python benchmarks/iil_benchmark.py duckietown-peers --seeds 1     # as run: 1 seed
+    python benchmarks/iil_benchmark.py duckietown          # as run: 3 seeds x 10 x 512 steps, ~70 min
+    python benchmarks/iil_benchmark.py duckietown-peers    # as run: the five others, 3 seeds x 10 x 512
     python benchmarks/iil_benchmark.py report
 
 Duckietown runs under .venv-duckietown (see docs/iil.md).
@@ -34,7 +34,7 @@ def main() -> int:
     p.add_argument("what", choices=["crossing", "crossing-binary", "duckietown", "duckietown-peers", "report"])
     p.add_argument("--seeds", nargs="+", default=["1", "2", "3"])
     p.add_argument("--episodes", default="10")
-    p.add_argument("--horizon", default=None, help="crossing: 128, duckietown: 256 (as run for docs/iil)")
+    p.add_argument("--horizon", default=None, help="crossing: 128, duckietown: 512 (as run for docs/iil)")
     a = p.parse_args()
     if a.what == "crossing":
         for s in a.seeds:  # seed by seed, so that a partial result holds complete seeds
@@ -49,17 +49,19 @@ def main() -> int:
         if not DT_PY.exists():
             print("error: .venv-duckietown is missing; see docs/iil.md", file=sys.stderr)
             return 2
-        h = a.horizon or "256"
+        h = a.horizon or "512"
         for s in a.seeds:
             _cli(DT_PY, "run", "--env", "duckietown", "--algo", "thesis", "--episodes", a.episodes, "--horizon", h,
                  "--epochs", "2", "--seeds", s, "--out", str(RUNS / f"duckietown-h{h}"))
-    elif a.what == "duckietown-peers":  # Forward Training, SMILe and the three peers, as affordable
-        for algo in ("hg-dagger", "smile", "forward", "thrifty-dagger", "ensemble-dagger"):
-            _cli(DT_PY, "run", "--env", "duckietown", "--algo", algo, "--episodes", a.episodes, "--horizon",
-                 a.horizon or "256", "--epochs", "2", "--seeds", *a.seeds, "--out", str(RUNS / "duckietown-peers-h256"))
+    elif a.what == "duckietown-peers":  # Forward Training, SMILe and the three peers
+        h = a.horizon or "512"
+        for s in a.seeds:
+            _cli(DT_PY, "run", "--env", "duckietown", "--algo", "forward,smile,ensemble-dagger,hg-dagger,thrifty-dagger",
+                 "--episodes", a.episodes, "--horizon", h, "--epochs", "2", "--seeds", s,
+                 "--out", str(RUNS / f"duckietown-peers-h{h}"))
     else:
-        names = {"crossing": "crossing", "crossing-binary": "crossing-binary", "duckietown-h256": "duckietown",
-                 "duckietown-peers-h256": "duckietown-peers"}
+        names = {"crossing": "crossing", "crossing-binary": "crossing-binary", "duckietown-h512": "duckietown",
+                 "duckietown-peers-h512": "duckietown-peers"}
         for run_name, doc_name in names.items():
             if (RUNS / run_name).exists():
                 _cli(Path(sys.executable), "report", str(RUNS / run_name), "--out", str(REPO / "docs" / "iil" / doc_name))

@@ -156,3 +156,15 @@ def test_holdout_sources_are_masked_from_one_cache(tiny, tmp_path):
     from crossing_assist.models.config import ConfigError
     with pytest.raises(ConfigError, match="not among train sources"):
         train(_cfg(tiny, tmp_path / "run2", holdout=("ptl:nobody",), select_on="holdout"))
+
+
+def test_unfreeze_trains_the_last_blocks_and_only_them(tiny, tmp_path):
+    """Same seed, same data: with --unfreeze 2 the last two backbone blocks move away from the
+    frozen run's, every earlier block stays bit-identical."""
+    frozen = load_policy(train(_cfg(tiny, tmp_path / "frozen", epochs=1)) / "weights" / "last.pt")
+    tuned = load_policy(train(_cfg(tiny, tmp_path / "tuned", epochs=1, unfreeze=2)) / "weights" / "last.pt")
+    blocks = list(zip(frozen.backbone.blocks, tuned.backbone.blocks))
+    same = [all(torch.equal(a, b) for a, b in zip(fa.state_dict().values(), ta.state_dict().values()))
+            for fa, ta in blocks]
+    assert same[:-2] == [True] * (len(blocks) - 2) and same[-2:] == [False, False]
+    assert tuned.config["frozen_blocks"] == len(blocks) - 2
