@@ -59,3 +59,22 @@ def test_eval_mirror_tta_averages_each_frame_with_its_mirror(tiny_run, tmp_path)
                                  cache_dir=str(root / "cache"), out=str(tmp_path / "b")))
     assert tta["n"] == plain["n"] == 6 and tta["tta_mirror"] is True
     assert np.array(tta["confusion"]).sum() == 6
+
+
+def test_eval_scores_a_13_action_model_in_a_coarser_space(tiny_run, tmp_path):
+    from crossing_assist.actions import get_space
+    from crossing_assist.models.evaluate import _eval_checkpoint, _split
+
+    data, run, root = tiny_run
+    cfg = EvalConfig(data=str(data), run=str(run), examples=2, cache_dir=str(root / "cache"), progress=False,
+                     actions=4, out=str(tmp_path / "g"))
+    out, m4 = evaluate(cfg)
+    part = _split(cfg)
+    probs13, _, _ = _eval_checkpoint(cfg, part)
+    space = get_space(4)
+    want = (space.bin_probs_to_action_probs(probs13).argmax(1) == space.bins_to_actions(part.labels())).mean()
+    assert m4["n_actions"] == 4 and m4["grouped_from"] == 13 and list(m4["names"]) == list(space.names)
+    assert m4["accuracy"] == pytest.approx(want) and np.array(m4["confusion"]).shape == (4, 4)
+    assert (out / "examples.png").is_file()
+    with pytest.raises(Exception, match="valid: 4, 8, 13"):
+        EvalConfig(data=str(data), run=str(run), actions=5)

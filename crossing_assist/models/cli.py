@@ -124,6 +124,7 @@ def eval_parser() -> argparse.ArgumentParser:
     p.add_argument("--samples", type=int, default=1, help="MC dropout samples for checkpoints (1 = deterministic)")
     p.add_argument("--examples", type=int, default=12, help="frames on the example sheet")
     p.add_argument("--tta-mirror", action="store_true", help="average each frame with its mirror image (checkpoints)")
+    p.add_argument("--actions", type=int, help="score a 13-action model as 4 or 8 actions (probabilities summed per action)")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--cache-dir", default=_DEFAULTS["cache_dir"])
     p.add_argument("--quiet", action="store_true")
@@ -141,7 +142,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         if bool(a.run) == bool(a.bundle):
             raise ConfigError("Invalid arguments: give exactly one of --run DIR and --bundle DIR")
         cfg = EvalConfig(run=a.run, bundle=a.bundle, data=a.data, split=a.split, out=a.out, samples=a.samples,
-                         examples=a.examples, tta_mirror=a.tta_mirror, threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
+                         examples=a.examples, tta_mirror=a.tta_mirror, actions=a.actions, threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
         out, m = evaluate(cfg)
         print(f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f}), "
               f"bin MAE {m['bin_mae']:.3f} -> {out / 'metrics.json'}")

@@ -41,6 +41,7 @@ class EvalConfig:
     samples: int = 1
     examples: int = 12
     tta_mirror: bool = False
+    actions: int | None = None      # score a 13-action model in a coarser space (4 or 8)
     threads: int = 2
     cache_dir: str = "runs/.cache"
     progress: bool = True
@@ -52,6 +53,8 @@ class EvalConfig:
             raise ConfigError(f"Invalid samples {self.samples}; valid: >= 1")
         if self.examples < 0:
             raise ConfigError(f"Invalid examples {self.examples}; valid: >= 0")
+        if self.actions not in (None, 4, 8, 13):
+            raise ConfigError(f"Invalid actions {self.actions}; valid: 4, 8, 13")
 
 
 def _checkpoint_path(run: str) -> Path:
@@ -152,9 +155,20 @@ def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
         probs, info, bundle = _eval_bundle(cfg, part)
         n_actions, majority = int(bundle.actions.n), bundle.training.get("majority_action")
         default_out = Path(cfg.bundle) / f"eval_{cfg.split}"
+    grouped = cfg.actions is not None and cfg.actions != n_actions
+    if grouped:  # a coarser action's probability is the sum over its strips
+        if n_actions != 13:
+            raise ConfigError(f"Invalid --actions {cfg.actions}: only a 13-action model can be scored in a coarser "
+                              f"space; this one has {n_actions}")
+        space = get_space(cfg.actions)
+        probs = space.bin_probs_to_action_probs(probs)
+        majority = None if majority is None else space.bin_to_action(int(majority))
+        n_actions = cfg.actions
+        info["grouped_from"] = 13
+        default_out = default_out.with_name(f"{default_out.name}_{n_actions}")
     labels = get_space(n_actions).bins_to_actions(part.labels())
     m = compute_metrics(probs, labels, n_actions, part.far_x(), majority=majority)
-    if cfg.bundle is not None:
+    if cfg.bundle is not None and not grouped:  # the bundle's conformal threshold is for its own actions
         m["conformal"] = _bundle_conformal(bundle, probs, labels)
     m.update({"split": cfg.split, "data": str(cfg.data), **info})
     out = Path(cfg.out) if cfg.out else default_out
@@ -167,6 +181,6 @@ def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
         pred = probs.argmax(1)
         idx = _example_indices(pred, labels, cfg.examples)
         images = [load_rgb(part.image_path(part.rows[i])) for i in idx]
-        maps = activation_maps(policy, images, pred[idx]) if policy is not None else [None] * len(idx)
+        maps = activation_maps(policy, images, pred[idx]) if policy is not None and not grouped else [None] * len(idx)
         plot_examples(images, probs[idx], labels[idx], n_actions, maps, out / "examples.png")
     return out, m
