@@ -237,3 +237,13 @@ def test_crossing_eval_on_a_bundle_reports_metrics_and_coverage(work, tmp_path):
     assert 0.0 <= c["coverage"] <= 1.0 and sum(c["size_hist"]) == 30
     for name in ("confusion_matrix.png", "reliability.png"):
         assert (out / name).stat().st_size > 0
+
+
+def test_export_without_labelled_data_is_honestly_uncalibrated(work, tmp_path):
+    root, _ = work
+    res = export_bundle(ExportConfig(run=str(root / "run"), out=str(tmp_path / "u"), samples=4, parity_frames=2,
+                                     progress=False), log=lambda m: None)
+    b = read_bundle(tmp_path / "u")
+    assert b.calibration.temperature == 1.0 and b.calibration.conformal.threshold == 0.0
+    assert b.calibration.conformal.n_frames == 0 and "cross_fit" not in b.metrics
+    assert any("not calibrated" in n for n in res.notes)

@@ -280,6 +280,9 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
         temperature = cal.fit_temperature(logits, data.actions)
         log(f"temperature {temperature:.3f} (NLL {cal.nll(logits, data.actions):.4f} -> "
             f"{cal.nll(logits, data.actions, temperature):.4f} on {len(data.actions)} frames)")
+    else:
+        temperature = 1.0
+        notes.append("not calibrated: no --calib-data (temperature 1, every action in every conformal set)")
     spec = _spec(policy.config, cfg.samples, p, temperature)
     t0 = time.time()
     model = export_graph(policy, spec)
