@@ -22,7 +22,7 @@ HELP = {
     "coverage": "target coverage of the conformal action sets",
     "measure": "the gate's uncertainty measure: entropy | mutual_info",
     "int8": "quantise the convolutions to int8 (static QDQ, calibrated on real frames)",
-    "int8_mode": "static: int8 weights and activations in the backbone's convolutions; weights: int8 weights only (fp32 compute)",
+    "int8_mode": "static: int8 weights and activations in the backbone's convolutions; weights: int8 weights only (float activations)",
     "int8_frames": "calibration frames for the int8 ranges",
     "parity_frames": "frames for the T=1, p=0 onnxruntime vs PyTorch parity check",
     "parity_tol": "largest allowed |probs| difference in the parity check",
