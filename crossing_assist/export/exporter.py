@@ -37,6 +37,7 @@ from crossing_assist.bundle import SCHEMA_VERSION, read_bundle, write_bundle
 from crossing_assist.export import calibrate as cal
 from crossing_assist.export.evaluate import conformal_report, predict_bundle
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
+from crossing_assist.export.quantize import INT8_MODES, quantize_convs
 
 PARITY_TOL = 1e-4
 
@@ -75,7 +76,7 @@ class ExportConfig:
             (0.0 < self.coverage < 1.0, f"--coverage {self.coverage}; valid: 0 < coverage < 1"),
             (self.calib_folds >= 2, f"--calib-folds {self.calib_folds}; valid: >= 2"),
             (self.measure in ("entropy", "mutual_info"), f"--measure {self.measure!r}; valid: entropy, mutual_info"),
-            (self.int8_mode in ("static", "weights"), f"--int8-mode {self.int8_mode!r}; valid: static, weights"),
+            (self.int8_mode in INT8_MODES, f"--int8-mode {self.int8_mode!r}; valid: {', '.join(INT8_MODES)}"),
             (not self.int8 or self.calib_data, "--int8 needs --calib-data (real frames to calibrate the int8 ranges)"),
         ]
         for ok, msg in checks:
@@ -289,8 +290,6 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     log(f"exported the graph in {time.time() - t0:.1f} s")
     precision, fp32_model = "fp32", model
     if cfg.int8:
-        from crossing_assist.export.quantize import quantize_convs
-
         perm = np.random.default_rng(0).permutation(len(data.images))
         k = min(cfg.int8_frames, len(perm) // 2)  # keep frames the ranges never saw to measure on
         pick, unseen = np.sort(perm[:k]), np.sort(perm[k:])
