@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
         for idx in batches:
             imgs, ys = [], []
             for k in idx:
-                img, _, lab = load_variants(ds, ds.rows[fs.row[k]], size, (variants[fs.variant[k]],), 90.0)[0]
+                img, _, lab, _ = load_variants(ds, ds.rows[fs.row[k]], size, (variants[fs.variant[k]],), 90.0)[0]
                 imgs.append(img)
                 ys.append(lab)
             with torch.no_grad():

@@ -8,7 +8,10 @@ never leaves half a bundle. :func:`check_session` compares an opened onnxruntime
 in, never imported here) with the json: input name and dtype, output names, action count and
 the facts embedded in the graph's metadata.
 
-Schema (version 1), see docs/contracts.md section 3. Two fields depend on the model bytes and
+Schema (version 2; version 1 is still read), see docs/contracts.md section 3. Version 2 adds
+``geometry`` (:class:`crossing_assist.geometry.Geometry`: how the graph fits a frame onto its
+canvas, and the default camera field of view per orientation); a version-1 bundle reads as
+``fit = stretch`` with ``fov_deg`` for both orientations. Two fields depend on the model bytes and
 are filled in by :func:`write_bundle`: ``model_sha256`` and ``model_size`` (bytes). They are the
 only fields left out of the copy embedded in the ONNX metadata (``bundle_json``).
 """
@@ -26,8 +29,10 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from crossing_assist.actions import VALID_SPACES, ActionSpace, get_space
+from crossing_assist.geometry import FITS, GeometryError, Geometry, check_fov
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+READABLE_SCHEMAS = (1, 2)
 BUNDLE_JSON = "bundle.json"
 MODEL_FILE = "model.onnx"
 INPUT_NAME = "frames"
@@ -124,7 +129,14 @@ class Bundle:
     provenance: Mapping[str, Any]
     model_sha256: str
     model_size: int
+    geometry: Geometry = field(default_factory=Geometry)
     raw: Mapping[str, Any] = field(repr=False, compare=False, default_factory=dict)
+
+    def camera_fov(self, width: int, height: int, override: float | None = None) -> float:
+        """Horizontal FOV (degrees) that turns strips of a ``width x height`` frame into
+        headings: ``override`` (the user's or device's) if given, else this bundle's default for
+        the frame's orientation. Raises GeometryError outside 20..170 degrees."""
+        return self.geometry.camera_fov(width, height, override)
 
     @property
     def model_path(self) -> Path:
@@ -227,6 +239,33 @@ def _parse_calibration(d: Any) -> Calibration:
     return Calibration(temperature=temp, conformal=conformal, uncertainty=unc)
 
 
+def _parse_geometry(d: Any, fov_deg: float, version: int) -> Geometry:
+    """``geometry`` (schema 2, required) or the schema-1 equivalent (stretch, one FOV)."""
+    if version < 2:
+        return Geometry(fit="stretch", camera_fov_deg=(fov_deg, fov_deg), train_fov_deg=fov_deg)
+    d = _obj(d, "geometry")
+    fit = _choice(_get(d, "fit", "geometry"), "geometry.fit", FITS)
+    strips = d.get("strips", "frame")
+    if strips != "frame":
+        raise BundleError(f"bundle.json: geometry.strips = {strips!r} unsupported; valid: 'frame'")
+    cam = _obj(_get(d, "camera_fov_deg", "geometry"), "geometry.camera_fov_deg")
+    fovs = []
+    for name in ("landscape", "portrait"):
+        v = _num(_get(cam, name, "geometry.camera_fov_deg"), f"geometry.camera_fov_deg.{name}", 0.0, 180.0)
+        try:
+            fovs.append(check_fov(v))
+        except GeometryError as exc:
+            raise BundleError(f"bundle.json: geometry.camera_fov_deg.{name}: {exc}") from None
+    pad = (0, 0, 0)
+    if fit == "letterbox":
+        pad = _get(d, "pad_rgb", "geometry")
+        if (not isinstance(pad, list) or len(pad) != 3
+                or not all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 255 for v in pad)):
+            raise BundleError(f"bundle.json: geometry.pad_rgb = {pad!r} must be three integers 0..255")
+    train = _num(d.get("train_fov_deg", fovs[0]), "geometry.train_fov_deg", 0.0, 180.0, lo_open=True, hi_open=True)
+    return Geometry(fit=fit, pad_rgb=tuple(pad), camera_fov_deg=(fovs[0], fovs[1]), train_fov_deg=train)
+
+
 def _obj(value: Any, name: str) -> Mapping[str, Any]:
     if not isinstance(value, dict):
         raise BundleError(f"bundle.json: {name} must be an object, got {type(value).__name__}")
@@ -241,10 +280,10 @@ def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_by
     version = _get(meta, "schema_version", "")
     if isinstance(version, bool) or not isinstance(version, int):
         raise BundleError(f"bundle.json: schema_version = {version!r} must be an integer")
-    if version != SCHEMA_VERSION:
+    if version not in READABLE_SCHEMAS:
         fix = "upgrade crossing_assist" if version > SCHEMA_VERSION else "re-export the bundle"
         raise BundleError(f"bundle.json: schema_version {version} unsupported (this package reads "
-                          f"{SCHEMA_VERSION}); {fix}")
+                          f"{', '.join(map(str, READABLE_SCHEMAS))}); {fix}")
     model_file = _get(meta, "model_file", "")
     if not isinstance(model_file, str) or not model_file.endswith(".onnx") or Path(model_file).name != model_file:
         raise BundleError(f"bundle.json: model_file = {model_file!r} must be a plain file name ending in .onnx")
@@ -255,12 +294,13 @@ def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_by
         if not isinstance(sha, str) or len(sha) != 64 or any(ch not in "0123456789abcdef" for ch in sha):
             raise BundleError(f"bundle.json: model_sha256 = {sha!r} is not a lowercase hex SHA-256")
         size = _int(size, "model_size", MIN_ONNX_BYTES)
+    fov = _num(_get(meta, "fov_deg", ""), "fov_deg", 0.0, 180.0, lo_open=True, hi_open=True)
     return Bundle(
         dir=Path(bundle_dir),
         schema_version=version,
         model_file=model_file,
         actions=_parse_actions(_get(meta, "actions", "")),
-        fov_deg=_num(_get(meta, "fov_deg", ""), "fov_deg", 0.0, 180.0, lo_open=True, hi_open=True),
+        fov_deg=fov,
         input=_parse_input(_get(meta, "input", "")),
         mc=McSpec(samples=_int(_get(mc, "samples", "mc"), "mc.samples", 1, 1024),
                   p=_num(_get(mc, "p", "mc"), "mc.p", 0.0, 1.0, hi_open=True)),
@@ -272,6 +312,7 @@ def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_by
         provenance=_obj(_get(meta, "provenance", ""), "provenance"),
         model_sha256=sha,
         model_size=size,
+        geometry=_parse_geometry(meta.get("geometry") if version >= 2 else None, fov, version),
         raw=dict(meta),
     )
 
@@ -400,7 +441,7 @@ def check_session(bundle: Bundle, session: Any) -> None:
     except json.JSONDecodeError:
         raise BundleError("bundle: the graph's 'bundle_json' metadata is not JSON; re-export the bundle") from None
     mine = embedded_meta(bundle.raw)
-    for key in ("schema_version", "actions", "input", "mc", "calibration", "precision"):
+    for key in ("schema_version", "actions", "fov_deg", "input", "geometry", "mc", "calibration", "precision"):
         if graph_meta.get(key) != mine.get(key):
             raise BundleError(f"bundle: bundle.json '{key}' = {json.dumps(mine.get(key))} disagrees with the "
                               f"graph's {json.dumps(graph_meta.get(key))}; re-export the bundle")

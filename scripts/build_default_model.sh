@@ -1,25 +1,34 @@
 #!/usr/bin/env bash
 # Build the app's DEFAULT policy (13 actions, EfficientNet-Lite0, its last 4 blocks fine-tuned) into runs/default/.
 #
-# Data: PTL train (real photos, ../shared/data/ptl) + a few hundred synthetic street corners
-# from `crossing-data synth` (with `unknown` frames, so the demo's synthetic clip is understood).
-# Selection: fixed epoch count (--select-on last). The recipe (unfreeze 4, 8 epochs) was chosen on
-# a photographer-held-out part of PTL train (ptl:heon), not on PTL val (docs/models.md).
+# Canvas: 168 x 224 (4:3 landscape, the PTL photos' own aspect), frames letterboxed onto it exactly
+# as the bundle's graph fits a camera frame (crossing_assist/geometry.py).
+# Data: PTL train (real photos, ../shared/data/ptl, squash undone: aspect=4:3) with, per photo, its
+# one random *field view* (mirrored half the time, roll up to 15 deg, a phone aspect such as 3:4 portrait
+# letterboxed, a corruption: night, glare, rain, blur, JPEG, noise, occluder); negatives labelled
+# unknown: views above the far kerb of every other PTL photo (crossing-data negatives) and
+# synthetic corners without a crossing (crossing-data synth, 40 % unknown).
+# Selection: fixed epoch count (--select-on last); the recipe is compared on held-out photographers
+# (scripts/cv_default_model.sh: leave-one-photographer-out), never on PTL val.
 #
 # Usage: scripts/build_default_model.sh [PTL_DIR]      (run from the repository root)
 set -euo pipefail
 PTL=${1:-../shared/data/ptl}
 PY=${PY:-.venv/bin/python}
-HEAD=${HEAD:-spatial}
-EPOCHS=${EPOCHS:-8}
+OUT=${OUT:-runs/default}
+EPOCHS=${EPOCHS:-6}
 UNFREEZE=${UNFREEZE:-4}
-mkdir -p runs/data
-[ -f runs/data/ptl/manifest.csv ] || $PY -m crossing_assist.data_tools.cli import-ptl "$PTL" --out runs/data/ptl --images reference --quiet
-[ -f runs/data/synth/manifest.csv ] || $PY -m crossing_assist.data_tools.cli synth --out runs/data/synth --frames 300 --seed 1 \
-    --unknown-fraction 0.25 --val-fraction 0.2 --quiet
-rm -rf runs/default
-$PY -m crossing_assist.models.cli train --data runs/data/ptl --extra-data runs/data/synth --out runs/default --backbone efficientnet_lite0 \
-    --head "$HEAD" --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --weight-decay 1e-4 --smoothing 0.2 --aux-x 1.0 \
-    --unfreeze "$UNFREEZE" --select-on last --seed 0 --threads 1 --quiet
-$PY -m crossing_assist.models.cli eval --run runs/default --data runs/data/ptl --split val --threads 1 --quiet
-$PY -m crossing_assist.models.cli eval --run runs/default --data runs/data/synth --split val --out runs/default/eval_synth_val --threads 1 --quiet
+FIELD=${FIELD:-1}
+THREADS=${THREADS:-1}
+scripts/prepare_default_data.sh "$PTL"
+RECIPE=(--data runs/data/ptl --extra-data runs/data/synth --extra-data runs/data/neg_half --backbone efficientnet_lite0
+    --head spatial --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --weight-decay 1e-4 --smoothing 0.2
+    --aux-x 1.0 --unfreeze "$UNFREEZE" --input-size 168x224 --fit letterbox --no-mirror --field "$FIELD" --seed 0
+    --threads "$THREADS" --quiet)
+if [ "${CV:-0}" = 1 ]; then   # leave-one-photographer-out figures of the same recipe
+    $PY -m crossing_assist.models.cli train "${RECIPE[@]}" --out "$OUT/cv" --cv source ${RESUME:+--resume}
+    exit 0
+fi
+if [ -f "$OUT/weights/last.pt" ]; then RESUME=1; fi
+$PY -m crossing_assist.models.cli train "${RECIPE[@]}" --out "$OUT" --select-on last ${RESUME:+--resume}
+$PY -m crossing_assist.models.cli eval --run "$OUT" --data runs/data/ptl --split val --threads "$THREADS" --quiet

@@ -41,7 +41,8 @@ def test_import_copies_keeps_split_labels_and_moves_safely(tmp_path):
     assert [r.label for r in ds.rows] == [6, 8, 7, 2]
     assert [r.split for r in ds.rows] == ["train", "train", "train", "val"]
     assert [r.source for r in ds.rows] == ["ptl:john", "ptl:sam", "ptl:sam", "ptl:heon"]
-    assert ds.rows[1].flags == ("blocked", "light=red") and ds.rows[0].far_x == 0.45685
+    assert ds.rows[1].flags[0] == "aspect=4:3" and ds.rows[1].flags[-2:] == ("blocked", "light=red")
+    assert ds.rows[0].far_x == 0.45685
     shutil.move(tmp_path / "ds", tmp_path / "moved")
     shutil.rmtree(ptl)
     assert len(read_manifest(tmp_path / "moved")) == 4   # self-contained
@@ -119,7 +120,7 @@ def test_minimal_ptl_layout_with_images_elsewhere(tmp_path):
     ds = read_manifest(tmp_path / "ds")
     assert [r.image for r in ds.rows] == ["images/pics/x.jpg", "images/y.jpg"]
     assert [r.source for r in ds.rows] == ["ptl:ann", "ptl:unnamed"] and ds.rows[1].split == "test"
-    assert all(r.flags == () for r in ds.rows)
+    assert all(r.flags == ("aspect=4:3",) for r in ds.rows)   # the squash to undo; no far_y column
     (root / "labels.csv").write_text("image,split,far_x\nx.jpg,train,0.5\n")
     with pytest.raises(PTLError, match="line 1: header lacks column.*photographer, bin12"):
         import_ptl(PTLImportConfig(root, tmp_path / "ds2", progress=False))

@@ -166,7 +166,7 @@ def test_graph_refuses_head_without_random_masks():
             self.head = nn.Linear(3, 4)
             self.head.p = 0.5
 
-        def forward(self, x, samples=1, mc=None):
+        def forward(self, x, samples=1, mc=None, window=None):
             return self.head(x.mean((2, 3))).unsqueeze(0).expand(samples, -1, -1)
 
     with pytest.raises(RuntimeError, match="no random op"):

@@ -85,7 +85,7 @@ def test_graph_metadata_carries_the_bundle_facts(work):
     bundle, sess = open_session(root / "bundle")
     props = sess.get_modelmeta().custom_metadata_map
     assert json.loads(props["bundle_json"]) == embedded_meta(bundle.raw)
-    assert props["schema_version"] == "1"
+    assert props["schema_version"] == "2"
 
 
 def test_predict_bundle_is_random_and_well_formed(work):

@@ -169,3 +169,97 @@ def random_augment(image: np.ndarray, far_x: float | None, label: int, rng: np.r
         image, far_x, label, valid, _ = random_yaw(image, far_x, label, rng, max_yaw_deg, fov_deg, out_of_frame)
         return image, far_x, label, valid
     return image, far_x, parse_label(label), np.ones(np.asarray(image).shape[:2], dtype=bool)
+
+
+# ----------------------------------------------------------------------------- field views
+
+#: Aspects (width / height) of the frames a phone gives, with how often a field view uses each.
+FIELD_ASPECTS = ((3 / 4, 0.45), (9 / 16, 0.15), (1.0, 0.15), (16 / 9, 0.10), (4 / 3, 0.15))
+
+
+def roll(image: np.ndarray, far_x: float | None, far_y: float, label: int, roll_deg: float,
+         ) -> tuple[np.ndarray, float | None, int]:
+    """Rotate the frame by ``roll_deg`` about its centre (the phone tilted sideways; positive =
+    counter-clockwise), borders reflected. The goal at (far_x, far_y) rotates with it; a goal
+    rotated out of the frame goes to the edge strip it left by (out of view, inferable)."""
+    image = _check_image(image)
+    if far_x is None and parse_label(label) != UNKNOWN:   # a voted bin: move its centre
+        far_x = bin_center_x(parse_label(label))
+    h, w = image.shape[:2]
+    m = cv2.getRotationMatrix2D((w / 2 - 0.5, h / 2 - 0.5), float(roll_deg), 1.0)
+    out = cv2.warpAffine(np.ascontiguousarray(image), m, (w, h), flags=cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REFLECT_101)
+    if far_x is None:
+        return out, None, UNKNOWN
+    px, py = far_x * w - 0.5, far_y * h - 0.5
+    nx = m[0, 0] * px + m[0, 1] * py + m[0, 2]
+    x = min(max((nx + 0.5) / w, 1e-6), 1 - 1e-6)
+    return out, x, x_to_bin(x)
+
+
+def crop_window(image: np.ndarray, far_x: float | None, label: int, aspect: float, offset: float,
+                ) -> tuple[np.ndarray, float | None, int]:
+    """A window of ``aspect`` (width / height) cut from the frame, as a phone of that aspect
+    would see it: narrower aspects keep the full height and start at ``offset`` (0..1 of the
+    free width); wider ones keep the full width and the rows around the middle. The goal moves
+    exactly (``x' = (x - x0) / w'``); a goal outside the window lies in the edge strip."""
+    image = _check_image(image)
+    h, w = image.shape[:2]
+    label = parse_label(label)
+    if far_x is None and label != UNKNOWN:   # a voted bin: move its centre
+        far_x = bin_center_x(label)
+    if aspect * h <= w:   # narrower than the frame: a vertical slice
+        cw = max(1, int(round(aspect * h)))
+        x0 = int(round(offset * (w - cw)))
+        out = image[:, x0:x0 + cw]
+        if far_x is None or label == UNKNOWN:
+            return np.ascontiguousarray(out), None, label
+        x = min(max((far_x * w - x0) / cw, 1e-6), 1 - 1e-6)
+        return np.ascontiguousarray(out), x, x_to_bin(x)
+    ch = max(1, int(round(w / aspect)))
+    y0 = (h - ch) // 2
+    return np.ascontiguousarray(image[y0:y0 + ch]), far_x, label
+
+
+def field_view(image: np.ndarray, far_x: float | None, far_y: float, label: int,
+               rng: np.random.Generator) -> tuple[np.ndarray, float | None, int, str]:
+    """One random view of a (true-aspect) photo as a user's phone might take it: mirrored
+    (p 0.5), rolled by up to 15 degrees (p 0.7), cut to a phone aspect (:data:`FIELD_ASPECTS`,
+    p 0.7) and corrupted (:mod:`.corrupt`, p 0.7). Returns the view, its goal, bin and a tag."""
+    from crossing_assist.data_tools.corrupt import CORRUPTIONS, corrupt
+
+    tags = []
+    if rng.random() < 0.5:
+        image, far_x, label = mirror(image, far_x, label)
+        tags.append("m")
+    if rng.random() < 0.7:
+        deg = float(rng.uniform(-15, 15))
+        image, far_x, label = roll(image, far_x, far_y, label, deg)
+        tags.append(f"roll={deg:+.0f}")
+    if rng.random() < 0.7:
+        aspects, weights = zip(*FIELD_ASPECTS)
+        aspect = float(aspects[rng.choice(len(aspects), p=np.asarray(weights) / sum(weights))])
+        image, far_x, label = crop_window(image, far_x, label, aspect, float(rng.random()))
+        tags.append(f"aspect={aspect:.2f}")
+    if rng.random() < 0.7:
+        name = str(rng.choice(list(CORRUPTIONS)))
+        image = corrupt(image, name, rng)
+        tags.append(name)
+    return image, far_x, parse_label(label), " ".join(tags)
+
+
+def portrait_views(image: np.ndarray, far_x: float | None, label: int, n: int = 3, aspect: float = 3 / 4,
+                   ) -> list[tuple[np.ndarray, float | None, int, bool]]:
+    """``n`` windows of ``aspect`` (3:4 portrait by default) cut from a landscape photo at
+    offsets spread evenly from its left to its right edge (:func:`crop_window`): (window, goal
+    x in it or None when out of view, bin, goal in view). Out-of-view goals lie in the edge strip."""
+    h, w = _check_image(image).shape[:2]
+    cw = max(1, int(round(aspect * h)))
+    out = []
+    for k in range(n):
+        off = k / (n - 1) if n > 1 else 0.5
+        win, x, b = crop_window(image, far_x, label, aspect, off)
+        x0 = int(round(off * (w - cw)))
+        inside = far_x is not None and b != UNKNOWN and 0.0 <= (far_x * w - x0) / cw < 1.0
+        out.append((win, x if inside else None, b, inside))
+    return out

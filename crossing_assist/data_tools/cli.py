@@ -61,6 +61,14 @@ def _cmd_stats(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_negatives(args: argparse.Namespace) -> int:
+    from crossing_assist.data_tools.negatives import NegativesConfig, make_negatives
+
+    path = make_negatives(NegativesConfig(Path(args.dataset), Path(args.out), args.seed, not args.quiet))
+    print(f"wrote {path}")
+    return 0
+
+
 def _cmd_synth(args: argparse.Namespace) -> int:
     from crossing_assist.data_tools import synth
     if args.video:
@@ -150,6 +158,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "them in place by relative path (checked on every read)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_import_ptl)
+
+    p = sub.add_parser("negatives", help="unknown views cut above the far kerb of labelled photos (needs far_y)")
+    p.add_argument("dataset", help="dataset folder (manifest.csv) whose rows carry far_y flags, e.g. imported PTL")
+    p.add_argument("--out", required=True, help="dataset folder to write")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_negatives)
 
     p = sub.add_parser("stats", help="counts per bin / action space / split, majority baseline, histogram")
     p.add_argument("dataset", help="dataset folder (with manifest.csv)")

@@ -27,6 +27,39 @@ def load_rgb(path: str | os.PathLike) -> np.ndarray:
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
 
 
+def flag_value(flags: tuple[str, ...], key: str) -> str | None:
+    """The value of a ``key=value`` manifest flag, or None."""
+    for f in flags:
+        if f.startswith(key + "="):
+            return f[len(key) + 1:]
+    return None
+
+
+def true_aspect(image: np.ndarray, flags: tuple[str, ...] = ()) -> np.ndarray:
+    """Undo a squash: an ``aspect=W:H`` flag resizes the frame to that aspect (keeping its
+    height) when its pixels say otherwise; frames without the flag are returned as they are."""
+    value = flag_value(flags, "aspect")
+    if value is None:
+        return image
+    try:
+        aw, ah = (float(v) for v in value.split(":"))
+        if not (aw > 0 and ah > 0):
+            raise ValueError
+    except ValueError:
+        raise ImageError(f"Invalid flag aspect={value!r}; expected W:H, e.g. aspect=4:3") from None
+    h, w = image.shape[:2]
+    want = max(1, int(round(h * aw / ah)))
+    if abs(want - w) <= 1:
+        return image
+    return cv2.resize(image, (want, h), interpolation=cv2.INTER_AREA if want < w else cv2.INTER_LINEAR)
+
+
+def load_frame(path: str | os.PathLike, flags: tuple[str, ...] = ()) -> np.ndarray:
+    """A dataset frame as the camera saw it: :func:`load_rgb` (EXIF orientation applied) then
+    :func:`true_aspect` for the row's flags."""
+    return true_aspect(load_rgb(path), flags)
+
+
 def save_rgb(path: str | os.PathLike, image: np.ndarray, *, quality: int = 92) -> Path:
     """Write an H×W×3 uint8 RGB array atomically; the format follows the suffix (.jpg, .png)."""
     path = Path(path)

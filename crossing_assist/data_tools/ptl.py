@@ -28,6 +28,9 @@ from crossing_assist.fileio import link_or_copy
 
 REQUIRED = ("image", "split", "photographer", "far_x", "bin12")
 IMAGE_MODES = ("copy", "reference")
+#: PTL's files are 224x224 copies of 4:3 photos squashed without a crop: ``aspect=4:3`` tells
+#: readers (:func:`crossing_assist.data_tools.images.load_frame`) to undo the squash.
+PTL_ASPECT = "4:3"
 LIGHTS = {"0": "red", "1": "green", "2": "countdown_green", "3": "countdown_blank", "4": "none"}
 
 
@@ -60,7 +63,13 @@ def _row_from_record(rec: dict[str, str]) -> tuple[Row, str]:
         label = parse_label(rec["bin12"] or "")
     except ValueError:
         raise ValueError(f"bin12 {rec['bin12']!r} invalid; valid: 1..12 or unknown") from None
-    flags = []
+    flags = [f"aspect={PTL_ASPECT}"]
+    far_y = (rec.get("far_y") or "").strip()
+    if far_y:
+        try:
+            flags.append(f"far_y={min(max(float(far_y), 0.0), 1.0):.4f}")
+        except ValueError:
+            raise ValueError(f"far_y {rec['far_y']!r} invalid; expected a number in 0..1") from None
     if (rec.get("blocked") or "").strip() == "1":
         flags.append("blocked")
     light = (rec.get("light") or "").strip()

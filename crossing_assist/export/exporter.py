@@ -18,6 +18,7 @@ Steps (:func:`export_bundle`):
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import shlex
@@ -38,6 +39,7 @@ from crossing_assist.export import calibrate as cal
 from crossing_assist.export.evaluate import conformal_report, predict_bundle
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
 from crossing_assist.export.quantize import INT8_MODES, quantize_convs
+from crossing_assist.geometry import PAD_RGB, TRAIN_FOV_DEG, Geometry
 
 PARITY_TOL = 1e-4
 
@@ -114,13 +116,13 @@ def load_labelled(data_dir: str, split: str, n_actions: int, progress: bool = Tr
     """Read a dataset split (manifest.csv) as raw frames + action labels."""
     from tqdm import tqdm
 
-    from crossing_assist.data_tools.images import load_rgb
+    from crossing_assist.data_tools.images import load_frame
     from crossing_assist.data_tools.manifest import read_manifest
 
     ds = read_manifest(data_dir).split(split)
     if len(ds.rows) < 2:
         raise ExportError(f"Invalid --calib-data {data_dir}: split {split!r} has {len(ds.rows)} frames; need >= 2")
-    images = [load_rgb(ds.image_path(r)) for r in tqdm(ds.rows, desc="frames", disable=not progress, unit="img")]
+    images = [load_frame(ds.image_path(r), r.flags) for r in tqdm(ds.rows, desc="frames", disable=not progress, unit="img")]
     actions = get_space(n_actions).bins_to_actions(ds.labels())
     return Labelled(images, actions, ds.far_x(), np.asarray([r.source for r in ds.rows]))
 
@@ -161,8 +163,15 @@ def _load_policy(run: str):
 
 
 def _spec(config: dict, samples: int, p: float, temperature: float = 1.0) -> GraphSpec:
+    """The graph of a policy config; a checkpoint from before the geometry contract (no
+    ``fit``) was trained on stretched frames and keeps ``stretch``."""
     return GraphSpec(size=tuple(int(s) for s in config["input_size"]), mean=tuple(config["mean"]),
-                     std=tuple(config["std"]), samples=samples, p=p, temperature=temperature)
+                     std=tuple(config["std"]), samples=samples, p=p, temperature=temperature,
+                     fit=config.get("fit", "stretch"), pad_rgb=tuple(config.get("pad_rgb", PAD_RGB)))
+
+
+def _geometry(config: dict, spec: GraphSpec) -> Geometry:
+    return Geometry(fit=spec.fit, pad_rgb=spec.pad_rgb, train_fov_deg=float(config.get("fov_deg", TRAIN_FOV_DEG)))
 
 
 def parity_check(policy, spec: GraphSpec, frames: np.ndarray) -> float:
@@ -171,7 +180,7 @@ def parity_check(policy, spec: GraphSpec, frames: np.ndarray) -> float:
     below 1 would magnify float32 rounding of large logits; it is one division, tested apart.)"""
     import onnxruntime as ort
 
-    det = GraphSpec(size=spec.size, mean=spec.mean, std=spec.std, samples=1, p=0.0, temperature=1.0)
+    det = dataclasses.replace(spec, samples=1, p=0.0, temperature=1.0)
     sess = ort.InferenceSession(model_bytes(export_graph(policy, det)))
     got = sess.run(["probs"], {"frames": frames})[0]
     with torch.no_grad():
@@ -201,13 +210,15 @@ def _meta(policy, ckpt: Path, spec: GraphSpec, calib: cal.CalibrationResult, pre
           metrics: dict, cfg: ExportConfig) -> dict:
     c = policy.config
     space = get_space(policy.n_actions)
+    geometry = _geometry(c, spec)
     return {
         "schema_version": SCHEMA_VERSION,
         "model_file": "model.onnx",
         "actions": {"n": space.n, "names": list(space.names), "bins": [list(g) for g in space.groups]},
-        "fov_deg": float(c.get("fov_deg", 90.0)),
+        "fov_deg": geometry.camera_fov_deg[0],
         "input": {"layout": "NHWC", "dtype": "uint8", "color": "RGB", "size": list(spec.size),
                   "mean": list(spec.mean), "std": list(spec.std), "resize": "bilinear, antialiased"},
+        "geometry": geometry.to_json(),
         "mc": {"samples": spec.samples, "p": spec.p},
         "calibration": calib.to_json(),
         "precision": precision,

@@ -3,8 +3,10 @@
 Layout of :class:`BundleGraph` (docs/contracts.md section 3):
 
     frames uint8 [N, H, W, 3] RGB (N, H, W dynamic)
-      -> float, /255, NCHW, bilinear resize (antialiased) to ``size``, (x - mean) / std
-      -> policy(x, samples=T, mc=p > 0): the backbone and the head's deterministic part run
+      -> float, /255, NCHW, fitted to the canvas ``size``: ``letterbox`` (bilinear antialiased
+         resize to the box of :func:`crossing_assist.geometry.letterbox_box`, centred, padded
+         with ``pad_rgb``) or ``stretch``; (x - mean) / std; the content window (x0, x1)
+      -> policy(x, samples=T, mc=p > 0, window): the head reads its 12 strips inside the window: the backbone and the head's deterministic part run
          once; the T dropout samples are folded into the batch inside the head with explicit
          ``rand_like(x) >= p`` masks (exported as RandomUniformLike, which onnxruntime's graph
          optimiser keeps, unlike Dropout nodes)
@@ -27,6 +29,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from crossing_assist.bundle import INPUT_NAME, OUTPUT_NAMES, SCHEMA_VERSION, embedded_meta
+from crossing_assist.geometry import FITS, PAD_RGB
 
 OPSET = 18
 MAX_SIDE = 8192
@@ -44,8 +47,12 @@ class GraphSpec:
     samples: int = 16
     p: float = 0.5
     temperature: float = 1.0
+    fit: str = "letterbox"
+    pad_rgb: tuple[int, int, int] = PAD_RGB
 
     def __post_init__(self) -> None:
+        if self.fit not in FITS:
+            raise ValueError(f"Unknown fit: {self.fit!r}; valid: {', '.join(FITS)}")
         if self.samples < 1:
             raise ValueError(f"Invalid samples: {self.samples}; valid: >= 1")
         if not 0.0 <= self.p < 1.0:
@@ -90,16 +97,32 @@ class BundleGraph(nn.Module):
             prm.requires_grad_(False)
         self.register_buffer("mean", torch.tensor(spec.mean, dtype=torch.float32).view(1, 3, 1, 1))
         self.register_buffer("std", torch.tensor(spec.std, dtype=torch.float32).view(1, 3, 1, 1))
+        self.register_buffer("pad", torch.tensor(spec.pad_rgb, dtype=torch.float32).view(1, 3, 1, 1) / 255.0)
 
-    def preprocess(self, frames: torch.Tensor) -> torch.Tensor:
-        """uint8 [N, H, W, 3] RGB -> normalised float [N, 3, h, w] at ``spec.size``."""
+    def preprocess(self, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """uint8 [N, H, W, 3] RGB -> (normalised float [N, 3, h, w] at ``spec.size``, the
+        content window [N, 2] as fractions of the canvas width)."""
         x = frames.permute(0, 3, 1, 2).to(torch.float32) / 255.0
-        x = F.interpolate(x, size=tuple(self.spec.size), mode="bilinear", align_corners=False, antialias=True)
-        return (x - self.mean) / self.std
+        n, _, h, w = x.shape
+        ch, cw = self.spec.size
+        if self.spec.fit == "stretch":
+            x = F.interpolate(x, size=(ch, cw), mode="bilinear", align_corners=False, antialias=True)
+            window = torch.tensor([0.0, 1.0]).expand(n, 2)
+            return (x - self.mean) / self.std, window
+        # crossing_assist.geometry.letterbox_box, in symbolic integers (exported as shape arithmetic)
+        new_w = torch.sym_max(1, torch.sym_min(cw, (w * ch * 2 + h) // (2 * h)))
+        new_h = torch.sym_max(1, torch.sym_min(ch, (h * cw * 2 + w) // (2 * w)))
+        top, left = (ch - new_h) // 2, (cw - new_w) // 2
+        x = F.interpolate(x, size=(new_h, new_w), mode="bilinear", align_corners=False, antialias=True)
+        x = F.pad(x - self.pad, (left, cw - new_w - left, top, ch - new_h - top), value=0.0) + self.pad
+        edges = torch.stack([torch.scalar_tensor(left), torch.scalar_tensor(left + new_w)]).to(torch.float32)
+        window = (edges / cw).view(1, 2).expand(n, 2)
+        return (x - self.mean) / self.std, window
 
     def logits(self, frames: torch.Tensor) -> torch.Tensor:
         """Raw (untempered) logits [T, N, A] of the T samples."""
-        return self.policy(self.preprocess(frames), samples=self.spec.samples, mc=self.spec.p > 0)
+        x, window = self.preprocess(frames)
+        return self.policy(x, samples=self.spec.samples, mc=self.spec.p > 0, window=window)
 
     def forward(self, frames: torch.Tensor) -> tuple[torch.Tensor, ...]:
         return mc_summaries(self.logits(frames), self.spec.temperature)

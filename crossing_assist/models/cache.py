@@ -2,10 +2,11 @@
 
 A cache entry is a folder ``<cache_dir>/<key>/`` holding ``feats.npy`` (float16,
 M x C x h x w, the output of the backbone's frozen blocks), ``labels.npy`` (int64 bins 0..12),
-``far_x.npy`` (float64, nan when unknown), ``row.npy`` (index of the dataset row each sample
+``far_x.npy`` (float64, nan when unknown), ``window.npy`` (float32 M x 2, the frame's extent
+on the canvas), ``row.npy`` (index of the dataset row each sample
 came from), ``variant.npy`` (index into the variant list) and ``meta.json``. The key hashes
 everything that changes the features: backbone name, weights source *and* file fingerprint,
-number of frozen blocks, input size, mean/std, the variants (mirroring, yaw angles, FOV) and
+number of frozen blocks, input size, mean/std, the variants (mirroring, yaw angles, field views and their seed, FOV), the fit and
 the dataset rows (image paths, labels, file sizes and mtimes). ``meta.json`` is written last
 (atomically), so a half-written entry is never used.
 """
@@ -31,11 +32,12 @@ from .data import Variant, load_variants, normalise
 @dataclass(frozen=True)
 class FeatureSet:
     """Cached samples: ``feats`` M x C x h x w (float16, memory-mapped), ``labels`` (M,) bins,
-    ``far_x`` (M,) in [0, 1] or nan, ``row`` (M,) dataset row index, ``variant`` (M,)."""
+    ``far_x`` (M,) in [0, 1] or nan, ``window`` (M, 2) content window, ``row`` (M,) dataset row index, ``variant`` (M,)."""
 
     feats: np.ndarray
     labels: np.ndarray
     far_x: np.ndarray
+    window: np.ndarray
     row: np.ndarray
     variant: np.ndarray
     path: Path
@@ -54,7 +56,8 @@ def _dataset_fingerprint(ds: Dataset) -> str:
 
 
 def cache_key(backbone: Backbone, frozen_blocks: int, size: tuple[int, int],
-              variants: tuple[Variant, ...], fov_deg: float, ds: Dataset) -> str:
+              variants: tuple[Variant, ...], fov_deg: float, ds: Dataset, fit: str = "stretch",
+              seed: int = 0) -> str:
     """A hex digest naming the cache entry (see the module docstring for what it covers)."""
     f = backbone.facts
     spec = {
@@ -64,6 +67,8 @@ def cache_key(backbone: Backbone, frozen_blocks: int, size: tuple[int, int],
         "variants": [[v.mirrored, v.yaw_deg] for v in variants], "fov_deg": fov_deg,
         "data": _dataset_fingerprint(ds), "version": 1,
     }
+    if fit != "stretch" or any(v.field >= 0 for v in variants):   # keys of older entries unchanged
+        spec.update(fit=fit, fields=[v.field for v in variants], seed=seed, version=2)
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:24]
 
 
@@ -77,16 +82,20 @@ def _weights_fingerprint(backbone: Backbone, frozen_blocks: int) -> str:
 
 def _open(path: Path) -> FeatureSet:
     load = lambda n, **kw: np.load(path / n, **kw)  # noqa: E731
-    return FeatureSet(load("feats.npy", mmap_mode="r"), load("labels.npy"), load("far_x.npy"),
+    labels = load("labels.npy")
+    window = (load("window.npy") if (path / "window.npy").is_file()
+              else np.tile(np.asarray([[0.0, 1.0]], np.float32), (len(labels), 1)))
+    return FeatureSet(load("feats.npy", mmap_mode="r"), labels, load("far_x.npy"), window,
                       load("row.npy"), load("variant.npy"), path)
 
 
 @torch.no_grad()
 def compute_features(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: tuple[int, int],
                      variants: tuple[Variant, ...], fov_deg: float, cache_dir: Path,
-                     batch_size: int = 32, progress: bool = True, desc: str = "features") -> FeatureSet:
+                     batch_size: int = 32, progress: bool = True, desc: str = "features",
+                     fit: str = "stretch", seed: int = 0) -> FeatureSet:
     """Features of blocks ``[0, frozen_blocks)`` for every row x variant, cached on disk."""
-    key = cache_key(backbone, frozen_blocks, size, variants, fov_deg, ds)
+    key = cache_key(backbone, frozen_blocks, size, variants, fov_deg, ds, fit, seed)
     path = Path(cache_dir) / key
     if (path / "meta.json").is_file():
         return _open(path)
@@ -98,16 +107,16 @@ def compute_features(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: 
     probe = backbone.forward_until(torch.zeros(1, 3, *size), frozen_blocks)
     feats = np.lib.format.open_memmap(tmp / "feats.npy", mode="w+", dtype=np.float16,
                                       shape=(n, *probe.shape[1:]))
-    base = _shallower(backbone, frozen_blocks, size, variants, fov_deg, ds, Path(cache_dir))
+    base = _shallower(backbone, frozen_blocks, size, variants, fov_deg, ds, Path(cache_dir), fit, seed)
     if base is not None:  # run only blocks [k, frozen) on an existing shallower entry
         k, src = base
         for i in tqdm(range(0, n, batch_size), desc=f"{desc} (from block {k})", disable=not progress):
             x = torch.from_numpy(np.array(src.feats[i:i + batch_size])).float()
             feats[i:i + batch_size] = backbone.forward_from_to(x, k, frozen_blocks).numpy().astype(np.float16)
-        for name in ("labels", "far_x", "row", "variant"):
+        for name in ("labels", "far_x", "window", "row", "variant"):
             np.save(tmp / f"{name}.npy", getattr(src, name))
         return _finish(feats, tmp, path, key, n, backbone, frozen_blocks, size, variants, ds)
-    labels, far_x, rows, vids = [], [], [], []
+    labels, far_x, windows, rows, vids = [], [], [], [], []
     buf: list[np.ndarray] = []
     done = 0
 
@@ -120,10 +129,11 @@ def compute_features(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: 
         buf.clear()
 
     for i, row in enumerate(tqdm(ds.rows, desc=desc, disable=not progress, unit="img")):
-        for j, (img, fx, lab) in enumerate(load_variants(ds, row, size, variants, fov_deg)):
+        for j, (img, fx, lab, win) in enumerate(load_variants(ds, row, size, variants, fov_deg, fit, seed)):
             buf.append(img)
             labels.append(lab)
             far_x.append(fx)
+            windows.append(win)
             rows.append(i)
             vids.append(j)
             if len(buf) >= batch_size:
@@ -132,16 +142,18 @@ def compute_features(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: 
         flush()
     np.save(tmp / "labels.npy", np.asarray(labels, np.int64))
     np.save(tmp / "far_x.npy", np.asarray(far_x, np.float64))
+    np.save(tmp / "window.npy", np.asarray(windows, np.float32).reshape(-1, 2))
     np.save(tmp / "row.npy", np.asarray(rows, np.int64))
     np.save(tmp / "variant.npy", np.asarray(vids, np.int64))
     return _finish(feats, tmp, path, key, n, backbone, frozen_blocks, size, variants, ds)
 
 
 def _shallower(backbone: Backbone, frozen_blocks: int, size: tuple[int, int], variants: tuple[Variant, ...],
-               fov_deg: float, ds: Dataset, cache_dir: Path) -> tuple[int, FeatureSet] | None:
+               fov_deg: float, ds: Dataset, cache_dir: Path, fit: str = "stretch",
+               seed: int = 0) -> tuple[int, FeatureSet] | None:
     """The deepest complete entry for the same frames and weights with fewer frozen blocks."""
     for k in range(frozen_blocks - 1, 0, -1):
-        p = cache_dir / cache_key(backbone, k, size, variants, fov_deg, ds)
+        p = cache_dir / cache_key(backbone, k, size, variants, fov_deg, ds, fit, seed)
         if (p / "meta.json").is_file():
             return k, _open(p)
     return None

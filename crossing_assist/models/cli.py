@@ -74,8 +74,12 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--p", type=float, default=d["p"], help="MC dropout probability of the head")
     p.add_argument("--no-mirror", dest="mirror", action="store_false", help="do not add mirrored frames")
     p.add_argument("--yaw", type=_floats, default=d["yaw"], help="fixed yaw angles in degrees, e.g. 8,16 (each +-)")
-    p.add_argument("--fov", dest="fov_deg", type=float, default=d["fov_deg"], help="camera field of view (deg)")
-    p.add_argument("--input-size", type=_size, default=d["input_size"], help="H or HxW, e.g. 224x298 (4:3)")
+    p.add_argument("--field", type=int, default=d["field"],
+                   help="random field views per frame: roll, phone aspect (letterboxed), corruption")
+    p.add_argument("--fov", dest="fov_deg", type=float, default=d["fov_deg"],
+                   help="horizontal field of view of the training photos (deg)")
+    p.add_argument("--input-size", type=_size, default=d["input_size"], help="canvas H or HxW, e.g. 168x224 (4:3)")
+    p.add_argument("--fit", default=d["fit"], help="letterbox (default) | stretch: how frames meet the canvas")
     p.add_argument("--four-three", action="store_true", help="shortcut for --input-size 224x298")
     p.add_argument("--unfreeze", type=int, default=d["unfreeze"], help="train the last N backbone blocks")
     p.add_argument("--balance", default=d["balance"], help="none | weights | sampler")
@@ -88,6 +92,8 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--cache-dir", default=d["cache_dir"])
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from weights/last.pt")
+    p.add_argument("--cv", choices=("source",), help="leave-one-source-out cross-validation: one run per "
+                   "train source in OUT/fold-SOURCE, mean +- sd in OUT/cv.json (finished folds are kept)")
     return p
 
 
@@ -101,11 +107,17 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         cfg = TrainConfig(
             data=a.data, out=a.out, extra_data=tuple(a.extra_data), backbone=a.backbone, weights=a.weights, head=a.head, actions=a.actions,
             epochs=a.epochs, batch_size=a.batch_size, optimizer=a.optimizer, lr=a.lr,
-            weight_decay=a.weight_decay, p=a.p, mirror=a.mirror, yaw=tuple(a.yaw), fov_deg=a.fov_deg,
-            input_size=(224, 298) if a.four_three else a.input_size, unfreeze=a.unfreeze, balance=a.balance,
+            weight_decay=a.weight_decay, p=a.p, mirror=a.mirror, yaw=tuple(a.yaw), field=a.field, fov_deg=a.fov_deg,
+            input_size=(224, 298) if a.four_three else a.input_size, fit=a.fit, unfreeze=a.unfreeze, balance=a.balance,
             smoothing=a.smoothing, aux_x=a.aux_x, select_on=a.select_on,
             holdout=tuple(s.strip() for s in a.holdout.split(",") if s.strip()), seed=a.seed,
             threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
+        if a.cv:
+            from .crossval import cross_validate, format_cv
+
+            summary = cross_validate(cfg, resume=a.resume)
+            print(format_cv(summary))
+            return 0
         out = train(cfg, resume=a.resume)
         best = out / "weights" / "best.pt"
         print(f"trained {cfg.epochs} epochs -> {best} ({best.stat().st_size / 1e6:.1f} MB)")
@@ -125,6 +137,11 @@ def eval_parser() -> argparse.ArgumentParser:
     p.add_argument("--examples", type=int, default=12, help="frames on the example sheet")
     p.add_argument("--tta-mirror", action="store_true", help="average each frame with its mirror image (checkpoints)")
     p.add_argument("--actions", type=int, help="score a 13-action model as 4 or 8 actions (probabilities summed per action)")
+    p.add_argument("--no-listen", dest="listen", action="store_false",
+                   help="bundles: skip playing frames through the runtime (beacon-on, confidently wrong, silence)")
+    p.add_argument("--portrait", type=int, default=3, help="bundles: 3:4 portrait windows per photo (0 = none)")
+    p.add_argument("--negatives", help="bundles: dataset of no-crossing frames (its SPLIT rows), for the silence rate")
+    p.add_argument("--clip-seconds", type=float, default=1.0, help="bundles: each photo plays as a still clip this long")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--cache-dir", default=_DEFAULTS["cache_dir"])
     p.add_argument("--quiet", action="store_true")
@@ -142,10 +159,21 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         if bool(a.run) == bool(a.bundle):
             raise ConfigError("Invalid arguments: give exactly one of --run DIR and --bundle DIR")
         cfg = EvalConfig(run=a.run, bundle=a.bundle, data=a.data, split=a.split, out=a.out, samples=a.samples,
-                         examples=a.examples, tta_mirror=a.tta_mirror, actions=a.actions, threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
+                         examples=a.examples, tta_mirror=a.tta_mirror, actions=a.actions, listen=a.listen,
+                         portrait=a.portrait, negatives=a.negatives, clip_seconds=a.clip_seconds,
+                         threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
         out, m = evaluate(cfg)
         print(f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f}), "
               f"bin MAE {m['bin_mae']:.3f} -> {out / 'metrics.json'}")
+        for name in ("landscape", "portrait"):
+            v = m.get("listen", {}).get(name)
+            if v:
+                f = lambda x, p=".3f": "n/a" if x is None else format(x, p)  # noqa: E731
+                print(f"{name:>9} (heard, {v['frames_with_crossing']} + {v['frames_without_crossing']} no-crossing "
+                      f"frames): accuracy {f(v['accuracy'])}, bin MAE {f(v['bin_mae'])}, far-x error "
+                      f"{f(v['far_x_error'], '.4f')}, beacon on {f(v['beacon_on'])} (goal in view "
+                      f"{f(v['beacon_on_goal_in_view'])}), confidently wrong {f(v['confidently_wrong'], '.4f')}, "
+                      f"silence off-crossing {f(v['silence_no_crossing'])}")
         if "conformal" in m:
             c = m["conformal"]
             print(f"conformal sets: coverage {c['coverage']:.3f} (target {c['target_coverage']:.2f}), "

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 
 from ..actions import VALID_SPACES
+from ..geometry import FITS, TRAIN_FOV_DEG
 from .backbones import list_backbones
 from .heads import HEAD_KINDS
 
@@ -38,8 +39,10 @@ class TrainConfig:
     p: float = 0.5                      # MC dropout probability of the head
     mirror: bool = True
     yaw: tuple[float, ...] = ()         # fixed yaw angles (degrees), each used as +-angle
-    fov_deg: float = 90.0
-    input_size: tuple[int, int] | None = None   # (H, W); None = the backbone's own
+    field: int = 0                      # random field views per frame (roll, phone aspect, corruption)
+    fov_deg: float = TRAIN_FOV_DEG      # horizontal FOV assumed for the training photos
+    input_size: tuple[int, int] | None = None   # (H, W) canvas; None = the backbone's own
+    fit: str = "letterbox"              # how a frame meets the canvas: letterbox | stretch
     unfreeze: int = 0                   # last backbone blocks trained (0 = frozen backbone)
     balance: str = "none"               # none | weights (class-weighted loss) | sampler
     smoothing: float = 0.0              # label mass moved to the neighbouring bins
@@ -69,6 +72,8 @@ class TrainConfig:
             (self.select_on != "holdout" or bool(self.holdout), "select_on holdout needs --holdout SOURCE"),
             (all(0 < abs(a) < 45 for a in self.yaw), f"yaw {self.yaw}; valid: angles with 0 < |a| < 45"),
             (self.threads >= 1, f"threads {self.threads}; valid: >= 1"),
+            (self.fit in FITS, f"fit {self.fit!r}; valid: {', '.join(FITS)}"),
+            (0 <= self.field <= 16, f"field {self.field}; valid: 0..16"),
             (self.input_size is None or min(self.input_size) >= 16, f"input_size {self.input_size}; valid: >= 16 px"),
         ]
         for ok, msg in check:

@@ -1,9 +1,16 @@
 """Frames -> normalised tensors, and the fixed augmentation *variants* of each frame.
 
-A variant is ``(mirrored, yaw_deg)``: the frame flipped left-right (bin k -> 13 - k) and/or
-re-rendered as if the camera had turned by ``yaw_deg`` (an exact homography; the label moves
-predictably, goals turned out of the frame become ``unknown``). Variants are fixed (not
-random per epoch) so that frozen-backbone features can be computed once and cached.
+A variant is ``(mirrored, yaw_deg, field)``: the frame flipped left-right (bin k -> 13 - k)
+and/or re-rendered as if the camera had turned by ``yaw_deg`` (an exact homography; the label
+moves predictably, goals turned out of the frame become ``unknown``); ``field >= 0`` instead
+draws a *field view* (:func:`crossing_assist.data_tools.augment.field_view`: mirror, roll, a
+phone aspect, a corruption) from a generator seeded by (seed, field, image path). Variants
+are fixed (not random per epoch) so that frozen-backbone features can be computed once and
+cached.
+
+Every variant is then fitted to the canvas as the bundle's graph will fit a camera frame:
+``letterbox`` (:mod:`crossing_assist.geometry`; the frame's content window on the canvas is
+returned with it) or ``stretch`` (the schema-1 way).
 """
 
 from __future__ import annotations
@@ -13,10 +20,13 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+import zlib
+
 from ..actions import UNKNOWN
 from ..data_tools import augment
-from ..data_tools.images import load_rgb
+from ..data_tools.images import flag_value, load_frame, load_rgb
 from ..data_tools.manifest import Dataset, Row
+from ..geometry import PAD_RGB, content_window, letterbox
 
 
 @dataclass(frozen=True)
@@ -25,17 +35,21 @@ class Variant:
 
     mirrored: bool = False
     yaw_deg: float = 0.0
+    field: int = -1          # >= 0: the field-th random field view (mirror/yaw unused)
 
     @property
     def tag(self) -> str:
+        if self.field >= 0:
+            return f"field{self.field}"
         return f"{'m' if self.mirrored else 'o'}{self.yaw_deg:+g}"
 
 
-def make_variants(mirror: bool, yaw_angles: tuple[float, ...] = ()) -> tuple[Variant, ...]:
-    """Identity (+ mirrored) x (0 and +-each yaw angle); identity first."""
+def make_variants(mirror: bool, yaw_angles: tuple[float, ...] = (), field: int = 0) -> tuple[Variant, ...]:
+    """Identity (+ mirrored) x (0 and +-each yaw angle), then ``field`` random field views;
+    identity first."""
     flips = (False, True) if mirror else (False,)
     angles = (0.0,) + tuple(s * float(a) for a in yaw_angles for s in (1, -1) if a)
-    return tuple(Variant(f, a) for f in flips for a in angles)
+    return tuple(Variant(f, a) for f in flips for a in angles) + tuple(Variant(field=i) for i in range(field))
 
 
 def resize_rgb(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -65,12 +79,33 @@ def apply_variant(image: np.ndarray, far_x: float | None, label: int, v: Variant
     return image, far_x, label
 
 
+def _field_rng(seed: int, field: int, image: str) -> np.random.Generator:
+    return np.random.default_rng([seed, field, zlib.crc32(image.encode())])
+
+
 def load_variants(ds: Dataset, row: Row, size: tuple[int, int], variants: tuple[Variant, ...],
-                  fov_deg: float) -> list[tuple[np.ndarray, float, int]]:
-    """Every variant of one row: (image size x 3 uint8, far_x or nan, bin)."""
-    base = resize_rgb(load_rgb(ds.image_path(row)), size)
+                  fov_deg: float, fit: str = "stretch", seed: int = 0,
+                  ) -> list[tuple[np.ndarray, float, int, tuple[float, float]]]:
+    """Every variant of one row, fitted to the canvas ``size`` (H, W): (image H x W x 3 uint8,
+    far_x or nan, bin, content window (x0, x1) as fractions of the canvas width)."""
     out = []
+    if fit == "stretch":
+        base = resize_rgb(load_rgb(ds.image_path(row)), size)
+        for v in variants:
+            img, fx, lab = apply_variant(base, row.far_x, row.label, v, fov_deg)
+            out.append((img, np.nan if fx is None or lab == UNKNOWN else float(fx), int(lab), (0.0, 1.0)))
+        return out
+    base = load_frame(ds.image_path(row), row.flags)
+    scale = 2 * max(size) / max(base.shape[:2])
+    if scale < 1:  # keep a margin over the canvas for crops, but do not warp megapixels
+        base = resize_rgb(base, (max(8, round(base.shape[0] * scale)), max(8, round(base.shape[1] * scale))))
+    far_y = float(flag_value(row.flags, "far_y") or 0.5)
     for v in variants:
-        img, fx, lab = apply_variant(base, row.far_x, row.label, v, fov_deg)
-        out.append((img, np.nan if fx is None or lab == UNKNOWN else float(fx), int(lab)))
+        if v.field >= 0:
+            img, fx, lab, _ = augment.field_view(base, row.far_x, far_y, row.label, _field_rng(seed, v.field, row.image))
+        else:
+            img, fx, lab = apply_variant(base, row.far_x, row.label, v, fov_deg)
+        window = content_window(img.shape[0], img.shape[1], size)
+        out.append((letterbox(img, size, PAD_RGB), np.nan if fx is None or lab == UNKNOWN else float(fx),
+                    int(lab), window))
     return out

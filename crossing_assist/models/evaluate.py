@@ -18,8 +18,9 @@ import numpy as np
 import torch
 
 from ..actions import get_space
-from ..data_tools.images import load_rgb
+from ..data_tools.images import load_frame
 from ..data_tools.manifest import Dataset, atomic_write_text, read_manifest
+from ..geometry import content_window, letterbox
 from .cache import compute_features
 from .checkpoint import load_checkpoint, load_policy
 from .config import ConfigError
@@ -42,6 +43,10 @@ class EvalConfig:
     examples: int = 12
     tta_mirror: bool = False
     actions: int | None = None      # score a 13-action model in a coarser space (4 or 8)
+    listen: bool = True             # bundles: play each frame through the runtime (what the user hears)
+    portrait: int = 3               # bundles: 3:4 portrait windows per photo, reported beside landscape
+    negatives: str | None = None    # a dataset of no-crossing frames (its SPLIT rows) for the silence rate
+    clip_seconds: float = 1.0       # each photo is played as a still clip this long at 10 fps
     threads: int = 2
     cache_dir: str = "runs/.cache"
     progress: bool = True
@@ -55,6 +60,10 @@ class EvalConfig:
             raise ConfigError(f"Invalid examples {self.examples}; valid: >= 0")
         if self.actions not in (None, 4, 8, 13):
             raise ConfigError(f"Invalid actions {self.actions}; valid: 4, 8, 13")
+        if not 0 <= self.portrait <= 12:
+            raise ConfigError(f"Invalid portrait {self.portrait}; valid: 0..12 windows a photo")
+        if not 0.1 <= self.clip_seconds <= 10:
+            raise ConfigError(f"Invalid clip_seconds {self.clip_seconds}; valid: 0.1..10")
 
 
 def _checkpoint_path(run: str) -> Path:
@@ -88,11 +97,15 @@ def activation_maps(policy: Policy, images: list[np.ndarray], actions: np.ndarra
     thesis heads: h x w score / CAM map)."""
     policy.eval()
     size = tuple(policy.config["input_size"])
-    x = torch.from_numpy(normalise(np.stack([resize_rgb(i, size) for i in images]),
-                                   policy.config["mean"], policy.config["std"]))
+    if policy.config.get("fit", "stretch") == "letterbox":
+        fitted = [letterbox(i, size) for i in images]
+        window = torch.tensor([content_window(i.shape[0], i.shape[1], size) for i in images], dtype=torch.float32)
+    else:
+        fitted, window = [resize_rgb(i, size) for i in images], None
+    x = torch.from_numpy(normalise(np.stack(fitted), policy.config["mean"], policy.config["std"]))
     feats = policy.backbone.forward_features(x)
     head = policy.head
-    maps = head.column_maps(feats)[:, :, None, :] if hasattr(head, "column_maps") else head.score_maps(feats)
+    maps = head.column_maps(feats, window)[:, :, None, :] if hasattr(head, "column_maps") else head.score_maps(feats)
     return [maps[i, int(a)].numpy() for i, a in enumerate(actions)]
 
 
@@ -103,8 +116,9 @@ def _eval_checkpoint(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, 
     c = policy.config
     start = int(c.get("frozen_blocks", len(policy.backbone.blocks)))
     fs = compute_features(policy.backbone, start, part, tuple(c["input_size"]), make_variants(cfg.tta_mirror),
-                          float(c["fov_deg"]), Path(cfg.cache_dir), progress=cfg.progress, desc=f"features {cfg.split}")
-    split = Split(torch.from_numpy(np.array(fs.feats)), fs.labels, fs.far_x)
+                          float(c["fov_deg"]), Path(cfg.cache_dir), progress=cfg.progress, desc=f"features {cfg.split}",
+                          fit=c.get("fit", "stretch"))
+    split = Split(torch.from_numpy(np.array(fs.feats)), fs.labels, fs.far_x, torch.from_numpy(np.asarray(fs.window)))
     probs = predict_split(policy, split, start, samples=cfg.samples)
     if cfg.tta_mirror:  # average each frame with its mirror image (actions mapped back)
         space = get_space(policy.n_actions)
@@ -125,7 +139,7 @@ def _eval_bundle(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, Any]
     from ..bundle import read_bundle
 
     bundle = read_bundle(cfg.bundle)
-    images = [load_rgb(part.image_path(r)) for r in part.rows]
+    images = [load_frame(part.image_path(r), r.flags) for r in part.rows]
     out = predict_bundle(cfg.bundle, images, progress=cfg.progress)
     majority = bundle.training.get("majority_action")
     info = {"source": "bundle", "bundle": str(cfg.bundle), "samples": int(bundle.mc.samples),
@@ -138,6 +152,69 @@ def _bundle_conformal(bundle, probs: np.ndarray, labels: np.ndarray) -> dict:
     from ..export.evaluate import bundle_conformal_report
 
     return bundle_conformal_report(bundle, probs, labels)
+
+
+def _views(cfg: EvalConfig, part: Dataset) -> dict[str, list[tuple[np.ndarray, float | None, int, bool]]]:
+    """The frames a user's phone would give: each photo as taken (landscape) and, with
+    ``cfg.portrait``, its portrait windows; no-crossing frames from ``cfg.negatives`` in both."""
+    from ..data_tools.augment import portrait_views
+
+    rows = [(part, r) for r in part.rows]
+    if cfg.negatives:
+        neg = read_manifest(cfg.negatives).split(cfg.split)
+        rows += [(neg, r) for r in neg.rows if r.label == 0]
+    views: dict[str, list] = {"landscape": []}
+    if cfg.portrait:
+        views["portrait"] = []
+    for ds, r in rows:
+        img = load_frame(ds.image_path(r), r.flags)
+        views["landscape"].append((img, r.far_x, r.label, r.label != 0))
+        if cfg.portrait:
+            views["portrait"] += portrait_views(img, r.far_x, r.label, cfg.portrait)
+    return views
+
+
+def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
+    """What the user hears, per view (landscape / portrait): the runtime's decisions on every
+    frame played as a still clip, the model's own accuracy on the same frames, and the
+    risk-coverage curve of the gate threshold (landscape + no-crossing frames)."""
+    from tqdm import tqdm
+
+    from ..runtime.engine import Engine
+    from ..runtime.listen import Listener, choose_threshold, summarise
+    from .metrics import compute_metrics
+    from .plots import plot_risk_coverage
+
+    engine = Engine(cfg.bundle, threads=cfg.threads)
+    space = engine.space
+    result: dict = {"clip_seconds": cfg.clip_seconds, "fps": 10.0}
+    listeners = {}
+    for name, frames in _views(cfg, _split(cfg)).items():
+        lis = Listener(engine, cfg.clip_seconds, 10.0)
+        for img, _, lab, _ in tqdm(frames, desc=f"listen {name}", disable=not cfg.progress, unit="frame"):
+            lis.add(img, lab)
+        listeners[name] = lis
+        known = np.asarray([lab != 0 for _, _, lab, _ in frames])
+        probs = np.stack([c[0].probs if c[0].ok else np.full(space.n, 1 / space.n) for c in lis.clips])
+        labels = space.bins_to_actions(np.asarray([lab for _, _, lab, _ in frames]))
+        far_x = np.asarray([np.nan if fx is None else fx for _, fx, _, _ in frames], float)
+        m = compute_metrics(probs[known], labels[known], space.n, far_x[known]) if known.any() else {}
+        heard = lis.heard()
+        entry = {k: m.get(k) for k in ("n", "accuracy", "bin_mae", "far_x_error", "majority_accuracy")}
+        entry.update(summarise(heard))
+        inside = [h for h, (_, _, _, ins) in zip(heard, frames) if ins]
+        entry["beacon_on_goal_in_view"] = float(np.mean([h.on for h in inside])) if inside else None
+        result[name] = entry
+    lis = listeners["landscape"]
+    t0 = float(engine.decision_config().threshold)
+    grid = sorted({t0, *(t0 * np.geomspace(0.15, 4.0, 23))})
+    curve = lis.risk_coverage(grid)
+    result["risk_coverage"] = curve
+    result["bundle_threshold"] = t0
+    result["best_threshold_here"] = choose_threshold(curve)
+    plot_risk_coverage(curve, t0, out / "risk_coverage.png",
+                       f"{cfg.split}: what the user hears ({len(lis.clips)} frames)")
+    return result
 
 
 def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
@@ -173,6 +250,8 @@ def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
     m.update({"split": cfg.split, "data": str(cfg.data), **info})
     out = Path(cfg.out) if cfg.out else default_out
     out.mkdir(parents=True, exist_ok=True)
+    if cfg.bundle is not None and cfg.listen and not grouped:
+        m["listen"] = listen_bundle(cfg, out)
     atomic_write_text(out / "metrics.json", json.dumps(m, indent=1, allow_nan=True))
     plot_confusion(np.array(m["confusion"]), m["names"], out / "confusion_matrix.png",
                    f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f})")
@@ -180,7 +259,7 @@ def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
     if cfg.examples:
         pred = probs.argmax(1)
         idx = _example_indices(pred, labels, cfg.examples)
-        images = [load_rgb(part.image_path(part.rows[i])) for i in idx]
+        images = [load_frame(part.image_path(part.rows[i]), part.rows[i].flags) for i in idx]
         maps = activation_maps(policy, images, pred[idx]) if policy is not None and not grouped else [None] * len(idx)
         plot_examples(images, probs[idx], labels[idx], n_actions, maps, out / "examples.png")
     return out, m

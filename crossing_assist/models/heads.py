@@ -66,18 +66,23 @@ class Head(nn.Module):
     def trunk(self, features: torch.Tensor) -> torch.Tensor:  # deterministic, once per frame
         raise NotImplementedError
 
-    def tail(self, z: torch.Tensor, mc: bool) -> torch.Tensor:  # stochastic, per sample
+    def tail(self, z: torch.Tensor, mc: bool, window: torch.Tensor | None = None) -> torch.Tensor:
+        """Stochastic, per sample. ``window`` [N, 2]: the frame's extent on the canvas (heads
+        that localise read their strips there; the others ignore it)."""
         raise NotImplementedError
 
-    def forward(self, features: torch.Tensor, samples: int = 1, mc: bool | None = None) -> torch.Tensor:
+    def forward(self, features: torch.Tensor, samples: int = 1, mc: bool | None = None,
+                window: torch.Tensor | None = None) -> torch.Tensor:
         mc = self.training if mc is None else bool(mc)
         z = self.trunk(features)
         n = z.shape[0]
         if not mc:  # every sample is the same: compute one, repeat it (exactly identical)
-            return self.tail(z, False).unsqueeze(0).expand(samples, n, self.n_actions)
+            return self.tail(z, False, window).unsqueeze(0).expand(samples, n, self.n_actions)
         if samples > 1:
             z = z.unsqueeze(0).expand(samples, *z.shape).reshape(samples * n, *z.shape[1:])
-        logits = self.tail(z, True)
+            if window is not None:
+                window = window.unsqueeze(0).expand(samples, n, 2).reshape(samples * n, 2)
+        logits = self.tail(z, True, window)
         return logits.reshape(samples, n, self.n_actions)
 
 
@@ -99,11 +104,11 @@ class SpatialMLPHead(Head):
         z = F.interpolate(z, size=(1, self.columns), mode="bilinear", align_corners=False)
         return z.flatten(1)                                               # N x (width * 12)
 
-    def tail(self, z: torch.Tensor, mc: bool) -> torch.Tensor:
+    def tail(self, z: torch.Tensor, mc: bool, window: torch.Tensor | None = None) -> torch.Tensor:
         z = F.relu(self.fc1(mc_dropout(z, self.p, mc)))
         return self.fc2(mc_dropout(z, self.p, mc))
 
-    def column_maps(self, features: torch.Tensor) -> torch.Tensor:
+    def column_maps(self, features: torch.Tensor, window: torch.Tensor | None = None) -> torch.Tensor:
         """Class activation along the width: N x A x 12 (each column's share of the logit)."""
         z = self.trunk(features).reshape(features.shape[0], -1, self.columns)   # N x W x 12
         h = F.relu(self.fc1(z.flatten(1)))                                        # N x hidden
@@ -143,20 +148,32 @@ class SpatialHead(Head):
         z = F.relu(self.reduce(pool_rows(features)))                      # N x W x w
         return F.relu(self.context(z))                                    # N x W x w
 
-    def strip_scores(self, z: torch.Tensor) -> torch.Tensor:
-        """Trunk output N x W x w -> a score per strip, N x 12."""
-        cols = self.score(z)                                              # N x 1 x w
-        return F.interpolate(cols.unsqueeze(2), size=(1, N_BINS), mode="bilinear",
-                             align_corners=False).flatten(1) + self.bias
+    def strip_scores(self, z: torch.Tensor, window: torch.Tensor | None = None) -> torch.Tensor:
+        """Trunk output N x W x w -> a score per strip, N x 12: the column scores linearly
+        interpolated at the centres of the 12 strips of the content ``window`` [N, 2] (fractions
+        of the canvas width; None = the whole canvas, where this equals a bilinear resize of the
+        columns to 12)."""
+        cols = self.score(z)[:, 0]                                        # N x w
+        w = cols.shape[-1]
+        centres = (torch.arange(N_BINS, dtype=cols.dtype, device=cols.device) + 0.5) / N_BINS
+        if window is None:
+            pos = centres.unsqueeze(0)                                    # 1 x 12
+        else:
+            window = window.to(cols.dtype)
+            pos = window[:, :1] + (window[:, 1:] - window[:, :1]) * centres   # N x 12
+        src = (pos * w - 0.5).clamp(0.0, w - 1.0)                         # column coordinate
+        j = torch.arange(w, dtype=cols.dtype, device=cols.device)
+        weight = F.relu(1.0 - (src.unsqueeze(-1) - j).abs())             # (N|1) x 12 x w
+        return (weight * cols.unsqueeze(1)).sum(-1) + self.bias
 
-    def column_maps(self, features: torch.Tensor) -> torch.Tensor:
+    def column_maps(self, features: torch.Tensor, window: torch.Tensor | None = None) -> torch.Tensor:
         """Where the head sees the goal: the strip scores, N x A x 12 (the same for every action)."""
-        bins = self.strip_scores(self.trunk(features))
+        bins = self.strip_scores(self.trunk(features), window)
         return bins.unsqueeze(1).expand(bins.shape[0], self.n_actions, N_BINS)
 
-    def tail(self, z: torch.Tensor, mc: bool) -> torch.Tensor:
+    def tail(self, z: torch.Tensor, mc: bool, window: torch.Tensor | None = None) -> torch.Tensor:
         z = mc_dropout(z, self.p, mc)
-        bins = self.strip_scores(z)                                       # N x 12
+        bins = self.strip_scores(z, window)                               # N x 12
         known = torch.logsumexp(bins.unsqueeze(1) + self.groups_mask, -1)  # N x (A - 1)
         unknown = self.unknown(z.mean(2))                                 # N x 1
         return torch.cat([unknown, known], 1)
@@ -175,7 +192,7 @@ class ThesisHead(Head):
     def trunk(self, features: torch.Tensor) -> torch.Tensor:
         return F.relu(self.conv(features))
 
-    def tail(self, z: torch.Tensor, mc: bool) -> torch.Tensor:
+    def tail(self, z: torch.Tensor, mc: bool, window: torch.Tensor | None = None) -> torch.Tensor:
         return F.relu(self.score(mc_dropout(z, self.p, mc))).mean((2, 3))
 
     def score_maps(self, features: torch.Tensor) -> torch.Tensor:
@@ -195,7 +212,7 @@ class ThesisFCHead(Head):
     def trunk(self, features: torch.Tensor) -> torch.Tensor:
         return features.mean((2, 3))
 
-    def tail(self, z: torch.Tensor, mc: bool) -> torch.Tensor:
+    def tail(self, z: torch.Tensor, mc: bool, window: torch.Tensor | None = None) -> torch.Tensor:
         return self.fc(mc_dropout(z, self.p, mc))
 
     def score_maps(self, features: torch.Tensor) -> torch.Tensor:

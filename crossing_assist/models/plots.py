@@ -106,3 +106,23 @@ def plot_examples(images: list[np.ndarray], probs: np.ndarray, labels: np.ndarra
                  fontsize=8)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def plot_risk_coverage(curve: list[dict], chosen: float | None, path: Path, title: str = "") -> Path:
+    """Confidently-wrong rate against beacon-on rate as the gate's threshold sweeps; the
+    bundle's threshold marked. Lower right is better."""
+    plt = _plt()
+    on = np.array([c["beacon_on"] or 0 for c in curve])
+    wrong = np.array([c["confidently_wrong"] or 0 for c in curve])
+    fig, ax = plt.subplots(figsize=(5, 4))
+    ax.plot(on, 100 * wrong, "o-", ms=3, label="gate threshold sweep")
+    for c in curve:
+        if chosen is not None and abs(c["threshold"] - chosen) < 1e-9:
+            ax.plot([c["beacon_on"]], [100 * (c["confidently_wrong"] or 0)], "r*", ms=14,
+                    label=f"bundle threshold {chosen:.3g}")
+    ax.axhline(0.5, color="grey", ls="--", lw=1, label="target: 0.5 % confidently wrong")
+    ax.set(xlabel="beacon on (frames with a crossing)", ylabel="confidently wrong (% of frames)",
+           title=title or "risk-coverage")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return _save(fig, path)

@@ -55,10 +55,13 @@ class Policy(nn.Module):
         head = create_head(config["head"], backbone.num_features, int(config["n_actions"]), p=float(config["p"]))
         return cls(backbone, head, config)
 
-    def forward(self, x: torch.Tensor, samples: int = 1, mc: bool | None = None) -> torch.Tensor:
-        return self.head(self.backbone.forward_features(x), samples=samples, mc=mc)
+    def forward(self, x: torch.Tensor, samples: int = 1, mc: bool | None = None,
+                window: torch.Tensor | None = None) -> torch.Tensor:
+        """``window`` [N, 2]: the frame's extent on the canvas (fractions of its width; None =
+        the whole canvas), where the head reads the 12 strips."""
+        return self.head(self.backbone.forward_features(x), samples=samples, mc=mc, window=window)
 
     def forward_from(self, cached: torch.Tensor, start: int, samples: int = 1,
-                     mc: bool | None = None) -> torch.Tensor:
+                     mc: bool | None = None, window: torch.Tensor | None = None) -> torch.Tensor:
         """Logits from cached output of backbone blocks ``[0, start)``."""
-        return self.head(self.backbone.forward_from(cached, start), samples=samples, mc=mc)
+        return self.head(self.backbone.forward_from(cached, start), samples=samples, mc=mc, window=window)

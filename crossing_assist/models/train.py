@@ -49,6 +49,7 @@ class Split:
     feats: torch.Tensor          # M x C x h x w float16
     actions: np.ndarray          # (M,) int64
     far_x: np.ndarray            # (M,) float64
+    window: torch.Tensor         # M x 2 float32: the frame's extent on the canvas
 
 
 def _check_sets(cfg: TrainConfig, ds: Dataset) -> tuple[Dataset, Dataset | None]:
@@ -70,7 +71,7 @@ def _check_sets(cfg: TrainConfig, ds: Dataset) -> tuple[Dataset, Dataset | None]
 
 def _take(split: Split, mask: np.ndarray) -> Split:
     idx = torch.from_numpy(np.flatnonzero(mask))
-    return Split(split.feats[idx], split.actions[mask], split.far_x[mask])
+    return Split(split.feats[idx], split.actions[mask], split.far_x[mask], split.window[idx])
 
 
 def _hold_out(full: Split, fs: FeatureSet, train_ds: Dataset, hold: tuple[str, ...]) -> tuple[Split, Split | None]:
@@ -85,14 +86,15 @@ def _hold_out(full: Split, fs: FeatureSet, train_ds: Dataset, hold: tuple[str, .
 
 def _to_split(fs: FeatureSet, n_actions: int) -> Split:
     feats = torch.from_numpy(np.array(fs.feats))  # copy into memory (the file is read-only)
-    return Split(feats, get_space(n_actions).bins_to_actions(fs.labels), fs.far_x)
+    return Split(feats, get_space(n_actions).bins_to_actions(fs.labels), fs.far_x,
+                 torch.from_numpy(np.asarray(fs.window, np.float32)))
 
 
 def _concat(a: Split, b: Split) -> Split:
     if a.feats.shape[1:] != b.feats.shape[1:]:
         raise ConfigError(f"Invalid extra data: feature shapes differ ({tuple(a.feats.shape[1:])} vs {tuple(b.feats.shape[1:])})")
     return Split(torch.cat([a.feats, b.feats]), np.concatenate([a.actions, b.actions]),
-                 np.concatenate([a.far_x, b.far_x]))
+                 np.concatenate([a.far_x, b.far_x]), torch.cat([a.window, b.window]))
 
 
 def _targets(actions: torch.Tensor, n: int, smoothing: float) -> torch.Tensor:
@@ -146,7 +148,7 @@ def predict_split(policy: Policy, split: Split, start: int, batch_size: int = 25
     out = []
     for i in range(0, len(split.actions), batch_size):
         x = split.feats[i:i + batch_size].float()
-        logits = policy.forward_from(x, start, samples=samples, mc=samples > 1)
+        logits = policy.forward_from(x, start, samples=samples, mc=samples > 1, window=split.window[i:i + batch_size])
         out.append(logits.softmax(-1).mean(0))
     return torch.cat(out).numpy()
 
@@ -169,7 +171,7 @@ def _build(cfg: TrainConfig) -> tuple[Policy, int]:
     kind = "thesis_fc" if cfg.head == "thesis" and cfg.backbone == "resnet50" else cfg.head
     head = create_head(kind, backbone.num_features, cfg.actions, p=cfg.p)
     conf = policy_config(backbone, kind, cfg.actions, p=cfg.p, input_size=cfg.input_size, fov_deg=cfg.fov_deg,
-                         frozen_blocks=n_blocks - cfg.unfreeze, data=str(cfg.data))
+                         frozen_blocks=n_blocks - cfg.unfreeze, data=str(cfg.data), fit=cfg.fit)
     return Policy(backbone, head, conf), n_blocks - cfg.unfreeze
 
 
@@ -232,10 +234,11 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     train_ds, val_ds = _check_sets(cfg, ds)
     policy, start = _build(cfg)
     size = tuple(policy.config["input_size"])
-    variants = make_variants(cfg.mirror, cfg.yaw)
+    variants = make_variants(cfg.mirror, cfg.yaw, cfg.field)
     cache = Path(cfg.cache_dir)
     fs = lambda d, v, name: compute_features(policy.backbone, start, d, size, v, cfg.fov_deg, cache,  # noqa: E731
-                                             progress=cfg.progress, desc=f"features {name}")
+                                             progress=cfg.progress, desc=f"features {name}",
+                                             fit=cfg.fit, seed=cfg.seed)
     train_fs = fs(train_ds, variants, "train")
     tr, held = _hold_out(_to_split(train_fs, cfg.actions), train_fs, train_ds, cfg.holdout)
     n_extra = 0
@@ -307,7 +310,7 @@ def _run_epoch(policy: Policy, opt: torch.optim.Optimizer, tr: Split, start: int
         idx = torch.from_numpy(order[i:i + cfg.batch_size])
         x = tr.feats[idx].float()
         y = torch.from_numpy(tr.actions[idx.numpy()])
-        logits = policy.forward_from(x, start, samples=1, mc=True)[0]
+        logits = policy.forward_from(x, start, samples=1, mc=True, window=tr.window[idx])[0]
         target = _targets(y, cfg.actions, cfg.smoothing)
         logp = logits.log_softmax(-1)
         per = -(target * (logp if weights is None else logp * weights)).sum(-1)

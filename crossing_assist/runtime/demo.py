@@ -41,6 +41,7 @@ class DemoConfig:
     audio_device: str | None
     max_seconds: float | None
     watchdog_s: float
+    fov_deg: float | None = None
 
 
 def parse_args(argv: list[str] | None) -> DemoConfig:
@@ -55,6 +56,9 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     ap.add_argument("--audio-device", default=None, help="sounddevice output device (index or name)")
     ap.add_argument("--max-seconds", type=float, default=None, help="stop a live run after this long")
+    ap.add_argument("--fov", type=float, default=None, metavar="DEG",
+                    help="the camera's horizontal field of view in its present orientation, 20..170 "
+                         "(default: the bundle's, per orientation: typical phone 67 landscape, 53 portrait)")
     ap.add_argument("--watchdog", type=float, default=0.5, help="seconds without a fresh decision before "
                     "the beacon stops (default 0.5)")
     a = ap.parse_args(argv)
@@ -62,6 +66,13 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
         raise DemoError("give a VIDEO or --camera N, not both")
     if a.camera is not None and not a.live:
         raise DemoError("--camera needs --live (the camera has no end for an offline run)")
+    if a.fov is not None:
+        from crossing_assist.geometry import GeometryError, check_fov
+
+        try:
+            check_fov(a.fov)
+        except GeometryError as exc:
+            raise DemoError(f"--fov: {exc}") from None
     if not a.watchdog > 0:
         raise DemoError(f"--watchdog {a.watchdog} invalid; valid: > 0 seconds")
     video, bundle = a.video, a.bundle
@@ -82,7 +93,7 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
     return DemoConfig(video=video, camera=a.camera, bundle=bundle, out_dir=a.out, live=a.live,
                       annotate=not a.no_video, progress=not a.quiet,
                       audio_device=int(dev) if dev is not None and dev.isdigit() else dev,
-                      max_seconds=a.max_seconds, watchdog_s=a.watchdog)
+                      max_seconds=a.max_seconds, watchdog_s=a.watchdog, fov_deg=a.fov)
 
 
 def run_live_demo(cfg: DemoConfig) -> None:
@@ -95,7 +106,7 @@ def run_live_demo(cfg: DemoConfig) -> None:
     from crossing_assist.runtime.pipeline import Pipeline
     from crossing_assist.runtime.sources import CameraSource, VideoSource
 
-    engine = Engine(cfg.bundle)
+    engine = Engine(cfg.bundle, fov_deg=cfg.fov_deg)
     beacon = BeaconConfig()
     player = CuePlayer(beacon)
     source = CameraSource(cfg.camera) if cfg.camera is not None else VideoSource(cfg.video)
@@ -123,7 +134,7 @@ def run(cfg: DemoConfig) -> None:
     from crossing_assist.runtime.offline import OfflineConfig, run_offline
 
     summary = run_offline(OfflineConfig(video=cfg.video, bundle=cfg.bundle, out_dir=cfg.out_dir,
-                                        annotate=cfg.annotate, progress=cfg.progress))
+                                        annotate=cfg.annotate, progress=cfg.progress, fov_deg=cfg.fov_deg))
     print(f"crossing-demo: {cfg.video} with bundle {cfg.bundle}")
     for line in summary.lines():
         print("  " + line)

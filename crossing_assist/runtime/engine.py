@@ -17,6 +17,7 @@ from typing import Callable
 import numpy as np
 
 from crossing_assist.bundle import INPUT_NAME, OUTPUT_NAMES, Bundle, BundleError, check_session, read_bundle
+from crossing_assist.geometry import GeometryError, check_fov, check_frame_shape
 from crossing_assist.runtime.decide import DecisionConfig, Observation
 
 
@@ -40,6 +41,7 @@ class Prediction:
     conformal_set: tuple[int, ...] = ()
     action: int = 0
     heading_deg: float | None = None
+    fov_deg: float | None = None
     uncertainty: float = math.inf
     latency_s: float = 0.0
     error: str = ""
@@ -62,12 +64,18 @@ def measure_value(measure: str, entropy: float, mutual_info: float, variance: np
 
 
 class Engine:
-    """Runs a bundle. ``threads`` = onnxruntime intra-op threads (0 = its default)."""
+    """Runs a bundle. ``threads`` = onnxruntime intra-op threads (0 = its default); ``fov_deg``:
+    the camera's horizontal field of view (the user's or device's setting; None = the bundle's
+    default for each frame's orientation). A FOV outside 20..170 degrees raises BundleError."""
 
-    def __init__(self, bundle_dir: str | Path, *, threads: int = 1) -> None:
+    def __init__(self, bundle_dir: str | Path, *, threads: int = 1, fov_deg: float | None = None) -> None:
         import onnxruntime as ort
 
         self.bundle: Bundle = read_bundle(bundle_dir)
+        try:
+            self.fov_override = None if fov_deg is None else check_fov(fov_deg)
+        except GeometryError as exc:
+            raise BundleError(str(exc)) from None
         opts = ort.SessionOptions()
         if threads:
             opts.intra_op_num_threads = int(threads)
@@ -85,17 +93,25 @@ class Engine:
         self.conformal_threshold = self.bundle.calibration.conformal.threshold
         self._clock: Callable[[], float] = time.perf_counter
 
+    def camera_fov(self, width: int, height: int) -> float:
+        """Horizontal FOV (degrees) for a ``width x height`` frame: the override, else the
+        bundle's default for the frame's orientation."""
+        return self.bundle.camera_fov(width, height, self.fov_override)
+
     def decision_config(self, **overrides) -> DecisionConfig:
-        """The decision logic's config for this bundle (actions, FOV, measure, threshold)."""
+        """The decision logic's config for this bundle (actions, FOV, measure, threshold). The
+        FOV is the landscape one until a frame says otherwise (:class:`Pipeline` follows it)."""
         unc = self.bundle.calibration.uncertainty
-        return DecisionConfig(n_actions=self.bundle.actions.n, fov_deg=self.bundle.fov_deg,
-                              measure=unc.measure, threshold=unc.threshold, **overrides)
+        kw = {"fov_deg": self.fov_override or self.bundle.geometry.camera_fov_deg[0], "measure": unc.measure,
+              "threshold": unc.threshold, **overrides}
+        return DecisionConfig(n_actions=self.bundle.actions.n, **kw)
 
     def _check_frame(self, frame: np.ndarray) -> np.ndarray:
         if not isinstance(frame, np.ndarray):
             raise TypeError(f"Invalid frame: {type(frame).__name__}; expected a numpy array")
         if frame.dtype != np.uint8 or frame.ndim != 3 or frame.shape[2] != 3 or min(frame.shape[:2]) < 2:
             raise ValueError(f"Invalid frame: shape {frame.shape} dtype {frame.dtype}; expected H x W x 3 uint8 RGB")
+        check_frame_shape(frame.shape[0], frame.shape[1])   # e.g. 1 x N or 1:10: never a heading
         return np.ascontiguousarray(frame)[None]
 
     def predict(self, frame_rgb: np.ndarray) -> Prediction:
@@ -110,6 +126,7 @@ class Engine:
                                  if probs.shape == (self.space.n,) else
                                  f"model returned probs of shape {probs.shape}; expected ({self.space.n},)")
             action = int(np.argmax(probs))
+            fov = self.camera_fov(frame_rgb.shape[1], frame_rgb.shape[0])
             unc = measure_value(self.measure, float(ent), float(mi), var, probs)
             if not math.isfinite(unc):
                 raise ValueError(f"model returned a non-finite {self.measure}")
@@ -117,7 +134,7 @@ class Engine:
                 ok=True, probs=probs, entropy=float(ent), mutual_info=float(mi), variance=var, votes=votes,
                 conformal_set=tuple(int(a) for a in np.flatnonzero(probs >= self.conformal_threshold)),
                 action=action,
-                heading_deg=None if action == 0 else self.space.action_heading(action, self.bundle.fov_deg),
+                heading_deg=None if action == 0 else self.space.action_heading(action, fov), fov_deg=fov,
                 uncertainty=unc, latency_s=self._clock() - t0,
             )
         except Exception as exc:  # never raise into the audio path

@@ -42,6 +42,7 @@ class OfflineConfig:
     progress: bool = True
     max_width: int | None = 640
     beacon: BeaconConfig = field(default_factory=BeaconConfig)
+    fov_deg: float | None = None     # the camera's horizontal FOV; None = the bundle's per orientation
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,8 @@ class Summary:
     failed: int
     outputs: dict
     truth: dict | None = None
+    frame_size: tuple[int, int] | None = None      # (W, H) of the decoded frames
+    fov_deg: tuple[float, ...] = ()                # the horizontal FOVs the headings assumed
 
     def lines(self) -> list[str]:
         """Human-readable summary lines."""
@@ -65,6 +68,11 @@ class Summary:
         out = [f"{self.frames} frames, {self.video_s:.1f} s of video in {self.wall_s:.1f} s "
                f"({speed:.1f}x real time)",
                f"gate: {pct(self.gates)}", f"stop reasons: {pct(self.reasons)}"]
+        if self.frame_size:
+            w, h = self.frame_size
+            fovs = ", ".join(f"{f:g}" for f in self.fov_deg) or "none (no frame was understood)"
+            out.insert(1, f"frames {w}x{h} ({'portrait' if h > w else 'landscape'}); headings assume a "
+                          f"horizontal field of view of {fovs} deg")
         if self.failed:
             out.append(f"failed inferences: {self.failed}")
         if self.truth:
@@ -129,6 +137,8 @@ class _Recorder:
         self.reasons: Counter = Counter()
         self.failed = 0
         self.headings: list[float | None] = []
+        self.fovs: set[float] = set()
+        self.frame_size: tuple[int, int] | None = None
         self.writer = None
         self.tmp_video = self.out / ".annotated.tmp.mp4"
         self.trace = tempfile.NamedTemporaryFile("w", dir=self.out, prefix=".trace.", suffix=".jsonl", delete=False)
@@ -149,9 +159,13 @@ class _Recorder:
         self.gates[d.gate] += 1
         self.reasons[d.reason] += 1
         self.failed += not step.prediction.ok
+        self.frame_size = self.frame_size or (frame.shape[1], frame.shape[0])
+        if step.prediction.fov_deg is not None:
+            self.fovs.add(step.prediction.fov_deg)
         self.trace.write(json.dumps(trace_record(i, step)) + "\n")
         if self.cfg.annotate:
-            img = annotate(frame, step.prediction, d, self.engine.space, self.engine.bundle.fov_deg)
+            fov = step.prediction.fov_deg or self.engine.camera_fov(frame.shape[1], frame.shape[0])
+            img = annotate(frame, step.prediction, d, self.engine.space, fov)
             if self.writer is None:
                 h, w = img.shape[:2]
                 self.writer = cv2.VideoWriter(str(self.tmp_video), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (w, h))
@@ -193,7 +207,7 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
 
     from crossing_assist.runtime.sources import SourceError, VideoSource
 
-    engine = engine or Engine(cfg.bundle)
+    engine = engine or Engine(cfg.bundle, fov_deg=cfg.fov_deg)
     source = VideoSource(cfg.video, max_width=cfg.max_width)
     pipeline = Pipeline(engine, beacon_cfg=cfg.beacon)
     rec = _Recorder(cfg, engine, source.fps)
@@ -216,4 +230,5 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     truth = load_truth(cfg.video)
     return Summary(frames=n, video_s=n / source.fps, wall_s=time.perf_counter() - t0, gates=dict(rec.gates),
                    reasons=dict(rec.reasons), failed=rec.failed, outputs={k: str(v) for k, v in outputs.items()},
-                   truth=compare(truth, rec.headings) if truth else None)
+                   truth=compare(truth, rec.headings) if truth else None, frame_size=rec.frame_size,
+                   fov_deg=tuple(sorted(rec.fovs)))

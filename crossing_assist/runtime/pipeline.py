@@ -5,7 +5,7 @@ Used by the offline demo, the live loop and the benchmark, so they all make the 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -34,7 +34,12 @@ def cached_loop(cue: Cue, cfg: BeaconConfig) -> np.ndarray:
 
 
 class Pipeline:
-    """Engine + decision logic + beacon synthesis for one stream of frames."""
+    """Engine + decision logic + beacon synthesis for one stream of frames.
+
+    Headings follow the camera: each successful frame's field of view (its orientation's, or
+    the user's setting) becomes the decision logic's; when it changes (the phone turned
+    between portrait and landscape) the belief starts afresh, since old strips no longer mean
+    the same directions."""
 
     def __init__(self, engine: Engine, decision_cfg: DecisionConfig | None = None,
                  beacon_cfg: BeaconConfig | None = None) -> None:
@@ -46,6 +51,9 @@ class Pipeline:
         """Process a frame taken at ``t`` seconds (None = no new frame, a watchdog tick)."""
         pred = self.engine.predict(frame_rgb) if frame_rgb is not None else Prediction(ok=False, error="no frame")
         obs = pred.observation() if frame_rgb is not None else None
+        if pred.ok and pred.fov_deg is not None and pred.fov_deg != self.decider.cfg.fov_deg:
+            self.decider.cfg = replace(self.decider.cfg, fov_deg=pred.fov_deg)
+            self.decider.reset()
         decision = self.decider.step(t, obs, yaw_rate_dps)
         cue = cue_for(decision)
         return Step(pred, decision, cue, cached_loop(cue, self.beacon_cfg))

@@ -1,0 +1,144 @@
+"""Camera geometry: how a frame of any size meets the model's canvas, and which field of view
+turns its strips into headings (numpy + OpenCV; no torch).
+
+The model sees a fixed canvas (``H x W``, e.g. 168 x 224, a 4:3 landscape like the PTL photos).
+A frame of another aspect is *letterboxed*: scaled to fit inside the canvas without stretching,
+centred, the rest filled with ``pad_rgb``. The integer arithmetic of :func:`letterbox_box` is
+the contract: the exported ONNX graph (``export/graph.py``) computes the same box from the
+frame's height and width, so training, Python and the phone fit frames identically.
+
+The 12 strips are strips of the *frame* (the camera's view), not of the padded canvas; the
+head samples its per-column scores inside the content window :func:`content_window`. A goal
+that is out of view but inferable lies in an edge strip (1 or 12), so the padding never holds a
+strip: an edge strip means "at or beyond that edge of the view".
+
+Headings use the horizontal field of view of the camera that took the frame in its present
+orientation (:func:`camera_fov`), never a constant.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+FITS = ("letterbox", "stretch")
+ORIENTATIONS = ("landscape", "portrait")
+#: Typical phone main camera (4:3 sensor, ~26 mm equivalent): ~67 deg across the long side,
+#: ~53 deg across the short side. Used when neither the user nor the device says otherwise.
+CAMERA_FOV_DEG = {"landscape": 67.0, "portrait": 53.0}
+#: The horizontal field of view assumed for the PTL training photos (phone cameras, landscape).
+TRAIN_FOV_DEG = 67.0
+FOV_RANGE_DEG = (20.0, 170.0)
+DEFAULT_CANVAS = (168, 224)            # (H, W): 4:3 landscape
+PAD_RGB = (124, 116, 104)              # ImageNet mean in uint8: normalises to ~0
+MAX_ASPECT = 8.0                       # frames more elongated than 8:1 are refused
+
+
+class GeometryError(ValueError):
+    """A frame or field of view the geometry cannot use (one line, says what is valid)."""
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """The bundle's geometry contract (``bundle.json`` ``geometry``).
+
+    ``fit``: ``letterbox`` (scale to fit, centre, pad with ``pad_rgb``) or ``stretch`` (schema 1:
+    resize to the canvas whatever the aspect); ``camera_fov_deg``: default horizontal FOV per
+    orientation; ``train_fov_deg``: the FOV assumed for the training photos.
+    """
+
+    fit: str = "letterbox"
+    pad_rgb: tuple[int, int, int] = PAD_RGB
+    camera_fov_deg: tuple[float, float] = (CAMERA_FOV_DEG["landscape"], CAMERA_FOV_DEG["portrait"])
+    train_fov_deg: float = TRAIN_FOV_DEG
+
+    def to_json(self) -> dict:
+        d = {"fit": self.fit, "strips": "frame",
+             "camera_fov_deg": {"landscape": self.camera_fov_deg[0], "portrait": self.camera_fov_deg[1]},
+             "train_fov_deg": self.train_fov_deg}
+        if self.fit == "letterbox":
+            d["pad_rgb"] = list(self.pad_rgb)
+        return d
+
+    def camera_fov(self, width: int, height: int, override: float | None = None) -> float:
+        """Horizontal FOV (degrees) for a ``width x height`` frame: ``override`` if given, else
+        the default for the frame's orientation. Raises GeometryError outside 20..170 degrees."""
+        fov = self.camera_fov_deg[ORIENTATIONS.index(orientation(width, height))] if override is None else override
+        return check_fov(fov)
+
+
+def orientation(width: int, height: int) -> str:
+    """``portrait`` if the frame is taller than wide, else ``landscape``."""
+    return "portrait" if height > width else "landscape"
+
+
+def check_fov(fov_deg: float) -> float:
+    """A horizontal field of view in the sane range 20..170 degrees, as float."""
+    try:
+        fov = float(fov_deg)
+    except (TypeError, ValueError):
+        raise GeometryError(f"Invalid field of view: {fov_deg!r}; valid: 20..170 degrees") from None
+    lo, hi = FOV_RANGE_DEG
+    if not lo <= fov <= hi:
+        raise GeometryError(f"Invalid field of view: {fov_deg} degrees; valid: {lo:g}..{hi:g}")
+    return fov
+
+
+def check_frame_shape(height: int, width: int) -> None:
+    """Refuse frames the model cannot see sensibly: under 8 px a side, or over 8:1."""
+    if min(height, width) < 8:
+        raise GeometryError(f"Invalid frame: {width}x{height} px; valid: at least 8 px a side")
+    if max(height, width) > MAX_ASPECT * min(height, width):
+        raise GeometryError(f"Invalid frame: {width}x{height} px has an aspect beyond {MAX_ASPECT:g}:1")
+
+
+def letterbox_box(height: int, width: int, canvas: tuple[int, int]) -> tuple[int, int, int, int]:
+    """Where a ``height x width`` frame lands on the canvas (H, W): ``(top, left, new_h, new_w)``.
+
+    ``new_w = min(W, round(w H / h))``, ``new_h = min(H, round(h W / w))`` (rounding half up, in
+    integers), at least 1; the content is centred (``left = (W - new_w) // 2``). The ONNX graph
+    uses exactly this arithmetic."""
+    ch, cw = canvas
+    new_w = max(1, min(cw, (width * ch * 2 + height) // (2 * height)))
+    new_h = max(1, min(ch, (height * cw * 2 + width) // (2 * width)))
+    return (ch - new_h) // 2, (cw - new_w) // 2, new_h, new_w
+
+
+def content_window(height: int, width: int, canvas: tuple[int, int], fit: str = "letterbox") -> tuple[float, float]:
+    """The frame's horizontal extent on the canvas, as fractions of the canvas width ``(x0, x1)``."""
+    if fit == "stretch":
+        return 0.0, 1.0
+    _, left, _, new_w = letterbox_box(height, width, canvas)
+    return left / canvas[1], (left + new_w) / canvas[1]
+
+
+def letterbox(image: np.ndarray, canvas: tuple[int, int], pad_rgb: tuple[int, int, int] = PAD_RGB) -> np.ndarray:
+    """Fit an H x W x 3 uint8 image onto the canvas (letterbox; area filter when shrinking)."""
+    import cv2
+
+    top, left, nh, nw = letterbox_box(image.shape[0], image.shape[1], canvas)
+    shrink = image.shape[0] > nh or image.shape[1] > nw
+    inner = cv2.resize(image, (nw, nh), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+    out = np.empty((canvas[0], canvas[1], 3), np.uint8)
+    out[:] = np.asarray(pad_rgb, np.uint8)
+    out[top:top + nh, left:left + nw] = inner
+    return out
+
+
+def window_x(far_x: float, x0: float, width: float) -> float:
+    """A goal at ``far_x`` of a photo, seen through a window starting at ``x0`` of ``width``
+    (fractions of the photo's width): its position in the window, clipped into the edge strips
+    when out of view (``x' = (x - x0) / width``; out-of-view goals are inferable, so edge strip)."""
+    x = (far_x - x0) / width
+    return min(max(x, 1e-6), 1 - 1e-6)
+
+
+def heading_fov_ok(fov_deg: float) -> bool:
+    """True when ``fov_deg`` is a usable field of view (for callers that must not raise)."""
+    try:
+        check_fov(fov_deg)
+        return math.isfinite(float(fov_deg))
+    except GeometryError:
+        return False

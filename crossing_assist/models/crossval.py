@@ -1,0 +1,90 @@
+"""Leave-one-source-out cross-validation (``crossing-train --cv source``).
+
+A user is always an unseen photographer in an unseen city, so the honest figure is measured
+on sources the model never trained on: one run per train source ``s`` (``OUT/fold-<s>``), each
+trained on the other sources with ``s`` held out (``--holdout s --select-on last``), scored on
+``s``'s frames (identity variant only). The frozen-feature cache is shared by all folds (one
+source is a mask, never a new cache). ``OUT/cv.json`` and ``OUT/cv.csv`` hold each fold and the
+mean +- sd; a fold that already finished is read back, not retrained, so a killed CV resumes.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import re
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..data_tools.manifest import atomic_write_text, read_manifest
+from .checkpoint import load_checkpoint
+from .config import ConfigError, TrainConfig
+
+CV_METRICS = ("accuracy", "bin_mae", "far_x_error", "majority_accuracy", "top3_accuracy", "nll")
+
+
+def _fold_dir(out: Path, source: str) -> Path:
+    return out / ("fold-" + re.sub(r"[^A-Za-z0-9_.-]+", "_", source))
+
+
+def _fold_metrics(fold: Path, epochs: int) -> dict | None:
+    """The held-out metrics of a finished fold (its last epoch), else None."""
+    last = fold / "weights" / "last.pt"
+    if not last.is_file():
+        return None
+    state = load_checkpoint(last)
+    if int(state.get("epoch", 0)) < epochs:
+        return None
+    return dict(state["metrics"]["selection"])
+
+
+def cross_validate(cfg: TrainConfig, *, resume: bool = False) -> dict:
+    """Run (or finish) every fold of ``cfg`` and return the summary written to ``cv.json``."""
+    from .train import train
+
+    out = Path(cfg.out)
+    sources = read_manifest(cfg.data).split("train").sources()
+    if len(sources) < 2:
+        raise ConfigError(f"Invalid --cv source: {cfg.data} has {len(sources)} train source(s); need >= 2")
+    if cfg.holdout:
+        raise ConfigError("Invalid --cv source with --holdout: each fold holds out its own source")
+    folds = []
+    for i, source in enumerate(sources, 1):
+        fold = _fold_dir(out, source)
+        m = _fold_metrics(fold, cfg.epochs)
+        if m is None:
+            print(f"fold {i}/{len(sources)}: holding out {source}", flush=True)
+            fcfg = replace(cfg, out=str(fold), holdout=(source,), select_on="last")
+            train(fcfg, resume=(fold / "weights" / "last.pt").is_file())
+            m = _fold_metrics(fold, cfg.epochs)
+        folds.append({"source": source, **{k: m.get(k) for k in ("n",) + CV_METRICS}})
+    summary = {"cv": "source", "folds": folds, "config": cfg.to_dict()}
+    for k in CV_METRICS:
+        vals = np.asarray([f[k] for f in folds if f.get(k) is not None and not math.isnan(f[k])], float)
+        summary[k] = {"mean": float(vals.mean()) if len(vals) else None,
+                      "sd": float(vals.std(ddof=1)) if len(vals) > 1 else None}
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "cv.json", json.dumps(summary, indent=1))
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=["source", "n", *CV_METRICS])
+    w.writeheader()
+    w.writerows(folds)
+    atomic_write_text(out / "cv.csv", buf.getvalue())
+    return summary
+
+
+def format_cv(summary: dict) -> str:
+    """Lines a person reads: one per fold, then mean +- sd."""
+    lines = [f"{'held out':<16} {'n':>5} {'accuracy':>9} {'bin MAE':>8} {'far-x err':>9} {'majority':>9}"]
+    for f in summary["folds"]:
+        lines.append(f"{f['source']:<16} {f['n']:>5} {f['accuracy']:>9.3f} {f['bin_mae']:>8.3f} "
+                     f"{(f['far_x_error'] or float('nan')):>9.4f} {f['majority_accuracy']:>9.3f}")
+    ms = lambda k: f"{summary[k]['mean']:.3f} +- {summary[k]['sd'] or 0:.3f}"  # noqa: E731
+    lines.append(f"leave-one-source-out over {len(summary['folds'])} folds: accuracy {ms('accuracy')}, "
+                 f"bin MAE {ms('bin_mae')}, far-x error {summary['far_x_error']['mean'] or float('nan'):.4f} "
+                 f"+- {summary['far_x_error']['sd'] or 0:.4f}")
+    return "\n".join(lines)

@@ -1,0 +1,115 @@
+"""What the user hears: labelled photos played through the runtime as a user meets them.
+
+Each photo is played as a still clip (``seconds`` at ``fps``, 1 s at 10 fps by default): every
+frame runs through the bundle's :class:`~crossing_assist.runtime.engine.Engine` (a fresh MC
+dropout draw each time) and the runtime's decision logic (:class:`Decider`: filter, gate,
+watchdog), exactly as :class:`~crossing_assist.runtime.pipeline.Pipeline` does; the *last*
+decision is what the user hears. The engine outputs are kept, so the decision logic can be
+replayed at other gate thresholds (the risk-coverage curve) without running the model again.
+
+Per frame: the beacon is *on* (not the stop cue) or off; when on, the strip it points at is
+``x_to_bin(heading_to_x(heading, fov))`` with the camera FOV of the frame. A frame with a
+crossing is *confidently wrong* when the beacon is on and that strip is >= 2 strips from the
+label; a frame with no crossing (label ``unknown``) should be *silent* (beacon off).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from crossing_assist.actions import UNKNOWN, heading_to_x, x_to_bin
+from crossing_assist.runtime.decide import Decider, DecisionConfig
+from crossing_assist.runtime.engine import Engine, Prediction
+
+WRONG_STRIPS = 2     # >= this many strips off with the beacon on: confidently wrong
+
+
+@dataclass(frozen=True)
+class Heard:
+    """The last decision of one still clip: ``on`` (beacon playing), ``strip`` it points at
+    (0 when off), ``label`` (bin 1..12, 0 = no crossing)."""
+
+    label: int
+    on: bool
+    strip: int
+
+
+def play_still(engine: Engine, frame: np.ndarray, seconds: float = 1.0, fps: float = 10.0) -> list[Prediction]:
+    """The engine's predictions for ``frame`` held still for ``seconds`` at ``fps``."""
+    return [engine.predict(frame) for _ in range(max(1, int(round(seconds * fps))))]
+
+
+def decide_still(preds: Sequence[Prediction], cfg: DecisionConfig, fps: float = 10.0) -> Heard | None:
+    """Replay the decision logic over one clip's predictions; the last decision as heard
+    (label filled in by the caller)."""
+    fov = next((p.fov_deg for p in preds if p.ok and p.fov_deg is not None), cfg.fov_deg)
+    decider = Decider(replace(cfg, fov_deg=fov))
+    d = None
+    for i, p in enumerate(preds):
+        d = decider.step(i / fps, p.observation())
+    if d is None or d.stop or d.heading_deg is None:
+        return Heard(0, False, 0)
+    return Heard(0, True, x_to_bin(min(max(heading_to_x(d.heading_deg, fov), 0.0), 1.0 - 1e-9)))
+
+
+def summarise(heard: Iterable[Heard]) -> dict:
+    """Rates over frames: ``beacon_on`` (frames with a crossing), ``confidently_wrong`` (of
+    frames with a crossing: on and >= 2 strips off), ``accuracy_heard`` (on and the right strip),
+    ``strip_mae_on`` (mean strip error while on), ``silence_no_crossing`` (beacon off on frames
+    with no crossing), with the counts behind them."""
+    heard = list(heard)
+    pos = [h for h in heard if h.label != UNKNOWN]
+    neg = [h for h in heard if h.label == UNKNOWN]
+    on = [h for h in pos if h.on]
+    err = np.asarray([abs(h.strip - h.label) for h in on], float)
+    rate = lambda k, n: float(k / n) if n else None  # noqa: E731
+    return {
+        "frames_with_crossing": len(pos), "frames_without_crossing": len(neg),
+        "beacon_on": rate(len(on), len(pos)),
+        "confidently_wrong": rate(int((err >= WRONG_STRIPS).sum()), len(pos)),
+        "accuracy_heard": rate(int((err == 0).sum()), len(pos)),
+        "strip_mae_on": float(err.mean()) if len(err) else None,
+        "silence_no_crossing": rate(sum(not h.on for h in neg), len(neg)),
+    }
+
+
+@dataclass
+class Listener:
+    """Plays frames through ``engine`` and keeps their predictions for threshold sweeps."""
+
+    engine: Engine
+    seconds: float = 1.0
+    fps: float = 10.0
+
+    def __post_init__(self) -> None:
+        self.clips: list[list[Prediction]] = []
+        self.labels: list[int] = []
+
+    def add(self, frame: np.ndarray, label: int) -> None:
+        self.clips.append(play_still(self.engine, frame, self.seconds, self.fps))
+        self.labels.append(int(label))
+
+    def heard(self, threshold: float | None = None, idx: Sequence[int] | None = None) -> list[Heard]:
+        """The last decisions at the bundle's gate threshold (or ``threshold``)."""
+        cfg = self.engine.decision_config(**({} if threshold is None else {"threshold": float(threshold)}))
+        out = []
+        for i in range(len(self.clips)) if idx is None else idx:
+            h = decide_still(self.clips[i], cfg, self.fps)
+            out.append(Heard(self.labels[i], h.on, h.strip))
+        return out
+
+    def risk_coverage(self, thresholds: Sequence[float], idx: Sequence[int] | None = None) -> list[dict]:
+        """For each gate threshold: beacon-on rate, confidently-wrong rate, silence off-crossing."""
+        return [{"threshold": float(t), **summarise(self.heard(t, idx))} for t in thresholds]
+
+
+def choose_threshold(curve: Sequence[dict], max_wrong: float = 0.005, min_silence: float = 0.98) -> dict | None:
+    """The curve point with the most beacon-on whose confidently-wrong rate is <= ``max_wrong``
+    and whose silence on no-crossing frames is >= ``min_silence`` (None if no point qualifies)."""
+    ok = [c for c in curve if (c["confidently_wrong"] or 0) <= max_wrong
+          and (c["silence_no_crossing"] is None or c["silence_no_crossing"] >= min_silence)]
+    return max(ok, key=lambda c: (c["beacon_on"] or 0, -c["threshold"])) if ok else None
+
