@@ -85,17 +85,20 @@ test('observationFromOutputs: the bundle measure, argmax variance, failed frames
   assert.throws(() => observationFromOutputs(out, 'votes'), /Unknown uncertainty measure/);
 });
 
-test('sameFrame compares every 7th row and column, as live._same does', () => {
+test('sameFrame compares every byte, as live.same_frame does', () => {
   const w = 20;
   const h = 15;
   const a = { width: w, height: h, rgb: Uint8Array.from({ length: w * h * 3 }, (_, i) => i % 251) };
   const b = { ...a, rgb: a.rgb.slice() };
   assert.equal(sameFrame(null, a), false);
   assert.equal(sameFrame(a, b), true);
-  b.rgb[(1 * w + 1) * 3] ^= 1; // row 1, col 1: not sampled
-  assert.equal(sameFrame(a, b), true);
-  b.rgb[(7 * w + 14) * 3 + 2] ^= 1; // row 7, col 14, blue: sampled
+  b.rgb[(1 * w + 1) * 3] ^= 1; // any pixel, any channel counts
   assert.equal(sameFrame(a, b), false);
+  b.rgb[(1 * w + 1) * 3] ^= 1;
+  b.rgb[b.rgb.length - 1] ^= 1; // the last byte (past the 4-byte words)
+  assert.equal(sameFrame(a, b), false);
+  const odd = { width: 3, height: 1, rgb: Uint8Array.from([1, 2, 3, 4, 5, 6, 7, 8, 9]).subarray(0, 9) };
+  assert.equal(sameFrame(odd, { ...odd, rgb: odd.rgb.slice() }), true);
   assert.equal(sameFrame(a, { ...a, width: h, height: w }), false);
 });
 
@@ -118,13 +121,15 @@ test('rgbaToRgb drops alpha and keeps the channel order', () => {
 
 function validMeta() {
   return {
-    schema_version: 1, model_file: 'model.onnx',
+    schema_version: 2, model_file: 'model.onnx',
     actions: { n: 4, names: spaceNames(4), bins: spaceGroups(4) }, fov_deg: 90,
     input: { layout: 'NHWC', dtype: 'uint8', color: 'RGB', size: [224, 224], mean: [0.485, 0.456, 0.406], std: [0.229, 0.224, 0.225] },
     mc: { samples: 16, p: 0.5 },
     calibration: { temperature: 1, conformal: { coverage: 0.9, threshold: 0.05, n_frames: 10 }, uncertainty: { measure: 'entropy', threshold: 1.2 } },
     precision: 'fp32', training: {}, metrics: {}, package_version: '0.1.0', provenance: {},
     model_sha256: 'a'.repeat(64), model_size: 1000,
+    geometry: { fit: 'letterbox', pad_rgb: [124, 116, 104], strips: 'frame',
+      camera_fov_deg: { landscape: 67, portrait: 53 }, train_fov_deg: 67 },
   };
 }
 
@@ -132,8 +137,18 @@ test('bundle.json validation accepts a good bundle and names the bad field', () 
   const ok = parseBundleMeta(validMeta());
   assert.equal(ok.actions.n, 4);
   assert.equal(ok.calibration.uncertainty.threshold, 1.2);
+  assert.deepEqual(ok.geometry.camera_fov_deg, { landscape: 67, portrait: 53 });
+  const v1 = validMeta();
+  v1.schema_version = 1;
+  delete v1.geometry;
+  assert.deepEqual(parseBundleMeta(v1).geometry,
+    { fit: 'stretch', pad_rgb: null, strips: 'frame', camera_fov_deg: { landscape: 90, portrait: 90 }, train_fov_deg: 90 });
   const bad = [
-    [(m) => { m.schema_version = 2; }, /schema_version 2 unsupported/],
+    [(m) => { m.schema_version = 3; }, /schema_version 3 unsupported/],
+    [(m) => { delete m.geometry; }, /missing field 'geometry'/],
+    [(m) => { m.geometry.fit = 'crop'; }, /geometry.fit/],
+    [(m) => { m.geometry.camera_fov_deg.portrait = 10; }, /camera_fov_deg.portrait = 10 is out of range/],
+    [(m) => { m.geometry.pad_rgb = [0, 0]; }, /pad_rgb/],
     [(m) => { m.actions.names[1] = 'west'; }, /actions.names disagree/],
     [(m) => { m.calibration.uncertainty.measure = 'votes'; }, /measure = "votes" unknown/],
     [(m) => { m.input.size = [8, 8]; }, /input.size/],

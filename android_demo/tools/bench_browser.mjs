@@ -18,11 +18,11 @@ const FLAGS = ['--headless=new', '--no-sandbox', '--disable-gpu', '--disable-qui
   '--disable-background-networking', '--disable-component-update', '--disable-sync'];
 
 function args(argv) {
-  const a = { www: join(ROOT, 'www'), size: '480x640', runs: 20, warmup: 3, chromium: '/usr/bin/chromium' };
+  const a = { www: join(ROOT, 'www'), size: '480x640', runs: 20, warmup: 3, chromium: '/usr/bin/chromium', threads: 0 };
   for (let i = 0; i < argv.length; i += 2) {
     const key = argv[i].replace(/^--/, '');
     if (!(key in a) || argv[i + 1] === undefined) throw new Error(`unknown argument ${argv[i]}`);
-    a[key] = ['runs', 'warmup'].includes(key) ? Number(argv[i + 1]) : argv[i + 1];
+    a[key] = ['runs', 'warmup', 'threads'].includes(key) ? Number(argv[i + 1]) : argv[i + 1];
   }
   const m = /^(\d+)x(\d+)$/.exec(a.size);
   if (!m) throw new Error(`invalid --size ${a.size}; expected HxW, e.g. 480x640`);
@@ -48,7 +48,7 @@ async function main() {
   const ctx = await chromium.launchPersistentContext(profile, { executablePath: a.chromium, headless: true, args: FLAGS });
   try {
     const page = ctx.pages()[0] || await ctx.newPage();
-    await page.goto(url);
+    await page.goto(a.threads ? `${url}?threads=${a.threads}` : url);
     await page.waitForFunction(() => window.crossingAssist?.ready || window.crossingAssist?.error, null, { timeout: 120000 });
     const r = await page.evaluate(async ({ hw, runs, warmup }) => {
       const app = window.crossingAssist;
@@ -65,7 +65,7 @@ async function main() {
       }
       ms.sort((x, y) => x - y);
       const t = app.meta.raw.training || {};
-      return { bundle: `${t.backbone || '?'} ${app.meta.input.size.join('x')} T=${app.meta.mc.samples} ${app.meta.precision}`,
+      return { backend: app.model.backend, threads: app.model.threads, isolated: crossOriginIsolated, bundle: `${t.backbone || '?'} ${app.meta.input.size.join('x')} T=${app.meta.mc.samples} ${app.meta.precision}`,
         size: hw, runs, median_ms: ms[Math.floor(runs / 2)], p90_ms: ms[Math.floor(0.9 * (runs - 1))] };
     }, { hw: a.hw, runs: a.runs, warmup: a.warmup });
     if (r.error) throw new Error(r.error);

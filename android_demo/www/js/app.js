@@ -17,7 +17,7 @@ import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
 import { isFresh, sameFrame, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
 import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs } from './logic.js';
-import { fetchBundle, Model } from './model.js';
+import { fetchBundle, openBest } from './model.js';
 import { replayVectors } from './vectors.js';
 import { HelperView, statusMessage } from './view.js';
 
@@ -264,8 +264,8 @@ async function init() {
     const bundle = await fetchBundle(base.href);
     app.meta = bundle.meta;
     view.bundle(bundle.meta);
-    const ort = await import('../vendor/ort.wasm.min.mjs');
-    app.model = await Model.open(ort, bundle, new URL('vendor/', location.href).href);
+    const threads = Number(params.get('threads')) || undefined; // ?threads=N: for benchmarks
+    app.model = await openBest(bundle, new URL('vendor/', location.href).href, { threads });
     app.ready = true;
     $('start').disabled = false;
     $('start').focus();

@@ -5,17 +5,29 @@
 
 import { N_BINS } from './actions.js';
 
-/** One short sentence for the user; changes only when the advice changes. Pure. */
+/** Stop sentences by reason: the Decider's (uncertain, stale, failed) and the app's own. */
+export const STATUS_STOP = Object.freeze({
+  uncertain: 'Stop. Not sure: scan slowly.',
+  stale: 'Stop. Camera stalled.',
+  failed: 'Stop. The model failed.',
+  audio: 'Audio stopped. Tap to resume.',
+  background: 'Stop. The app is in the background.',
+  fov: 'Stop. The camera field of view setting is invalid.',
+});
+export const STRAIGHT_DEG = 7.5;
+export const SLIGHT_DEG = 22.5;
+
+/**
+ * The one sentence shown and spoken for a decision ({stop, reason, heading_deg}) and its
+ * style: [text, 'stop' | 'go']. Pure; the same as vectors.status_message in Python (the shared
+ * test vectors' `status` section).
+ */
 export function statusMessage(d) {
-  if (d.stop) {
-    if (d.reason === 'stale') return ['Stop. Camera or model stalled.', 'stop'];
-    if (d.reason === 'failed') return ['Stop. The model failed on this frame.', 'stop'];
-    return ['Stop. Not sure: scan slowly.', 'stop'];
-  }
+  if (d.stop || d.heading_deg === null || d.heading_deg === undefined) return [STATUS_STOP[d.reason] || STATUS_STOP.uncertain, 'stop'];
   const h = d.heading_deg;
   const side = h < 0 ? 'left' : 'right';
-  if (Math.abs(h) < 7.5) return ['Go straight ahead.', 'go'];
-  if (Math.abs(h) < 22.5) return [`Bear slightly ${side}.`, 'go'];
+  if (Math.abs(h) < STRAIGHT_DEG) return ['Go straight ahead.', 'go'];
+  if (Math.abs(h) < SLIGHT_DEG) return [`Bear slightly ${side}.`, 'go'];
   return [`Turn ${side}.`, 'go'];
 }
 
