@@ -62,11 +62,9 @@ function parseArgs(argv) {
 /** Create (not start) the server for a root folder. */
 export function createStaticServer(root, { log = false } = {}) {
   return createServer((req, res) => {
+    let sent = 0;
     if (log) {
-      res.on('finish', () => {
-        const sent = Number(res.getHeader('Content-Length') || 0);
-        console.log(`request ${req.method} ${req.url} ${res.statusCode} ${req.method === 'HEAD' ? 0 : sent}`);
-      });
+      res.on('finish', () => console.log(`request ${req.method} ${req.url} ${res.statusCode} ${req.method === 'HEAD' ? 0 : sent}`));
     }
     let path;
     try {
@@ -93,9 +91,10 @@ export function createStaticServer(root, { log = false } = {}) {
     }
     const gz = `${file}.gz`;
     const useGz = /\bgzip\b/.test(req.headers['accept-encoding'] || '') && existsSync(gz);
+    sent = useGz ? statSync(gz).size : stat.size;
     res.writeHead(200, {
       'Content-Type': TYPES[extname(file)] || 'application/octet-stream',
-      'Content-Length': useGz ? statSync(gz).size : stat.size,
+      'Content-Length': sent,
       'Cache-Control': 'no-cache',
       Vary: 'Accept-Encoding',
       ...(useGz ? { 'Content-Encoding': 'gzip' } : {}),

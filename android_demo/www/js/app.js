@@ -46,7 +46,7 @@ const params = new URLSearchParams(location.search);
 const TEST = params.get('test') === '1';
 const TUTORIAL_SPEED = Math.max(1, Number(params.get('tutorial_speed')) || 1);
 const MAX_TRACE = 5000;
-const MAX_FRAMES = 400;
+const MAX_FRAMES = 600;
 
 /** The first-run headphone check and sound tutorial: what is said, what plays, for how long (s). */
 export const TUTORIAL = [
@@ -245,10 +245,11 @@ async function step(frame, captured, dt) {
     app.audio.render(fresh ? cueFor(d) : STOP_CUE);
     feedback(now(), fresh ? d : { ...d, stop: true, reason: 'stale', heading_deg: null });
   }
-  record({ kind: 'frame', t: captured, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, obs, decision: d,
+  app.frameId = (app.frameId || 0) + 1; // unique over restarts (seq restarts with the camera)
+  record({ kind: 'frame', id: app.frameId, t: captured, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, obs, decision: d,
     fov_deg: cam.fov, width: frame.width, height: frame.height, outputs: outputs && plain(outputs) });
   if (TEST) {
-    app.frames.push({ seq: frame.seq, width: frame.width, height: frame.height, rgb: frame.rgb.slice() });
+    app.frames.push({ id: app.frameId, seq: frame.seq, width: frame.width, height: frame.height, rgb: frame.rgb.slice() });
     if (app.frames.length > MAX_FRAMES) app.frames.shift();
   }
   view.decision(d);
@@ -270,8 +271,7 @@ async function runLoop() {
       prevCaptured = null;
       continue;
     }
-    const wait = 1000 * (lastRun + MIN_FRAME_INTERVAL_S - now());
-    if (wait > 0) await sleep(wait);
+    while (now() < lastRun + MIN_FRAME_INTERVAL_S) await sleep(Math.max(1, 1000 * (lastRun + MIN_FRAME_INTERVAL_S - now())));
     if (!(await app.grabber.waitForNewFrame(FRAME_WAIT_MS)) || !app.running || app.paused) continue;
     const captured = now();
     const frame = app.grabber.grab();
@@ -334,6 +334,9 @@ async function resumeAudio(how) {
   record({ kind: 'audio_resumed', t: now(), how });
   setControl('End guidance', 'Double tap or hold', 'running');
   app.audio.render(STOP_CUE); // until the next fresh decision
+  app.policy.reset(); // the next advice is announced afresh
+  app.haptics.reset();
+  announce(['Audio back. Scan slowly.', '']);
 }
 
 function onAudioState(state) {
