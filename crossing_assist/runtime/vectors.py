@@ -260,8 +260,11 @@ def _guards(rng: np.random.Generator) -> dict:
     on_grid = a.copy()
     on_grid[7, 7, 2] ^= 1
     rotated = np.ascontiguousarray(a.transpose(1, 0, 2))
-    frame = lambda x: None if x is None else {"width": int(x.shape[1]), "height": int(x.shape[0]),  # noqa: E731
-                                               "rgb": [int(v) for v in x.reshape(-1)]}
+
+    def frame(x: np.ndarray | None) -> dict | None:
+        return None if x is None else {"width": int(x.shape[1]), "height": int(x.shape[0]),
+                                       "rgb": [int(v) for v in x.reshape(-1)]}
+
     pairs = [(None, a), (a, a.copy()), (a, off_grid), (a, on_grid), (a, rotated), (a, a[:, :14].copy())]
     same = [{"prev": frame(p), "cur": frame(c), "same": bool(same_frame(p, c))} for p, c in pairs]
     fresh = [{"now": n, "captured": c, "watchdog_s": w, "fresh": is_fresh(n, c, w)}
