@@ -111,9 +111,9 @@ export function rgbaToRgb(rgba, rgb = new Uint8Array((rgba.length / 4) * 3)) {
   return rgb;
 }
 
-/** WASM threads to ask for: up to 4 where SharedArrayBuffer works (cross-origin isolated), else 1. */
+/** WASM threads to ask for: cores - 1, at most 4, where SharedArrayBuffer works (cross-origin isolated), else 1. */
 export function wasmThreads(isolated = globalThis.crossOriginIsolated, cores = globalThis.navigator?.hardwareConcurrency) {
-  return isolated ? Math.max(1, Math.min(4, cores || 1)) : 1;
+  return isolated ? Math.max(1, Math.min(4, (cores || 1) - 1)) : 1; // one core left for the camera, audio and page
 }
 
 /**
