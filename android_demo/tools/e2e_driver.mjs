@@ -16,9 +16,11 @@
 // (3 deg/s right) while sampling the audio graph and the control's box every 100 ms -> a single
 // tap (must not end) -> AudioContext suspended (must stop, vibrate, speak) and a tap (resumes)
 // -> app hidden and shown again (pause; wake lock asked again) -> camera frozen (watchdog) ->
-// double tap ends -> a failed start, then a good one (the error must go) -> long press ends ->
+// double tap ends -> a failed start, then a good one (the error must go) -> the landscape FOV
+// set in the helper view (10 refused, 60 taken) -> long press ends ->
 // server stopped, reload, start again (offline; settings kept: no tutorial).
-// Phases "short": load with the tutorial marked done, start, run, collect, double tap.
+// Phases "short": load with the tutorial marked done and the direction vibration on, start,
+// run, collect, double tap.
 // The driver asserts nothing; it exits non-zero only when it could not run.
 
 import { spawn } from 'node:child_process';
@@ -282,6 +284,20 @@ async function fullPhases(page, context, server, args, result) {
   await sleep(1000);
   result.states.restarted = await page.evaluate(screenState);
 
+  // The helper sets this phone's landscape field of view: 10 is refused, 60 is taken at once.
+  await page.click('#helper-toggle');
+  await page.fill('#fov-landscape', '10');
+  await page.dispatchEvent('#fov-landscape', 'change');
+  const refused = await page.textContent('#fov-result');
+  await page.fill('#fov-landscape', '60');
+  await page.dispatchEvent('#fov-landscape', 'change');
+  const saved = await page.textContent('#fov-result');
+  await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'fov' && e.fov_deg === 60), null, 5000, 'the new FOV');
+  await sleep(800);
+  result.fov_ui = { refused, saved, camera_text: await page.textContent('#camera'),
+    stored: await page.evaluate(() => JSON.parse(localStorage.getItem('crossing-assist-settings')).fov) };
+  await page.click('#helper-close');
+
   // A long press ends guidance.
   const box = await control(page).boundingBox();
   await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
@@ -294,7 +310,8 @@ async function fullPhases(page, context, server, args, result) {
 }
 
 async function shortPhases(page, server, args, result) {
-  await page.addInitScript(() => localStorage.setItem('crossing-assist-settings', JSON.stringify({ tutorialDone: true })));
+  await page.addInitScript(() => localStorage.setItem('crossing-assist-settings',
+    JSON.stringify({ tutorialDone: true, hapticDirections: true })));
   await page.goto(`${server.url}?test=1`);
   await waitFor(page, () => window.crossingAssist?.ready && window.crossingAssist.offline === 'ready', null, 120000, 'the app and its service worker');
   result.first_load = server.requests.slice();
