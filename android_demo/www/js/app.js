@@ -503,16 +503,27 @@ async function registerWorker(version) {
     return;
   }
   try {
-    await navigator.serviceWorker.register(`sw.js?v=${version}`);
-    await navigator.serviceWorker.ready;
+    const reg = await navigator.serviceWorker.register(`sw.js?v=${version}`);
     if (!navigator.serviceWorker.controller) {
-      // The worker claims this page once it has cached everything: the model and the runtime are then
-      // read from its cache, so the first visit downloads each file once.
+      // First visit: wait until the worker has cached everything (however long the download
+      // takes) and claimed this page; the model and the runtime are then read from its cache,
+      // so each file is downloaded once. A worker that fails to install ends 'redundant'.
+      const worker = reg.installing || reg.waiting || reg.active;
+      if (!worker) throw new Error('no service worker after registering');
       await new Promise((ok) => {
-        navigator.serviceWorker.addEventListener('controllerchange', ok, { once: true });
-        setTimeout(ok, 10000);
+        const check = () => (['activated', 'redundant'].includes(worker.state) ? ok() : null);
+        worker.addEventListener('statechange', check);
+        check();
       });
+      if (worker.state === 'redundant') throw new Error('the service worker could not cache the app');
+      if (!navigator.serviceWorker.controller) {
+        await new Promise((ok) => {
+          navigator.serviceWorker.addEventListener('controllerchange', ok, { once: true });
+          setTimeout(ok, 3000);
+        });
+      }
     }
+    await navigator.serviceWorker.ready;
     app.offline = 'ready';
   } catch (err) {
     app.offline = `unavailable (${err.message})`;
