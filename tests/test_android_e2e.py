@@ -388,7 +388,10 @@ def test_the_control_never_moves(run: dict) -> None:
 def test_ending_needs_a_double_tap_or_a_long_press(run: dict) -> None:
     st = run["result"]["states"]
     assert st["single_tap"]["running"], "a single tap ended guidance"
-    assert st["single_tap"]["speech"][-1]["text"] == "Double tap or hold to end guidance."
+    hint = "Double tap or hold to end guidance."
+    assert st["single_tap"]["speech"][-1]["text"] == hint
+    n_hint = sum(s["text"] == hint for s in st["single_tap"]["speech"])
+    assert sum(s["text"] == hint for s in st["ended_double"]["speech"]) == n_hint  # a double tap is not hinted at
     assert st["ended_double"]["mode"] == "ready" and st["ended_long"]["mode"] == "ready"
     ends = [e["how"] for e in run["result"]["trace"] if e["kind"] == "end"]
     assert ends == ["double tap", "long press"], ends

@@ -132,6 +132,7 @@ function appStop(reason) {
 
 let lastTapMs = -Infinity;
 let pressTimer = null;
+let hintTimer = null;
 let longPressed = false;
 
 function onControlDown() {
@@ -163,13 +164,15 @@ function onControlClick() {
     if (app.audioFailed) {
       resumeAudio('tap');
     } else if (ms - lastTapMs <= DOUBLE_TAP_MS) {
+      clearTimeout(hintTimer);
       lastTapMs = -Infinity;
       record({ kind: 'end', t: now(), how: 'double tap' });
       stop();
       return;
     } else {
       record({ kind: 'tap', t: now() });
-      app.speaker.say('Double tap or hold to end guidance.');
+      // Said only if no second tap follows (the first half of a double tap stays silent).
+      hintTimer = setTimeout(() => app.running && app.speaker.say('Double tap or hold to end guidance.'), DOUBLE_TAP_MS);
     }
   }
   lastTapMs = ms;
