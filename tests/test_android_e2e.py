@@ -24,7 +24,7 @@ frame) and the Python pipeline on those *source* frames agrees with the app on >
 decisions (stop/go and side).
 
 Needs node >= 18, chromium (apt-get install chromium) and `npm ci` in android_demo; skips
-with the reason otherwise. Takes about 80 s.
+with the reason otherwise. Takes about 90 s.
 """
 
 from __future__ import annotations
@@ -537,6 +537,8 @@ def test_app_is_installable(run: dict) -> None:
     """Chromium's own installability check (what offers "Install app" on Android) finds nothing."""
     assert run["result"]["installability"] == [], run["result"]["installability"]
     assert run["result"]["manifest_errors"] == []
+    manifest = json.loads((run["www"] / "manifest.webmanifest").read_text())
+    assert manifest["orientation"] == "any"  # the app follows the phone; no forced portrait
 
 
 def test_app_works_offline_after_first_load(run: dict) -> None:

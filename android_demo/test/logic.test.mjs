@@ -279,3 +279,12 @@ test('settings persist and a damaged entry falls back to the defaults', async ()
   store.set('crossing-assist-settings', '{not json');
   assert.equal(loadSettings(storage).tutorialDone, false);
 });
+
+test('WASM threads: cores - 1 (at most 4) when cross-origin isolated, else one', async () => {
+  const { wasmThreads } = await import('../www/js/model.js');
+  assert.equal(wasmThreads(false, 8), 1);
+  assert.equal(wasmThreads(true, 8), 4);
+  assert.equal(wasmThreads(true, 4), 3);
+  assert.equal(wasmThreads(true, 2), 1);
+  assert.equal(wasmThreads(true, undefined), 1);
+});
