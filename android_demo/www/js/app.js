@@ -27,12 +27,13 @@
 import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
 import { cameraFov, FovError, orientation, zoomedFov } from './geometry.js';
-import { Haptics, STOP_PATTERNS } from './haptics.js';
+import { Haptics } from './haptics.js';
 import { isFresh, sameFrame, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
-import { configFromBundle, cueFor, Decider, KIND_BEACON, KIND_SILENCE, KIND_STOP, observationFromOutputs } from './logic.js';
+import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs } from './logic.js';
 import { fetchBundle, openBest } from './model.js';
 import { loadSettings, saveSettings } from './settings.js';
 import { Speaker, SpeechPolicy } from './speech.js';
+import { playTutorial } from './tutorial.js';
 import { replayVectors } from './vectors.js';
 import { HelperView } from './view.js';
 
@@ -47,17 +48,6 @@ const TEST = params.get('test') === '1';
 const TUTORIAL_SPEED = Math.max(1, Number(params.get('tutorial_speed')) || 1);
 const MAX_TRACE = 5000;
 const MAX_FRAMES = 600;
-
-/** The first-run headphone check and sound tutorial: what is said, what plays, for how long (s). */
-export const TUTORIAL = [
-  { say: 'Sound check. A beep in your left ear.', cue: { kind: KIND_BEACON, pan: -1, heading_deg: -45, rate_hz: 3 }, s: 3 },
-  { say: 'Right ear.', cue: { kind: KIND_BEACON, pan: 1, heading_deg: 45, rate_hz: 3 }, s: 2 },
-  { say: 'Centre.', cue: { kind: KIND_BEACON, pan: 0, heading_deg: 0, rate_hz: 3 }, s: 2 },
-  { say: 'If left and right were swapped, turn your headphones round.', cue: { kind: KIND_SILENCE }, s: 3 },
-  { say: 'This is the beacon. It comes from where to head, and beeps faster the surer the app is.', sweep: true, s: 6 },
-  { say: 'This is the stop cue, two falling beeps, with a vibration. Stop and scan slowly.', cue: STOP_CUE, s: 4 },
-  { say: 'Double tap or hold the screen to end guidance. Guidance starts now.', cue: { kind: KIND_SILENCE }, s: 3 },
-];
 
 const $ = (id) => document.getElementById(id);
 const app = {
@@ -373,30 +363,26 @@ async function requestWakeLock() {
   return lock || null;
 }
 
-/** The headphone check and sound tutorial (first run, or on request); a tap skips it. */
+/** The headphone check and sound tutorial (first run, or on request; tutorial.js); a tap skips it. */
 async function runTutorial() {
   app.mode = 'tutorial';
   app.skipTutorial = false;
   setControl('Sound check', 'Tap to skip', 'running');
-  for (const [i, part] of TUTORIAL.entries()) {
-    if (app.skipTutorial) break;
-    view.status(part.say, '');
-    app.speaker.say(part.say);
-    const steps = part.sweep ? 12 : 1;
-    for (let k = 0; k < steps && !app.skipTutorial; k += 1) {
-      const pan = -1 + (2 * k) / (steps - 1 || 1);
-      const cue = part.sweep ? { kind: KIND_BEACON, pan, heading_deg: 45 * pan, rate_hz: 2 + 2 * k / (steps - 1) } : part.cue;
-      app.audio.render(cue);
-      if (cue.kind === KIND_STOP) app.haptics.vibrate(STOP_PATTERNS.uncertain);
-      record({ kind: 'tutorial', t: now(), part: i, text: part.say, cue: { ...cue } });
-      await sleep((1000 * part.s) / steps / TUTORIAL_SPEED);
-    }
-  }
-  app.audio.render({ kind: KIND_SILENCE });
+  const done = await playTutorial({
+    audio: app.audio,
+    say: (text) => {
+      view.status(text, '');
+      app.speaker.say(text);
+    },
+    vibrate: (p) => app.haptics.vibrate(p),
+    onStep: (step) => record({ kind: 'tutorial', t: now(), ...step }),
+    speed: TUTORIAL_SPEED,
+    skipped: () => app.skipTutorial,
+  });
   app.speaker.cancel();
   app.settings.tutorialDone = true;
   saveSettings(app.settings);
-  record({ kind: 'tutorial_done', t: now(), skipped: app.skipTutorial });
+  record({ kind: 'tutorial_done', t: now(), skipped: !done });
 }
 
 async function start({ tutorial = !app.settings.tutorialDone } = {}) {
