@@ -367,6 +367,9 @@ def test_background_pauses_and_wake_lock_is_requested_again(run: dict) -> None:
     assert _vibrations(trace[i_hidden:i_visible], "background")
     assert len(visible["wake_locks"]) == len(hidden["wake_locks"]) + 1, (hidden["wake_locks"], visible["wake_locks"])
     assert visible["wake_locks"][-1]["visible"] == "visible"
+    resumed = [e for e in trace[i_hidden:] if e["kind"] == "audio_resumed"]
+    assert resumed and resumed[0]["how"] == "return", "audio suspended in the background was not resumed on return"
+    assert visible["audio"]["contextState"] == "running" and not visible["audio_failed"]
     first = next(e for e in trace[i_visible:] if e["kind"] in ("fov", "frame"))
     assert first["kind"] == "fov", "the first decision after the return reused the old Decider (stale heading)"
     assert not visible["paused"] and visible["running"]

@@ -15,7 +15,8 @@
 // first tap: the headphone check and sound tutorial, then guidance with a synthetic gyroscope
 // (3 deg/s right) while sampling the audio graph and the control's box every 100 ms -> a single
 // tap (must not end) -> AudioContext suspended (must stop, vibrate, speak) and a tap (resumes)
-// -> app hidden and shown again (pause; wake lock asked again) -> camera frozen (watchdog) ->
+// -> app hidden (audio suspended there too) and shown again (pause; audio resumed and wake
+// lock asked again on the return) -> camera frozen (watchdog) ->
 // double tap ends -> a failed start, then a good one (the error must go) -> the landscape FOV
 // set in the helper view (10 refused, 60 taken) -> long press ends ->
 // server stopped, reload, start again (offline; settings kept: no tutorial).
@@ -245,10 +246,12 @@ async function fullPhases(page, context, server, args, result) {
   await sleep(1500);
   result.states.audio_resumed = await page.evaluate(screenState);
 
-  // The app goes to the background and comes back.
+  // The app goes to the background (where the OS also suspends its audio) and comes back.
   await page.evaluate(hideShow, true);
   await sleep(1000);
   result.states.hidden = await page.evaluate(screenState);
+  await page.evaluate(() => window.crossingAssist.audio.ctx.suspend());
+  await sleep(300);
   await page.evaluate(hideShow, false);
   await sleep(1500);
   result.states.visible = await page.evaluate(screenState);
