@@ -167,10 +167,20 @@ def test_build_copies_only_the_wasm_runtime_and_lists_the_cache(tmp_path: Path) 
     proc = subprocess.run([NODE, "tools/build.mjs", "--bundle", str(bundle), "--www", str(www)],
                           capture_output=True, text=True, timeout=120, cwd=DEMO)
     assert proc.returncode == 0, proc.stderr
-    vendor = sorted(p.name for p in (www / "vendor").iterdir())
-    assert vendor == sorted(["ort.wasm.min.mjs", "ort-wasm-simd-threaded.mjs", "ort-wasm-simd-threaded.wasm"])
+    vendor = sorted(p.name for p in (www / "vendor").iterdir() if not p.name.endswith(".gz"))
+    wasm_only = ["ort.wasm.min.mjs", "ort-wasm-simd-threaded.mjs", "ort-wasm-simd-threaded.wasm"]
+    webgpu = ["ort.webgpu.min.mjs", "ort-wasm-simd-threaded.asyncify.mjs", "ort-wasm-simd-threaded.asyncify.wasm"]
+    assert vendor == sorted(wasm_only + webgpu)
     pre = json.loads((www / "precache.json").read_text())
     urls = {f["url"] for f in pre["files"]}
+    assert not {f"vendor/{n}" for n in webgpu} & urls  # fetched only by a phone with WebGPU
+    assert not [u for u in urls if u.endswith(".gz")]
+    # gzip twins: the wasm shrinks to under a third, and decompresses to the same bytes
+    import gzip
+
+    raw = (www / "vendor" / "ort-wasm-simd-threaded.wasm").read_bytes()
+    twin = (www / "vendor" / "ort-wasm-simd-threaded.wasm.gz").read_bytes()
+    assert len(twin) < len(raw) / 3 and gzip.decompress(twin) == raw
     assert {"index.html", "js/app.js", "bundle/model.onnx", "bundle/bundle.json",
             "vendor/ort-wasm-simd-threaded.wasm", "manifest.webmanifest"} <= urls
     assert "sw.js" not in urls and len(pre["version"]) == 16

@@ -85,17 +85,20 @@ test('observationFromOutputs: the bundle measure, argmax variance, failed frames
   assert.throws(() => observationFromOutputs(out, 'votes'), /Unknown uncertainty measure/);
 });
 
-test('sameFrame compares every 7th row and column, as live._same does', () => {
+test('sameFrame compares every byte, as live.same_frame does', () => {
   const w = 20;
   const h = 15;
   const a = { width: w, height: h, rgb: Uint8Array.from({ length: w * h * 3 }, (_, i) => i % 251) };
   const b = { ...a, rgb: a.rgb.slice() };
   assert.equal(sameFrame(null, a), false);
   assert.equal(sameFrame(a, b), true);
-  b.rgb[(1 * w + 1) * 3] ^= 1; // row 1, col 1: not sampled
-  assert.equal(sameFrame(a, b), true);
-  b.rgb[(7 * w + 14) * 3 + 2] ^= 1; // row 7, col 14, blue: sampled
+  b.rgb[(1 * w + 1) * 3] ^= 1; // any pixel, any channel counts
   assert.equal(sameFrame(a, b), false);
+  b.rgb[(1 * w + 1) * 3] ^= 1;
+  b.rgb[b.rgb.length - 1] ^= 1; // the last byte (past the 4-byte words)
+  assert.equal(sameFrame(a, b), false);
+  const odd = { width: 3, height: 1, rgb: Uint8Array.from([1, 2, 3, 4, 5, 6, 7, 8, 9]).subarray(0, 9) };
+  assert.equal(sameFrame(odd, { ...odd, rgb: odd.rgb.slice() }), true);
   assert.equal(sameFrame(a, { ...a, width: h, height: w }), false);
 });
 
@@ -118,13 +121,15 @@ test('rgbaToRgb drops alpha and keeps the channel order', () => {
 
 function validMeta() {
   return {
-    schema_version: 1, model_file: 'model.onnx',
+    schema_version: 2, model_file: 'model.onnx',
     actions: { n: 4, names: spaceNames(4), bins: spaceGroups(4) }, fov_deg: 90,
     input: { layout: 'NHWC', dtype: 'uint8', color: 'RGB', size: [224, 224], mean: [0.485, 0.456, 0.406], std: [0.229, 0.224, 0.225] },
     mc: { samples: 16, p: 0.5 },
     calibration: { temperature: 1, conformal: { coverage: 0.9, threshold: 0.05, n_frames: 10 }, uncertainty: { measure: 'entropy', threshold: 1.2 } },
     precision: 'fp32', training: {}, metrics: {}, package_version: '0.1.0', provenance: {},
     model_sha256: 'a'.repeat(64), model_size: 1000,
+    geometry: { fit: 'letterbox', pad_rgb: [124, 116, 104], strips: 'frame',
+      camera_fov_deg: { landscape: 67, portrait: 53 }, train_fov_deg: 67 },
   };
 }
 
@@ -132,8 +137,18 @@ test('bundle.json validation accepts a good bundle and names the bad field', () 
   const ok = parseBundleMeta(validMeta());
   assert.equal(ok.actions.n, 4);
   assert.equal(ok.calibration.uncertainty.threshold, 1.2);
+  assert.deepEqual(ok.geometry.camera_fov_deg, { landscape: 67, portrait: 53 });
+  const v1 = validMeta();
+  v1.schema_version = 1;
+  delete v1.geometry;
+  assert.deepEqual(parseBundleMeta(v1).geometry,
+    { fit: 'stretch', pad_rgb: null, strips: 'frame', camera_fov_deg: { landscape: 90, portrait: 90 }, train_fov_deg: 90 });
   const bad = [
-    [(m) => { m.schema_version = 2; }, /schema_version 2 unsupported/],
+    [(m) => { m.schema_version = 3; }, /schema_version 3 unsupported/],
+    [(m) => { delete m.geometry; }, /missing field 'geometry'/],
+    [(m) => { m.geometry.fit = 'crop'; }, /geometry.fit/],
+    [(m) => { m.geometry.camera_fov_deg.portrait = 10; }, /camera_fov_deg.portrait = 10 is out of range/],
+    [(m) => { m.geometry.pad_rgb = [0, 0]; }, /pad_rgb/],
     [(m) => { m.actions.names[1] = 'west'; }, /actions.names disagree/],
     [(m) => { m.calibration.uncertainty.measure = 'votes'; }, /measure = "votes" unknown/],
     [(m) => { m.input.size = [8, 8]; }, /input.size/],
@@ -185,4 +200,91 @@ test('gyroscope: the integrator gives the mean turn rate between two steps', () 
   y.add(10, 1.0); // after a 0.5 s sensor gap: at most 0.2 s is integrated
   assert.ok(Math.abs(y.take(1) - 10 * 0.2) < 1e-9);
   assert.equal(y.take(0), 0);
+});
+
+// ----------------------------------------------------------------------------- issue 12 / 14 modules
+
+test('geometry: orientation picks the FOV; overrides and the 20..170 range', async () => {
+  const { cameraFov, FovError, orientation, zoomedFov } = await import('../www/js/geometry.js');
+  const g = { camera_fov_deg: { landscape: 67, portrait: 53 } };
+  assert.equal(orientation(640, 480), 'landscape');
+  assert.equal(orientation(480, 640), 'portrait');
+  assert.equal(orientation(480, 480), 'landscape');
+  assert.equal(cameraFov(g, 1280, 720), 67);
+  assert.equal(cameraFov(g, 720, 1280), 53);
+  assert.equal(cameraFov(g, 720, 1280, 60), 60);
+  assert.throws(() => cameraFov(g, 720, 1280, 19.9), FovError);
+  assert.throws(() => cameraFov(g, 720, 1280, 171), /valid: 20..170/);
+  assert.equal(zoomedFov(67, {}, {}), 67);
+  assert.ok(Math.abs(zoomedFov(90, { zoom: 2 }, { zoom: { min: 1 } }) - 2 * Math.atan(0.5) * 180 / Math.PI) < 1e-12);
+});
+
+test('speech: a heading hopping over the 7.5 deg boundary is announced once; stops at once', async () => {
+  const { SpeechPolicy } = await import('../www/js/speech.js');
+  const p = new SpeechPolicy();
+  const said = [];
+  for (let i = 0; i < 100; i += 1) { // 10 s at 10 Hz: 2 s at 3 deg, then hopping between 3 and 9 deg every 0.7 s
+    const t = i / 10;
+    const m = p.step(t, { stop: false, reason: 'ok', heading_deg: t >= 2 && Math.floor(t / 0.7) % 2 ? 9 : 3 });
+    if (m) said.push([t, m[0]]);
+  }
+  assert.deepEqual(said, [[1, 'Go straight ahead.']]); // after holding 1 s; 9 deg stays within 7.5 + 2.5
+  const s = p.step(10.05, { stop: true, reason: 'uncertain', heading_deg: null });
+  assert.deepEqual(s, ['Stop. Not sure: scan slowly.', 'stop']); // no hold, no gap for a stop after guidance
+  assert.equal(p.step(10.5, { stop: true, reason: 'stale', heading_deg: null }), null); // reason change: rate-limited
+  assert.deepEqual(p.step(12.1, { stop: true, reason: 'stale', heading_deg: null })[0], 'Stop. Camera stalled.');
+  assert.deepEqual(p.force(12.2, 'audio')[0], 'Audio stopped. Tap to resume.');
+  // a clear new direction is announced after holding 1 s and 2 s after the last announcement
+  const q = new SpeechPolicy();
+  const go = (h) => ({ stop: false, reason: 'ok', heading_deg: h });
+  assert.equal(q.step(0, go(30)), null);
+  assert.equal(q.step(0.5, go(30)), null);
+  assert.equal(q.step(1.0, go(30))[0], 'Turn right.');
+  assert.equal(q.step(1.5, go(-30)), null);
+  assert.equal(q.step(2.5, go(-30)), null); // held 1 s, but only 1.5 s after the last announcement
+  assert.equal(q.step(3.0, go(-30))[0], 'Turn left.');
+});
+
+test('haptics: a pattern per stop reason, again on each change of reason; the direction code', async () => {
+  const { DIRECTION_PATTERNS, Haptics, STOP_PATTERNS } = await import('../www/js/haptics.js');
+  const got = [];
+  const h = new Haptics({ vibrate: (p) => got.push(p) });
+  h.stop('uncertain');
+  h.stop('uncertain');
+  h.stop('stale');
+  assert.deepEqual(got, [STOP_PATTERNS.uncertain, STOP_PATTERNS.stale]);
+  assert.equal(new Set(Object.values(STOP_PATTERNS).map(String)).size, Object.keys(STOP_PATTERNS).length);
+  assert.equal(h.go(1, -20), null); // direction code off by default
+  h.directions = true;
+  assert.deepEqual(h.go(2, -20), DIRECTION_PATTERNS.left);
+  assert.equal(h.go(3, -25), null); // same code within 3 s
+  assert.deepEqual(h.go(5.1, -25), DIRECTION_PATTERNS.left); // repeated every 3 s
+  assert.deepEqual(h.go(5.2, 2), DIRECTION_PATTERNS.ahead);
+  assert.deepEqual(h.go(5.3, 40), DIRECTION_PATTERNS.right);
+});
+
+test('settings persist and a damaged entry falls back to the defaults', async () => {
+  const { DEFAULT_SETTINGS, loadSettings, saveSettings } = await import('../www/js/settings.js');
+  const store = new Map();
+  const storage = { getItem: (k) => store.get(k) ?? null, setItem: (k, v) => store.set(k, v) };
+  assert.deepEqual(loadSettings(storage), { ...DEFAULT_SETTINGS, fov: { ...DEFAULT_SETTINGS.fov } });
+  const s = loadSettings(storage);
+  s.tutorialDone = true;
+  s.fov.portrait = 55;
+  saveSettings(s, storage);
+  assert.equal(loadSettings(storage).tutorialDone, true);
+  assert.equal(loadSettings(storage).fov.portrait, 55);
+  store.set('crossing-assist-settings', JSON.stringify({ fov: { portrait: 500 } }));
+  assert.equal(loadSettings(storage).fov.portrait, null);
+  store.set('crossing-assist-settings', '{not json');
+  assert.equal(loadSettings(storage).tutorialDone, false);
+});
+
+test('WASM threads: cores - 1 (at most 4) when cross-origin isolated, else one', async () => {
+  const { wasmThreads } = await import('../www/js/model.js');
+  assert.equal(wasmThreads(false, 8), 1);
+  assert.equal(wasmThreads(true, 8), 4);
+  assert.equal(wasmThreads(true, 4), 3);
+  assert.equal(wasmThreads(true, 2), 1);
+  assert.equal(wasmThreads(true, undefined), 1);
 });

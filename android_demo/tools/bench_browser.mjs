@@ -1,11 +1,15 @@
 #!/usr/bin/env node
-// Model latency in headless Chromium (onnxruntime-web WASM, one thread), as the app runs it:
-// serves a built www/ on 127.0.0.1, waits for the app's session, then times `runs` calls of
-// the app's Model.run on a synthetic H x W RGB frame (after `warmup` untimed ones).
+// Model latency in headless Chromium, as the app runs it, plus what the first visit costs:
+// serves a built www/ on 127.0.0.1 (logging requests), loads the app in a fresh profile, waits
+// for its session and service worker, then times `runs` calls of the app's Model.run on a
+// synthetic H x W RGB frame (after `warmup` untimed ones).
 //
 //   node tools/bench_browser.mjs [--www www] [--size 480x640] [--runs 20] [--warmup 3]
+//        [--threads N]   (0 = the app's choice: cores - 1, at most 4, when cross-origin isolated)
 //
-// Prints one JSON line: {"bundle": ..., "size": [H, W], "runs": n, "median_ms": ..., "p90_ms": ...}.
+// Prints one JSON line: {"bundle", "backend", "threads", "size": [H, W], "runs", "median_ms",
+// "p90_ms", "first_load_bytes" (bytes the server sent until the app was ready and cached for
+// offline use), "first_load_requests", "cache_bytes" (what the service worker's cache holds)}.
 
 import { spawn } from 'node:child_process';
 import { mkdtempSync, rmSync } from 'node:fs';
@@ -18,11 +22,11 @@ const FLAGS = ['--headless=new', '--no-sandbox', '--disable-gpu', '--disable-qui
   '--disable-background-networking', '--disable-component-update', '--disable-sync'];
 
 function args(argv) {
-  const a = { www: join(ROOT, 'www'), size: '480x640', runs: 20, warmup: 3, chromium: '/usr/bin/chromium' };
+  const a = { www: join(ROOT, 'www'), size: '480x640', runs: 20, warmup: 3, chromium: '/usr/bin/chromium', threads: 0 };
   for (let i = 0; i < argv.length; i += 2) {
     const key = argv[i].replace(/^--/, '');
     if (!(key in a) || argv[i + 1] === undefined) throw new Error(`unknown argument ${argv[i]}`);
-    a[key] = ['runs', 'warmup'].includes(key) ? Number(argv[i + 1]) : argv[i + 1];
+    a[key] = ['runs', 'warmup', 'threads'].includes(key) ? Number(argv[i + 1]) : argv[i + 1];
   }
   const m = /^(\d+)x(\d+)$/.exec(a.size);
   if (!m) throw new Error(`invalid --size ${a.size}; expected HxW, e.g. 480x640`);
@@ -33,14 +37,21 @@ function args(argv) {
 async function main() {
   const a = args(process.argv.slice(2));
   const { chromium } = await import('playwright-core');
-  const server = spawn(process.execPath, [join(ROOT, 'tools', 'serve.mjs'), '--port', '0', '--root', resolve(a.www)],
+  const server = spawn(process.execPath, [join(ROOT, 'tools', 'serve.mjs'), '--port', '0', '--root', resolve(a.www), '--log'],
     { stdio: ['ignore', 'pipe', 'inherit'] });
+  const requests = [];
   const url = await new Promise((ok, fail) => {
     let out = '';
     server.stdout.on('data', (c) => {
       out += c;
-      const m = out.match(/serving (http:\/\/\S+\/)/);
-      if (m) ok(m[1]);
+      const lines = out.split('\n');
+      out = lines.pop();
+      for (const line of lines) {
+        const r = /^request \S+ (\S+) (\d+) (\d+)$/.exec(line);
+        if (r) requests.push({ url: r[1], bytes: Number(r[3]) });
+        const m = line.match(/serving (http:\/\/\S+\/)/);
+        if (m) ok(m[1]);
+      }
     });
     server.on('exit', (code) => fail(new Error(`server exited with ${code}`)));
   });
@@ -48,11 +59,18 @@ async function main() {
   const ctx = await chromium.launchPersistentContext(profile, { executablePath: a.chromium, headless: true, args: FLAGS });
   try {
     const page = ctx.pages()[0] || await ctx.newPage();
-    await page.goto(url);
-    await page.waitForFunction(() => window.crossingAssist?.ready || window.crossingAssist?.error, null, { timeout: 120000 });
+    await page.goto(a.threads ? `${url}?threads=${a.threads}` : url);
+    await page.waitForFunction(() => (window.crossingAssist?.ready && window.crossingAssist.offline === 'ready')
+      || window.crossingAssist?.error, null, { timeout: 180000 });
+    const firstLoad = requests.slice();
     const r = await page.evaluate(async ({ hw, runs, warmup }) => {
       const app = window.crossingAssist;
       if (!app.ready) return { error: app.error };
+      let cacheBytes = 0;
+      for (const name of await caches.keys()) {
+        const cache = await caches.open(name);
+        for (const req of await cache.keys()) cacheBytes += (await (await cache.match(req)).arrayBuffer()).byteLength;
+      }
       const [h, w] = hw;
       const rgb = new Uint8Array(h * w * 3);
       for (let i = 0; i < rgb.length; i += 1) rgb[i] = (i * 2654435761) >>> 24;
@@ -66,9 +84,12 @@ async function main() {
       ms.sort((x, y) => x - y);
       const t = app.meta.raw.training || {};
       return { bundle: `${t.backbone || '?'} ${app.meta.input.size.join('x')} T=${app.meta.mc.samples} ${app.meta.precision}`,
-        size: hw, runs, median_ms: ms[Math.floor(runs / 2)], p90_ms: ms[Math.floor(0.9 * (runs - 1))] };
+        backend: app.model.backend, threads: app.model.threads, isolated: crossOriginIsolated,
+        size: hw, runs, median_ms: ms[Math.floor(runs / 2)], p90_ms: ms[Math.floor(0.9 * (runs - 1))], cache_bytes: cacheBytes };
     }, { hw: a.hw, runs: a.runs, warmup: a.warmup });
     if (r.error) throw new Error(r.error);
+    r.first_load_bytes = firstLoad.reduce((s, q) => s + q.bytes, 0);
+    r.first_load_requests = firstLoad.length;
     console.log(JSON.stringify(r));
   } finally {
     await ctx.close();

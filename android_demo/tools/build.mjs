@@ -5,6 +5,10 @@
 // self-test) into www/, and write www/precache.json: every file the
 // service worker caches for offline use, with its SHA-256, and a version that changes when
 // any of them changes (so phones pick up a new app or bundle on their next online visit).
+// Every compressible file also gets a gzip twin (FILE.gz, written only where it saves >= 10%;
+// tools/serve.mjs sends it to browsers that accept gzip; not listed for the cache, which holds
+// the decoded bytes). The WebGPU build of onnxruntime-web is copied too but not precached: a
+// phone with WebGPU fetches it on first use (model.js), others never download it.
 //
 //   node tools/build.mjs [--bundle DIR] [--www DIR]
 //
@@ -12,13 +16,16 @@
 
 import { createHash } from 'node:crypto';
 import { copyFileSync, existsSync, mkdirSync, readdirSync, readFileSync, renameSync, rmSync, statSync, writeFileSync } from 'node:fs';
-import { dirname, join, relative, resolve, sep } from 'node:path';
+import { dirname, extname, join, relative, resolve, sep } from 'node:path';
 import { fileURLToPath } from 'node:url';
+import { gzipSync } from 'node:zlib';
 import { BundleError, parseBundleMeta } from '../www/js/bundle.js';
 
 const HERE = dirname(dirname(fileURLToPath(import.meta.url)));
 export const ORT_FILES = ['ort.wasm.min.mjs', 'ort-wasm-simd-threaded.mjs', 'ort-wasm-simd-threaded.wasm'];
-const NOT_CACHED = new Set(['precache.json', 'sw.js']);
+export const ORT_WEBGPU_FILES = ['ort.webgpu.min.mjs', 'ort-wasm-simd-threaded.asyncify.mjs', 'ort-wasm-simd-threaded.asyncify.wasm'];
+const NOT_CACHED = new Set(['precache.json', 'sw.js', ...ORT_WEBGPU_FILES.map((f) => `vendor/${f}`)]);
+const COMPRESSIBLE = new Set(['.wasm', '.mjs', '.js', '.json', '.html', '.css', '.onnx', '.webmanifest', '.svg']);
 
 class BuildError extends Error {}
 
@@ -42,7 +49,7 @@ function writeAtomic(dst, text) {
 
 function copyOrt(www) {
   const dist = join(HERE, 'node_modules', 'onnxruntime-web', 'dist');
-  for (const name of ORT_FILES) {
+  for (const name of [...ORT_FILES, ...ORT_WEBGPU_FILES]) {
     const src = join(dist, name);
     if (!existsSync(src)) throw new BuildError(`${src} is missing; run 'npm ci' in android_demo first`);
     copyAtomic(src, join(www, 'vendor', name));
@@ -74,12 +81,35 @@ export function copyBundle(bundleDir, www) {
   return meta;
 }
 
+/** Write FILE.gz next to every compressible file where gzip saves >= 10% (kept when up to date); returns the twins. */
+export function writeGzipTwins(www) {
+  const twins = [];
+  for (const rel of listFiles(www)) {
+    const path = join(www, rel);
+    if (!COMPRESSIBLE.has(extname(rel))) continue;
+    const gz = `${path}.gz`;
+    if (existsSync(gz) && statSync(gz).mtimeMs >= statSync(path).mtimeMs) {
+      twins.push(rel);
+      continue;
+    }
+    const data = readFileSync(path);
+    const packed = gzipSync(data, { level: 9 });
+    if (packed.length <= 0.9 * data.length) {
+      writeAtomic(gz, packed);
+      twins.push(rel);
+    } else {
+      rmSync(gz, { force: true });
+    }
+  }
+  return twins;
+}
+
 function listFiles(root, dir = root) {
   const out = [];
   for (const entry of readdirSync(dir, { withFileTypes: true })) {
     const path = join(dir, entry.name);
     if (entry.isDirectory()) out.push(...listFiles(root, path));
-    else if (entry.isFile() && !entry.name.includes('.tmp-')) out.push(relative(root, path).split(sep).join('/'));
+    else if (entry.isFile() && !entry.name.includes('.tmp-') && !entry.name.endsWith('.gz')) out.push(relative(root, path).split(sep).join('/'));
   }
   return out.sort();
 }
@@ -125,9 +155,11 @@ function main() {
     const meta = copyBundle(args.bundle, args.www);
     copyVectors(args.www);
     const { version, files } = writePrecache(args.www);
+    writeGzipTwins(args.www);
     const total = files.reduce((s, f) => s + f.bytes, 0);
+    const wire = files.reduce((s, f) => s + (existsSync(join(args.www, `${f.url}.gz`)) ? statSync(join(args.www, `${f.url}.gz`)).size : f.bytes), 0);
     console.log(`built ${args.www}: ${meta.actions.n}-action bundle, ${files.length} files, `
-      + `${(total / 1e6).toFixed(1)} MB cached offline, version ${version}`);
+      + `${(total / 1e6).toFixed(1)} MB cached offline (${(wire / 1e6).toFixed(1)} MB to download with gzip), version ${version}`);
     return 0;
   } catch (err) {
     if (err instanceof BuildError || err instanceof BundleError) {

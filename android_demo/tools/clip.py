@@ -9,7 +9,9 @@ chroma is 128).
 :func:`bar_clip` makes the clip the end-to-end test uses: a mid-grey frame with a bright,
 coloured vertical bar (the "goal" of the test bundle's brightness detector) that sits left,
 sweeps right, sits right, disappears (plain grey: the model cannot tell), and finally sits
-right in exactly repeated frames (a frozen camera). Every other frame carries a little
+right in exactly repeated frames (a frozen camera). With ``flip_s`` > 0 the bar first hops
+between strips 7 and 8 every second for ``flip_s`` seconds (the heading crosses the 7.5 degree
+"straight ahead" boundary: the spoken advice must not chatter). Every other frame carries a little
 sensor noise, as a live camera's does, so that only the frozen segment repeats itself.
 """
 
@@ -70,23 +72,26 @@ def bar_frame(width: int, height: int, strip: float | None, grey: int = 110,
     return frame
 
 
-def bar_clip(width: int = 160, height: int = 120, fps: int = 10, *, noise: int = 3, seed: int = 0
-             ) -> tuple[list[np.ndarray], list[float | None], list[bool]]:
+def bar_clip(width: int = 160, height: int = 120, fps: int = 10, *, noise: int = 3, seed: int = 0,
+             flip_s: int = 0) -> tuple[list[np.ndarray], list[float | None], list[bool]]:
     """The test clip: frames, the bar's strip in each (None = no bar) and whether the frame is
     part of the frozen segment. 3 s at strip 3, 2 s sweeping to strip 10, 2.5 s at strip 10,
-    1.5 s of plain grey, then 2 s of one frame (bar at strip 10) repeated exactly: 11 s.
+    ``flip_s`` s hopping between strips 7 and 8 each second, 1.5 s of plain grey, then 2 s of one
+    frame (bar at strip 10) repeated exactly: 11 s + ``flip_s``.
     Live frames get uniform integer noise in [-noise, noise] (``seed`` fixes it)."""
     rng = np.random.default_rng(seed)
     strips: list[float | None] = [3.0] * (3 * fps)
     strips += [3.0 + 7.0 * (i + 1) / (2 * fps) for i in range(2 * fps)]
     strips += [10.0] * int(2.5 * fps)
+    last_at_10 = len(strips) - 1
+    strips += [7.0 if (i // fps) % 2 == 0 else 8.0 for i in range(flip_s * fps)]
     strips += [None] * int(1.5 * fps)
     frames = []
     for s in strips:
         f = bar_frame(width, height, s).astype(np.int16)
         f += rng.integers(-noise, noise + 1, size=f.shape, dtype=np.int16)
         frames.append(np.clip(f, 0, 255).astype(np.uint8))
-    frozen = frames[-int(1.5 * fps) - 1]  # the last frame with the bar at strip 10
+    frozen = frames[last_at_10]  # the last frame with the bar at strip 10
     n_frozen = 2 * fps
     return (frames + [frozen] * n_frozen, strips + [10.0] * n_frozen,
             [False] * len(frames) + [True] * n_frozen)

@@ -1,15 +1,27 @@
 #!/usr/bin/env node
-// End-to-end driver: serves www/ on 127.0.0.1, starts Debian's headless Chromium through
-// playwright-core with a fake camera playing a Y4M clip, runs the app, and writes what it saw
-// as JSON for tests/test_android_e2e.py to judge against the Python runtime:
+// End-to-end driver: serves www/ on 127.0.0.1 (logging every request), starts Debian's
+// headless Chromium through playwright-core with a fake camera playing a Y4M clip, uses the
+// app as a person would, and writes what it saw as JSON for tests/test_android_e2e.py to judge
+// (against the Python runtime, among others):
 //
 //   node tools/e2e_driver.mjs --clip clip.y4m --out result.json [--run-s 8] [--www DIR]
-//                            [--chromium /usr/bin/chromium]
+//        [--chromium /usr/bin/chromium] [--phases full|short] [--viewport 844x390]
 //
-// Phases: load (service worker ready) -> the app's self-test (shared test vectors) -> Start
-// (with a synthetic gyroscope turning right at 3 deg/s), run the clip for --run-s seconds while sampling the audio graph every 100 ms -> freeze the
-// camera (the <video> stops presenting frames) and time the stop cue -> collect the decision
-// trace and the frames the model saw -> stop the server, reload, Start again (offline).
+// Speech (speechSynthesis.speak), vibration (navigator.vibrate) and the screen wake lock are
+// wrapped so their calls are recorded (speech still goes to the real speechSynthesis).
+//
+// Phases "full": first load (requests counted until the service worker holds the app) ->
+// accessibility tree with the helper view closed and open -> the self-test (shared vectors) ->
+// first tap: the headphone check and sound tutorial, then guidance with a synthetic gyroscope
+// (3 deg/s right) while sampling the audio graph and the control's box every 100 ms -> a single
+// tap (must not end) -> AudioContext suspended (must stop, vibrate, speak) and a tap (resumes)
+// -> app hidden (audio suspended there too) and shown again (pause; audio resumed and wake
+// lock asked again on the return) -> camera frozen (watchdog) ->
+// double tap ends -> a failed start, then a good one (the error must go) -> the landscape FOV
+// set in the helper view (10 refused, 60 taken) -> long press ends ->
+// server stopped, reload, start again (offline; settings kept: no tutorial).
+// Phases "short": load with the tutorial marked done and the direction vibration on, start,
+// run, collect, double tap.
 // The driver asserts nothing; it exits non-zero only when it could not run.
 
 import { spawn } from 'node:child_process';
@@ -25,7 +37,7 @@ const CHROMIUM_FLAGS = ['--headless=new', '--no-sandbox', '--disable-gpu', '--di
   '--use-fake-device-for-media-stream', '--use-fake-ui-for-media-stream', '--autoplay-policy=no-user-gesture-required'];
 
 function parseArgs(argv) {
-  const args = { runS: 8, chromium: '/usr/bin/chromium', www: join(ROOT, 'www') };
+  const args = { runS: 8, chromium: '/usr/bin/chromium', www: join(ROOT, 'www'), phases: 'full', viewport: '844x390' };
   for (let i = 0; i < argv.length; i += 2) {
     const [k, v] = [argv[i], argv[i + 1]];
     if (v === undefined) throw new Error(`missing value for ${k}`);
@@ -34,25 +46,39 @@ function parseArgs(argv) {
     else if (k === '--run-s') args.runS = Number(v);
     else if (k === '--chromium') args.chromium = v;
     else if (k === '--www') args.www = resolve(v);
+    else if (k === '--phases') args.phases = v;
+    else if (k === '--viewport') args.viewport = v;
     else throw new Error(`unknown argument ${k}`);
   }
   if (!args.clip || !args.out) throw new Error('usage: e2e_driver.mjs --clip clip.y4m --out result.json [--run-s S] [--www DIR]');
+  const m = /^(\d+)x(\d+)$/.exec(args.viewport);
+  if (!m) throw new Error(`invalid --viewport ${args.viewport}; expected WxH`);
+  args.size = { width: Number(m[1]), height: Number(m[2]) };
   return args;
 }
 
-/** Start tools/serve.mjs on a free port; resolves {proc, url}. */
+/** Start tools/serve.mjs --log on a free port; resolves {proc, url, requests} (requests grows). */
 function startServer(www) {
   return new Promise((ok, fail) => {
-    const proc = spawn(process.execPath, [join(ROOT, 'tools', 'serve.mjs'), '--port', '0', '--root', www],
+    const proc = spawn(process.execPath, [join(ROOT, 'tools', 'serve.mjs'), '--port', '0', '--root', www, '--log'],
       { stdio: ['ignore', 'pipe', 'inherit'] });
+    const requests = [];
     let out = '';
+    let url = null;
     const timer = setTimeout(() => fail(new Error('server did not start in 10 s')), 10000);
     proc.stdout.on('data', (chunk) => {
       out += chunk;
-      const m = out.match(/serving (http:\/\/127\.0\.0\.1:\d+\/)/);
-      if (m) {
-        clearTimeout(timer);
-        ok({ proc, url: m[1] });
+      const lines = out.split('\n');
+      out = lines.pop();
+      for (const line of lines) {
+        const r = /^request (\S+) (\S+) (\d+) (\d+)$/.exec(line);
+        if (r) requests.push({ method: r[1], url: r[2], status: Number(r[3]), bytes: Number(r[4]) });
+        const m = line.match(/serving (http:\/\/127\.0\.0\.1:\d+\/)/);
+        if (m && !url) {
+          url = m[1];
+          clearTimeout(timer);
+          ok({ proc, url, requests });
+        }
       }
     });
     proc.on('exit', (code) => fail(new Error(`server exited with ${code}`)));
@@ -82,14 +108,55 @@ async function waitFor(page, fn, arg, timeoutMs, what) {
   }
 }
 
-const sampleAudio = () => {
+/** Records speech, vibration and wake-lock calls; can make the camera fail once (window.__failCameraOnce). */
+function instrument() {
+  const t = () => performance.now() / 1000;
+  window.__vibrations = [];
+  window.__speech = [];
+  window.__wakeLocks = [];
+  navigator.vibrate = (p) => { window.__vibrations.push({ t: t(), pattern: Array.isArray(p) ? p : [p] }); return true; };
+  if (window.speechSynthesis) {
+    const speak = speechSynthesis.speak.bind(speechSynthesis);
+    speechSynthesis.speak = (u) => { window.__speech.push({ t: t(), text: u.text }); speak(u); };
+  }
+  Object.defineProperty(navigator, 'wakeLock', { configurable: true, value: {
+    request: async (type) => {
+      window.__wakeLocks.push({ t: t(), type, visible: document.visibilityState });
+      return { released: false, type, release: async () => {}, addEventListener() {} };
+    } } });
+  const gum = navigator.mediaDevices.getUserMedia.bind(navigator.mediaDevices);
+  navigator.mediaDevices.getUserMedia = (c) => {
+    if (window.__failCameraOnce) {
+      window.__failCameraOnce = false;
+      return Promise.reject(new DOMException('Could not start video source', 'NotReadableError'));
+    }
+    return gum(c);
+  };
+}
+
+const sample = () => {
   const a = window.crossingAssist;
   const frames = a.trace.filter((e) => e.kind === 'frame');
   const last = frames[frames.length - 1];
+  const r = document.getElementById('control').getBoundingClientRect();
   return { t: (performance.now() - a.t0) / 1000, last_frame_t: last ? last.t : null, fresh: last ? last.fresh : null,
-    watchdog_stale: a.watchdog ? a.watchdog.stale : null,
+    watchdog_stale: a.watchdog ? a.watchdog.stale : null, mode: a.mode,
     decision: a.last && { reason: a.last.reason, stop: a.last.stop, pan: a.last.pan, heading_deg: a.last.heading_deg },
-    audio: a.audio ? a.audio.state() : null };
+    audio: a.audio ? a.audio.state() : null, status: document.getElementById('status').textContent,
+    control: [r.x, r.y, r.width, r.height], label: document.getElementById('control-label').textContent };
+};
+
+/** The page's state as a person and a screen reader meet it. */
+const screenState = () => {
+  const a = window.crossingAssist;
+  const r = document.getElementById('control').getBoundingClientRect();
+  const err = document.getElementById('error');
+  return { mode: a.mode, running: a.running, status: document.getElementById('status').textContent,
+    label: document.getElementById('control-label').textContent, control: [r.x, r.y, r.width, r.height],
+    error: err.hidden ? null : err.textContent, strips_on: document.querySelectorAll('#grid .on, #strips .on').length,
+    audio: a.audio ? a.audio.state() : null, audio_failed: a.audioFailed, paused: a.paused,
+    speech: window.__speech.slice(), vibrations: window.__vibrations.slice(), wake_locks: window.__wakeLocks.slice(),
+    t: (performance.now() - a.t0) / 1000, now_s: performance.now() / 1000 };
 };
 
 async function collect(page) {
@@ -102,10 +169,166 @@ async function collect(page) {
     };
     return {
       trace: a.trace,
-      frames: a.frames.map((f) => ({ seq: f.seq, width: f.width, height: f.height, rgb: b64(f.rgb) })),
-      meta: a.meta.raw, t0: a.t0 / 1000,
+      frames: a.frames.map((f) => ({ id: f.id, seq: f.seq, width: f.width, height: f.height, rgb: b64(f.rgb) })),
+      meta: a.meta.raw, t0: a.t0 / 1000, backend: { backend: a.model.backend, threads: a.model.threads,
+        isolated: window.crossOriginIsolated },
+      speed_text: document.getElementById('speed').textContent, bundle_text: document.getElementById('bundle').textContent,
+      camera_text: document.getElementById('camera').textContent,
     };
   });
+}
+
+const control = (page) => page.locator('#control');
+const hideShow = (hidden) => {
+  Object.defineProperty(document, 'hidden', { configurable: true, get: () => hidden });
+  Object.defineProperty(document, 'visibilityState', { configurable: true, get: () => (hidden ? 'hidden' : 'visible') });
+  document.dispatchEvent(new Event('visibilitychange'));
+};
+
+async function guide(page, runS, samples) {
+  const tEnd = Date.now() + runS * 1000;
+  while (Date.now() < tEnd) {
+    samples.push(await page.evaluate(sample));
+    await sleep(100);
+  }
+}
+
+async function fullPhases(page, context, server, args, result) {
+  // First load: everything the page and the service worker fetch before the app is ready.
+  await page.goto(`${server.url}?test=1&gyro=1&tutorial_speed=8`);
+  await waitFor(page, () => window.crossingAssist?.ready && window.crossingAssist.offline === 'ready', null, 90000, 'the app and its service worker');
+  await sleep(500);
+  result.first_load = server.requests.slice();
+  result.states = { ready: await page.evaluate(screenState) };
+
+  // What a screen reader gets: helper view closed, then open.
+  result.aria = await page.locator('body').ariaSnapshot();
+  await page.click('#helper-toggle');
+  result.aria_helper_open = await page.locator('body').ariaSnapshot();
+  result.states.helper_open = await page.evaluate(screenState);
+  const cdp = await context.newCDPSession(page);
+  result.installability = (await cdp.send('Page.getInstallabilityErrors')).installabilityErrors;
+  result.manifest_errors = (await cdp.send('Page.getAppManifest')).errors;
+  await page.click('#selftest');
+  result.vectors = await waitFor(page, () => window.crossingAssist.selftest, null, 60000, 'the self-test');
+  result.vectors_text = await page.textContent('#selftest-result');
+  await page.click('#helper-close');
+
+  // First tap: the sound tutorial, then guidance.
+  await control(page).click();
+  await sleep(300);
+  result.states.tutorial = await page.evaluate(screenState);
+  await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'tutorial_done'), null, 30000, 'the tutorial');
+  await page.evaluate(() => setInterval(() => window.dispatchEvent(new DeviceMotionEvent('devicemotion',
+    { rotationRate: { alpha: 0, beta: 0, gamma: -3 }, interval: 16 })), 16));
+  await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'frame'), null, 30000, 'the first frame decision');
+  const samples = [];
+  await guide(page, args.runS, samples);
+  result.samples = samples;
+  result.states.running = await page.evaluate(screenState);
+
+  // A single tap must not end guidance.
+  await control(page).click();
+  await sleep(800);
+  result.states.single_tap = await page.evaluate(screenState);
+
+  // Audio taken away (a phone call): guidance counts as failed; a tap resumes it.
+  const tSuspend = await page.evaluate(async () => {
+    const t = (performance.now() - window.crossingAssist.t0) / 1000;
+    await window.crossingAssist.audio.ctx.suspend();
+    return t;
+  });
+  await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'audio_failed'), null, 5000, 'the audio failure');
+  await sleep(1500);
+  result.states.audio_failed = { ...(await page.evaluate(screenState)), t_suspend: tSuspend };
+  await control(page).click();
+  await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'audio_resumed'), null, 5000, 'audio resumed');
+  await sleep(1500);
+  result.states.audio_resumed = await page.evaluate(screenState);
+
+  // The app goes to the background (where the OS also suspends its audio) and comes back.
+  await page.evaluate(hideShow, true);
+  await sleep(1000);
+  result.states.hidden = await page.evaluate(screenState);
+  await page.evaluate(() => window.crossingAssist.audio.ctx.suspend());
+  await sleep(300);
+  await page.evaluate(hideShow, false);
+  await sleep(1500);
+  result.states.visible = await page.evaluate(screenState);
+
+  // Freeze the camera: the video element stops presenting new frames (after a live beacon).
+  await waitFor(page, () => window.crossingAssist.audio.state().kind === 'beacon', null, 20000, 'a beacon before the freeze');
+  const tFreeze = await page.evaluate(() => {
+    document.getElementById('video').pause();
+    return (performance.now() - window.crossingAssist.t0) / 1000;
+  });
+  const stopped = await waitFor(page, () => {
+    const a = window.crossingAssist;
+    return a.watchdog.stale && a.audio.state().kind === 'stop' ? (performance.now() - a.t0) / 1000 : null;
+  }, null, 5000, 'the stop cue after freezing the camera');
+  await sleep(1200);
+  result.freeze = { t_freeze: tFreeze, t_stop: stopped, after: await page.evaluate(sample),
+    state: await page.evaluate(screenState) };
+  await page.evaluate(() => document.getElementById('video').play());
+
+  // Double tap ends guidance.
+  await control(page).dblclick();
+  await waitFor(page, () => window.crossingAssist.mode === 'ready', null, 10000, 'the end of guidance');
+  result.states.ended_double = await page.evaluate(screenState);
+
+  // A failed start leaves an error; the next, successful start must clear it.
+  await page.evaluate(() => { window.__failCameraOnce = true; });
+  await control(page).click();
+  await waitFor(page, () => window.crossingAssist.error && window.crossingAssist.mode === 'ready', null, 10000, 'the camera error');
+  result.states.error = await page.evaluate(screenState);
+  await control(page).click();
+  await waitFor(page, () => window.crossingAssist.running && window.crossingAssist.trace.filter((e) => e.kind === 'start').length >= 2,
+    null, 10000, 'the second start');
+  await sleep(1000);
+  result.states.restarted = await page.evaluate(screenState);
+
+  // The helper sets this phone's landscape field of view: 10 is refused, 60 is taken at once.
+  await page.click('#helper-toggle');
+  await page.fill('#fov-landscape', '10');
+  await page.dispatchEvent('#fov-landscape', 'change');
+  const refused = await page.textContent('#fov-result');
+  await page.fill('#fov-landscape', '60');
+  await page.dispatchEvent('#fov-landscape', 'change');
+  const saved = await page.textContent('#fov-result');
+  await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'fov' && e.fov_deg === 60), null, 5000, 'the new FOV');
+  await sleep(800);
+  result.fov_ui = { refused, saved, camera_text: await page.textContent('#camera'),
+    stored: await page.evaluate(() => JSON.parse(localStorage.getItem('crossing-assist-settings')).fov) };
+  await page.click('#helper-close');
+
+  // A long press ends guidance.
+  const box = await control(page).boundingBox();
+  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+  await page.mouse.down();
+  await sleep(1000);
+  await page.mouse.up();
+  await waitFor(page, () => window.crossingAssist.mode === 'ready', null, 5000, 'the end by long press');
+  result.states.ended_long = await page.evaluate(screenState);
+  Object.assign(result, await collect(page));
+}
+
+async function shortPhases(page, server, args, result) {
+  await page.addInitScript(() => localStorage.setItem('crossing-assist-settings',
+    JSON.stringify({ tutorialDone: true, hapticDirections: true })));
+  await page.goto(`${server.url}?test=1`);
+  await waitFor(page, () => window.crossingAssist?.ready && window.crossingAssist.offline === 'ready', null, 120000, 'the app and its service worker');
+  result.first_load = server.requests.slice();
+  result.states = { ready: await page.evaluate(screenState) };
+  await control(page).click();
+  await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'frame'), null, 60000, 'the first frame decision');
+  const samples = [];
+  await guide(page, args.runS, samples);
+  result.samples = samples;
+  result.states.running = await page.evaluate(screenState);
+  Object.assign(result, await collect(page));
+  await control(page).dblclick();
+  await waitFor(page, () => window.crossingAssist.mode === 'ready', null, 10000, 'the end of guidance');
+  result.states.ended_double = await page.evaluate(screenState);
 }
 
 async function main() {
@@ -113,11 +336,11 @@ async function main() {
   const { chromium } = await import('playwright-core');
   const profile = mkdtempSync(join(tmpdir(), 'crossing-chromium-'));
   let server = await startServer(args.www);
-  const result = { url: server.url, console: [] };
+  const result = { url: server.url, console: [], viewport: args.size };
   let context;
   try {
     context = await chromium.launchPersistentContext(profile, {
-      executablePath: args.chromium, headless: true,
+      executablePath: args.chromium, headless: true, viewport: args.size,
       args: [...CHROMIUM_FLAGS, `--use-file-for-fake-video-capture=${args.clip}`],
       ignoreDefaultArgs: ['--mute-audio'],
     });
@@ -125,76 +348,31 @@ async function main() {
     let sink = result.console; // the offline phase gets its own list
     page.on('console', (m) => sink.push(`${m.type()}: ${m.text()}`.slice(0, 500)));
     page.on('pageerror', (e) => sink.push(`pageerror: ${e.message}`.slice(0, 500)));
-    await page.addInitScript(() => {
-      window.__vibrations = [];
-      navigator.vibrate = (p) => { window.__vibrations.push(p); return true; };
-    });
-    const url = `${server.url}?test=1&gyro=1`;
-    await page.goto(url);
-    await waitFor(page, () => window.crossingAssist?.ready && window.crossingAssist.offline === 'ready', null, 60000, 'the app and its service worker');
-
-    // What a screen reader gets: the page's accessibility tree.
-    result.aria = await page.locator('body').ariaSnapshot();
-    // What Chrome on a phone would say about installing the app ("Add to Home screen").
-    const cdp = await context.newCDPSession(page);
-    result.installability = (await cdp.send('Page.getInstallabilityErrors')).installabilityErrors;
-    result.manifest_errors = (await cdp.send('Page.getAppManifest')).errors;
-
-    // The app's self-test button: the shared test vectors replayed in this browser.
-    await page.click('#selftest');
-    result.vectors = await waitFor(page, () => window.crossingAssist.selftest, null, 30000, 'the self-test');
-    result.vectors_text = await page.textContent('#selftest-result');
-
-    await page.click('#start');
-    // A gyroscope reporting a slow, steady right turn (3 deg/s = rotation of -3 deg/s about the
-    // phone's upward y axis), at 60 Hz as phones do.
-    await page.evaluate(() => setInterval(() => window.dispatchEvent(new DeviceMotionEvent('devicemotion',
-      { rotationRate: { alpha: 0, beta: 0, gamma: -3 }, interval: 16 })), 16));
-    await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'frame'), null, 20000, 'the first frame decision');
-    const samples = [];
-    const tEnd = Date.now() + args.runS * 1000;
-    while (Date.now() < tEnd) {
-      samples.push(await page.evaluate(sampleAudio));
-      await sleep(100);
+    await page.addInitScript(instrument);
+    if (args.phases === 'short') {
+      await shortPhases(page, server, args, result);
+    } else {
+      await fullPhases(page, context, server, args, result);
+      // Offline: stop the server, reload, start again (the tutorial was done: it must not come back).
+      await stopServer(server.proc);
+      server = null;
+      await page.reload();
+      const offline = { loaded: false, console: [] };
+      sink = offline.console;
+      try {
+        await waitFor(page, () => window.crossingAssist?.ready, null, 30000, 'the app offline');
+        offline.loaded = true;
+        await control(page).click();
+        await waitFor(page, () => window.crossingAssist.trace.filter((e) => e.kind === 'frame' && e.obs.ok).length >= 5,
+          null, 20000, 'decisions offline');
+        offline.decisions = await page.evaluate(() => window.crossingAssist.trace.filter((e) => e.kind === 'frame' && e.obs.ok).length);
+        offline.tutorial = await page.evaluate(() => window.crossingAssist.trace.filter((e) => e.kind === 'tutorial').length);
+        offline.error = await page.evaluate(() => window.crossingAssist.error);
+      } catch (err) {
+        offline.error = err.message;
+      }
+      result.offline = offline;
     }
-    result.samples = samples;
-
-    // Freeze the camera: the video element stops presenting new frames.
-    // Wait for a live beacon first, so that the stop is caused by the freeze.
-    await waitFor(page, () => window.crossingAssist.audio.state().kind === 'beacon', null, 15000, 'a beacon before the freeze');
-    const tFreeze = await page.evaluate(() => {
-      document.getElementById('video').pause();
-      return (performance.now() - window.crossingAssist.t0) / 1000;
-    });
-    const stopped = await waitFor(page, () => {
-      const a = window.crossingAssist;
-      return a.watchdog.stale && a.audio.state().kind === 'stop' ? (performance.now() - a.t0) / 1000 : null;
-    }, null, 5000, 'the stop cue after freezing the camera');
-    await sleep(1200);
-    result.freeze = { t_freeze: tFreeze, t_stop: stopped, after: await page.evaluate(sampleAudio),
-      vibrations: await page.evaluate(() => window.__vibrations) };
-    Object.assign(result, await collect(page));
-
-    // Offline: stop the server, reload, start again.
-    await page.click('#start'); // stop
-    await stopServer(server.proc);
-    server = null;
-    await page.reload();
-    const offline = { loaded: false, console: [] };
-    sink = offline.console;
-    try {
-      await waitFor(page, () => window.crossingAssist?.ready, null, 30000, 'the app offline');
-      offline.loaded = true;
-      await page.click('#start');
-      const ok = () => window.crossingAssist.trace.filter((e) => e.kind === 'frame' && e.obs.ok).length;
-      await waitFor(page, () => window.crossingAssist.trace.filter((e) => e.kind === 'frame' && e.obs.ok).length >= 5,
-        null, 20000, 'decisions offline');
-      offline.decisions = await page.evaluate(ok);
-      offline.error = await page.evaluate(() => window.crossingAssist.error);
-    } catch (err) {
-      offline.error = err.message;
-    }
-    result.offline = offline;
   } finally {
     if (context) await context.close();
     if (server) await stopServer(server.proc);

@@ -165,6 +165,59 @@ def make_test_bundle(out_dir: str | Path, *, size: tuple[int, int] = (24, 48), g
     return write_bundle(out_dir, model.SerializeToString(), meta)
 
 
+#: The geometry block the app's tests give a schema-1 bundle (bundle.json schema 2, issue 12):
+#: distinct default FOVs per orientation, so the tests see which one the app chose. The test graph
+#: resizes whatever it gets to its canvas, hence ``fit: stretch``.
+TEST_GEOMETRY = {"fit": "stretch", "strips": "frame", "camera_fov_deg": {"landscape": 67.0, "portrait": 53.0},
+                 "train_fov_deg": 67.0}
+
+
+def schema2_copy(bundle_dir: str | Path, out_dir: str | Path, geometry: dict | None = None) -> Path:
+    """A copy of a bundle whose bundle.json is schema 2 (for the app only: same model bytes).
+
+    A schema-1 bundle gets ``geometry`` (default :data:`TEST_GEOMETRY`) and ``fov_deg`` =
+    its landscape FOV; a schema-2 bundle is copied as it is."""
+    import json
+    import shutil
+
+    src, out = Path(bundle_dir), Path(out_dir)
+    meta = json.loads((src / "bundle.json").read_text())
+    out.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(src / meta["model_file"], out / meta["model_file"])
+    if meta["schema_version"] < 2:
+        geom = geometry or TEST_GEOMETRY
+        meta = {**meta, "schema_version": 2, "geometry": geom, "fov_deg": geom["camera_fov_deg"]["landscape"]}
+    tmp = out / "bundle.json.tmp"
+    tmp.write_text(json.dumps(meta, indent=2) + "\n")
+    tmp.replace(out / "bundle.json")
+    return out
+
+
+def deterministic_copy(bundle_dir: str | Path, out_dir: str | Path) -> Path:
+    """A copy of a bundle whose MC-dropout noise is a constant (every unit kept), so that two
+    runtimes (onnxruntime in Python, onnxruntime-web in the browser) must agree number for number.
+
+    Each ``RandomUniformLike(x)`` becomes ``x * 0 + 0.999`` (same shape; at or above any drop
+    probability < 0.999, so the dropout masks keep everything). Everything else is untouched."""
+    import json
+
+    src = Path(bundle_dir)
+    meta = json.loads((src / "bundle.json").read_text())
+    model = onnx.load(str(src / meta["model_file"]))
+    nodes = []
+    for node in model.graph.node:
+        if node.op_type != "RandomUniformLike":
+            nodes.append(node)
+            continue
+        x, y = node.input[0], node.output[0]
+        nodes += [_const(y + "_zero", np.array(0.0, np.float32)), _const(y + "_keep", np.array(0.999, np.float32)),
+                  helper.make_node("Mul", [x, y + "_zero"], [y + "_z"]),
+                  helper.make_node("Add", [y + "_z", y + "_keep"], [y])]
+    del model.graph.node[:]
+    model.graph.node.extend(nodes)
+    return write_bundle(out_dir, model.SerializeToString(), meta)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("out_dir")

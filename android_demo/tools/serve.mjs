@@ -7,9 +7,14 @@
 // 127.0.0.1 by default: a phone reaches it through `adb reverse tcp:8080 tcp:8080` (then
 // http://localhost:8080 on the phone is a secure context, which the camera needs).
 // Serves .mjs/.js as JavaScript and .wasm as application/wasm (needed for streaming compile),
-// and never lets a path leave the root folder.
+// and never lets a path leave the root folder. Every response carries the cross-origin
+// isolation headers (COOP same-origin + COEP require-corp), which onnxruntime-web needs for
+// its multi-threaded WASM (SharedArrayBuffer); a host serving the built www/ must send them
+// too, or the app runs on one thread. Where the build wrote a gzip twin (FILE.gz) and the
+// client accepts gzip, the twin is sent with Content-Encoding: gzip.
+// --log prints one line per request to stdout: "request GET /path 200 BYTES_SENT".
 
-import { createReadStream, statSync } from 'node:fs';
+import { createReadStream, existsSync, statSync } from 'node:fs';
 import { createServer } from 'node:http';
 import { dirname, extname, join, normalize, resolve, sep } from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -28,12 +33,24 @@ const TYPES = {
   '.png': 'image/png',
 };
 
+/** Headers every response carries: cross-origin isolation (threads in onnxruntime-web). */
+export const ISOLATION_HEADERS = {
+  'Cross-Origin-Opener-Policy': 'same-origin',
+  'Cross-Origin-Embedder-Policy': 'require-corp',
+  'Cross-Origin-Resource-Policy': 'same-origin',
+};
+
 function parseArgs(argv) {
-  const args = { port: 8080, host: '127.0.0.1', root: join(HERE, 'www') };
+  const args = { port: 8080, host: '127.0.0.1', root: join(HERE, 'www'), log: false };
   for (let i = 0; i < argv.length; i += 2) {
+    if (argv[i] === '--log') {
+      args.log = true;
+      i -= 1;
+      continue;
+    }
     const [key, value] = [argv[i], argv[i + 1]];
     if (value === undefined || !['--port', '--host', '--root'].includes(key)) {
-      throw new Error(`unknown argument ${JSON.stringify(key)}; usage: node tools/serve.mjs [--port N] [--host ADDR] [--root DIR]`);
+      throw new Error(`unknown argument ${JSON.stringify(key)}; usage: node tools/serve.mjs [--port N] [--host ADDR] [--root DIR] [--log]`);
     }
     args[key.slice(2)] = key === '--port' ? Number(value) : value;
   }
@@ -43,8 +60,12 @@ function parseArgs(argv) {
 }
 
 /** Create (not start) the server for a root folder. */
-export function createStaticServer(root) {
+export function createStaticServer(root, { log = false } = {}) {
   return createServer((req, res) => {
+    let sent = 0;
+    if (log) {
+      res.on('finish', () => console.log(`request ${req.method} ${req.url} ${res.statusCode} ${req.method === 'HEAD' ? 0 : sent}`));
+    }
     let path;
     try {
       path = decodeURIComponent(new URL(req.url, 'http://x').pathname);
@@ -68,13 +89,19 @@ export function createStaticServer(root) {
       res.writeHead(404, { 'Content-Type': 'text/plain' }).end('not found');
       return;
     }
+    const gz = `${file}.gz`;
+    const useGz = /\bgzip\b/.test(req.headers['accept-encoding'] || '') && existsSync(gz);
+    sent = useGz ? statSync(gz).size : stat.size;
     res.writeHead(200, {
       'Content-Type': TYPES[extname(file)] || 'application/octet-stream',
-      'Content-Length': stat.size,
+      'Content-Length': sent,
       'Cache-Control': 'no-cache',
+      Vary: 'Accept-Encoding',
+      ...(useGz ? { 'Content-Encoding': 'gzip' } : {}),
+      ...ISOLATION_HEADERS,
     });
     if (req.method === 'HEAD') res.end();
-    else createReadStream(file).pipe(res);
+    else createReadStream(useGz ? gz : file).pipe(res);
   });
 }
 
@@ -86,7 +113,7 @@ function main() {
     console.error(`error: ${err.message}`);
     process.exit(2);
   }
-  const server = createStaticServer(args.root);
+  const server = createStaticServer(args.root, { log: args.log });
   server.on('error', (err) => {
     console.error(`error: cannot serve on ${args.host}:${args.port}: ${err.message}`);
     process.exit(2);

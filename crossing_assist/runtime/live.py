@@ -31,8 +31,20 @@ class LiveConfig:
     max_seconds: float | None = None
 
 
-def _same(a: np.ndarray | None, b: np.ndarray) -> bool:
+def same_frame(a: np.ndarray | None, b: np.ndarray) -> bool:
+    """The frozen-frame rule (shared with the phone app's ``sameFrame``): a frame is a repeat
+    of the previous one when both have the same shape and every byte is equal. A live sensor's
+    noise changes some pixel of every real frame, so only a frozen camera repeats exactly."""
     return a is not None and a.shape == b.shape and np.array_equal(a, b)
+
+
+_same = same_frame
+
+
+def is_fresh(now: float, captured: float, watchdog_s: float) -> bool:
+    """The freshness rule (shared with the phone app's ``isFresh``): a decision made at ``now``
+    from a frame captured at ``captured`` (seconds) counts only within ``watchdog_s``."""
+    return now - captured <= watchdog_s
 
 
 def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, player: CuePlayer,
@@ -61,7 +73,7 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
                 continue  # a frozen camera repeats its last frame: not fresh, let the watchdog act
             prev = frame
             step = pipeline.step(frame, captured - start)
-            fresh = clock() - captured <= cfg.watchdog_s
+            fresh = is_fresh(clock(), captured, cfg.watchdog_s)
             player.set_loop(step.loop if fresh else stop_loop)
             if fresh:
                 dog.beat(captured)

@@ -10,6 +10,18 @@ included). Inputs are generated from a seeded generator, so the file is reproduc
 are written at full double precision; a port should agree to ~1e-9 (``tolerance``), and on
 every discrete field (gate, reason, stop, learner_action) exactly. Plus pure-function vectors
 for the beacon (pan gains, ITD, pulse loop length, heading -> pan).
+
+Version 2 adds what the live loop decides around the Decider, so the app and Python share it:
+
+* ``guards``: the frozen-frame rule (:func:`~crossing_assist.runtime.live.same_frame`: same
+  shape and every byte equal), freshness (:func:`~crossing_assist.runtime.live.is_fresh`) and
+  the watchdog (:class:`~crossing_assist.runtime.watchdog.Watchdog` on a scripted clock);
+* ``status``: the sentence shown and spoken for each decision (:func:`status_message`);
+* ``geometry``: the camera-geometry contract's field-of-view choice (:func:`camera_fov`:
+  orientation of the frame -> the override or the bundle's ``camera_fov_deg``, refused
+  outside 20..170 degrees; schema 1 reads as one FOV for both orientations), and scenarios
+  whose frames are portrait and landscape of several aspects: each step's FOV comes from
+  its frame, and a change of FOV (the phone turned) starts a fresh Decider with it.
 """
 
 from __future__ import annotations
@@ -29,9 +41,74 @@ from crossing_assist.fileio import atomic_write_text
 from crossing_assist.runtime.beacon import BeaconConfig, itd_seconds, pan_gains
 from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
 from crossing_assist.runtime.engine import measure_value
+from crossing_assist.runtime.live import is_fresh, same_frame
+from crossing_assist.runtime.watchdog import Watchdog
 
 FPS = 30.0
-VERSION = 1
+VERSION = 2
+
+# ----------------------------------------------------------------------------- camera geometry
+# The reference of the geometry contract's FOV choice (issue 12) for the vectors; the bundle
+# reader's ``Bundle.camera_fov`` must agree (tests/test_android_logic.py checks it where present).
+
+ORIENTATIONS = ("landscape", "portrait")
+FOV_RANGE_DEG = (20.0, 170.0)
+
+
+def orientation(width: int, height: int) -> str:
+    """``portrait`` when the frame is taller than wide, else ``landscape``."""
+    return "portrait" if height > width else "landscape"
+
+
+def geometry_of(meta: dict) -> dict:
+    """A bundle.json's geometry block; schema 1 reads as ``fit=stretch`` with its ``fov_deg``
+    for both orientations."""
+    if meta.get("schema_version", 1) >= 2:
+        return meta["geometry"]
+    fov = float(meta["fov_deg"])
+    return {"fit": "stretch", "strips": "frame", "camera_fov_deg": {"landscape": fov, "portrait": fov},
+            "train_fov_deg": fov}
+
+
+def camera_fov(geometry: dict, width: int, height: int, override: float | None = None) -> float:
+    """Horizontal FOV (degrees) for a ``width x height`` frame: ``override`` (the user's or the
+    device's value for this orientation) if given, else ``geometry.camera_fov_deg`` of the
+    frame's orientation. Raises ValueError outside 20..170 degrees (the runtime then plays the
+    stop cue)."""
+    fov = geometry["camera_fov_deg"][orientation(width, height)] if override is None else override
+    lo, hi = FOV_RANGE_DEG
+    if not (isinstance(fov, (int, float)) and math.isfinite(fov) and lo <= fov <= hi):
+        raise ValueError(f"Invalid field of view: {fov} degrees; valid: {lo:g}..{hi:g}")
+    return float(fov)
+
+
+# ----------------------------------------------------------------------------- status sentences
+#: Stop reasons beyond the Decider's: audio cannot play, the app is in the background, the
+#: field-of-view setting is invalid. Each is a stop (the beacon never plays then).
+STATUS_STOP = {
+    "uncertain": "Stop. Not sure: scan slowly.",
+    "stale": "Stop. Camera stalled.",
+    "failed": "Stop. The model failed.",
+    "audio": "Audio stopped. Tap to resume.",
+    "background": "Stop. The app is in the background.",
+    "fov": "Stop. The camera field of view setting is invalid.",
+}
+STRAIGHT_DEG = 7.5  # |heading| below: straight ahead
+SLIGHT_DEG = 22.5  # below: bear slightly; at or above: turn
+
+
+def status_message(stop: bool, reason: str, heading_deg: float | None) -> tuple[str, str]:
+    """The one sentence the phone shows and speaks for a decision, and its style
+    (``stop``/``go``): the stop reason, or the direction by |heading| (< 7.5 straight ahead,
+    < 22.5 bear slightly, else turn; negative = left)."""
+    if stop or heading_deg is None:
+        return STATUS_STOP.get(reason, STATUS_STOP["uncertain"]), "stop"
+    side = "left" if heading_deg < 0 else "right"
+    if abs(heading_deg) < STRAIGHT_DEG:
+        return "Go straight ahead.", "go"
+    if abs(heading_deg) < SLIGHT_DEG:
+        return f"Bear slightly {side}.", "go"
+    return f"Turn {side}.", "go"
 
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
@@ -120,6 +197,107 @@ def _scenarios(rng: np.random.Generator) -> list[tuple[str, DecisionConfig, list
     return out
 
 
+#: Frame sizes (width, height) the geometry scenarios use: portrait and landscape, several aspects.
+FRAME_SIZES = ((640, 480), (480, 640), (1280, 720), (720, 1280), (480, 480), (360, 720), (720, 360), (1080, 2400))
+GEOMETRY_V2 = {"fit": "letterbox", "pad_rgb": [124, 116, 104], "strips": "frame",
+               "camera_fov_deg": {"landscape": 67.0, "portrait": 53.0}, "train_fov_deg": 67.0}
+
+
+def _geometry_scenarios(rng: np.random.Generator) -> list[dict]:
+    """Decision scenarios whose frames have sizes: (name, geometry, overrides, steps) with steps
+    (t, yaw, raw outputs, (width, height))."""
+    out = []
+    for w, h in FRAME_SIZES[:6]:
+        steps = [(i / FPS, 0.0, _frame(13, 10 if i < 25 else 3, 0.9, rng), (w, h)) for i in range(40)]
+        out.append((f"frames_{w}x{h}", GEOMETRY_V2, {}, steps))
+    turn = []
+    for i in range(90):
+        w, h = FRAME_SIZES[(i // 30) % 2]  # landscape, portrait, landscape: the phone turned twice
+        turn.append((i / FPS, 0.0, _frame(13, 9, 0.9, rng), (w, h)))
+    out.append(("phone_turned_landscape_portrait_landscape", GEOMETRY_V2, {}, turn))
+    steps = [(i / FPS, 10.0, _frame(13, 11, 0.9, rng), FRAME_SIZES[i // 20 % 2]) for i in range(40)]
+    out.append(("user_fov_portrait_60", GEOMETRY_V2, {"portrait": 60.0}, steps))
+    schema1 = geometry_of({"schema_version": 1, "fov_deg": 90.0})
+    steps = [(i / FPS, 0.0, _frame(13, 2, 0.9, rng), FRAME_SIZES[3]) for i in range(30)]
+    out.append(("schema1_portrait", schema1, {}, steps))
+    return out
+
+
+def _run_geometry_scenario(geometry: dict, overrides: dict, steps: list, base: DecisionConfig) -> list[dict]:
+    """The app's rule: each step's FOV is camera_fov(frame); a new FOV starts a fresh Decider."""
+    rows, decider, fov_now = [], None, None
+    for t, yaw, raw, (w, h) in steps:
+        fov = camera_fov(geometry, w, h, overrides.get(orientation(w, h)))
+        if fov != fov_now:
+            decider, fov_now = Decider(dataclasses.replace(base, fov_deg=fov)), fov
+        dec = decider.step(t, raw.observation(base.measure), yaw)
+        rows.append({"t": t, "yaw_rate_dps": yaw, "frame": [w, h], "fov_deg": fov,
+                     "obs": _obs_json(raw, base.measure), "expect": dec.to_json()})
+    return rows
+
+
+def _fov_choices() -> list[dict]:
+    """orientation -> FOV cases: bundle defaults, overrides, schema 1, refused values."""
+    schema1 = geometry_of({"schema_version": 1, "fov_deg": 90.0})
+    cases = []
+    for geom in (GEOMETRY_V2, schema1):
+        for w, h in FRAME_SIZES:
+            for override in (None, 60.0, 20.0, 170.0, 19.9, 170.5, 0.0, 200.0):
+                row = {"geometry": geom, "frame": [w, h], "override": override, "orientation": orientation(w, h)}
+                try:
+                    row["fov_deg"] = camera_fov(geom, w, h, override)
+                except ValueError:
+                    row["fov_deg"] = None  # refused: the runtime plays the stop cue
+                cases.append(row)
+    return cases
+
+
+def _guards(rng: np.random.Generator) -> dict:
+    """Frozen-frame, freshness and watchdog vectors (the live loop's guards)."""
+    a = rng.integers(0, 256, size=(9, 15, 3), dtype=np.uint8)
+    off_grid = a.copy()
+    off_grid[4, 5, 1] ^= 1  # a pixel a 7-stride sample would miss: the frames still differ
+    on_grid = a.copy()
+    on_grid[7, 7, 2] ^= 1
+    rotated = np.ascontiguousarray(a.transpose(1, 0, 2))
+
+    def frame(x: np.ndarray | None) -> dict | None:
+        return None if x is None else {"width": int(x.shape[1]), "height": int(x.shape[0]),
+                                       "rgb": [int(v) for v in x.reshape(-1)]}
+
+    pairs = [(None, a), (a, a.copy()), (a, off_grid), (a, on_grid), (a, rotated), (a, a[:, :14].copy())]
+    same = [{"prev": frame(p), "cur": frame(c), "same": bool(same_frame(p, c))} for p, c in pairs]
+    fresh = [{"now": n, "captured": c, "watchdog_s": w, "fresh": is_fresh(n, c, w)}
+             for n, c, w in ((1.0, 0.9, 0.5), (1.0, 0.5, 0.5), (1.0, 0.49, 0.5), (2.0, 2.0, 0.5), (3.3, 3.0, 0.3),
+                             (3.31, 3.0, 0.3))]
+    clock = [0.0]
+    dog = Watchdog(0.5, lambda: None, clock=lambda: clock[0])
+    ops = []
+    script = [("poll", 0.1), ("beat", 0.2), ("poll", 0.6), ("poll", 0.71), ("poll", 0.75), ("poll", 1.0),
+              ("beat", 1.05), ("poll", 1.1), ("poll", 1.56), ("beat", 1.6), ("poll", 2.0), ("poll", 2.2)]
+    for op, t in script:
+        clock[0] = t
+        if op == "beat":
+            dog.beat(t)
+            ops.append({"op": "beat", "t": t})
+        else:
+            fired_before = dog.fired
+            stale = dog.poll()
+            ops.append({"op": "poll", "t": t, "stale": stale, "fired": dog.fired > fired_before})
+    return {"same_frame": same, "fresh": fresh, "watchdog": {"period_s": 0.5, "start": 0.0, "ops": ops}}
+
+
+def _status_vectors() -> list[dict]:
+    out = []
+    for reason in ("uncertain", "stale", "failed", "audio", "background", "fov"):
+        text, cls = status_message(True, reason, None)
+        out.append({"stop": True, "reason": reason, "heading_deg": None, "text": text, "cls": cls})
+    for h in (0.0, -7.4999, 7.5, -7.5, 12.0, -22.4999, 22.5, -22.5, 40.0, -80.0):
+        text, cls = status_message(False, "ok", h)
+        out.append({"stop": False, "reason": "ok", "heading_deg": h, "text": text, "cls": cls})
+    return out
+
+
 def _config_json(cfg: DecisionConfig) -> dict:
     return dataclasses.asdict(cfg)
 
@@ -142,6 +320,10 @@ def build_vectors(seed: int = 20240601) -> dict:
             dec = d.step(t, None if raw is None else raw.observation(cfg.measure), yaw)
             rows.append({"t": t, "yaw_rate_dps": yaw, "obs": _obs_json(raw, cfg.measure), "expect": dec.to_json()})
         scenarios.append({"name": name, "config": _config_json(cfg), "steps": rows})
+    base = DecisionConfig()
+    for name, geom, overrides, steps in _geometry_scenarios(rng):
+        scenarios.append({"name": name, "config": _config_json(base), "geometry": geom, "fov_override": overrides,
+                          "steps": _run_geometry_scenario(geom, overrides, steps, base)})
     bcfg = BeaconConfig()
     pans = [-1.0, -0.5, -0.1, 0.0, 0.3, 0.77, 1.0]
     headings = [-80.0, -45.0, -12.5, 0.0, 7.5, 30.0, 60.0]
@@ -159,6 +341,9 @@ def build_vectors(seed: int = 20240601) -> dict:
             "loop_samples": [{"rate_hz": r, "samples": round(bcfg.sample_rate / r)} for r in (2.0, 3.3, 4.0, 6.0)],
         },
         "actions": {str(n): [list(g) for g in get_space(n).groups] for n in (4, 8, 13)},
+        "guards": _guards(rng),
+        "status": _status_vectors(),
+        "geometry": {"fov_range_deg": list(FOV_RANGE_DEG), "fov_choice": _fov_choices()},
     }
 
 

@@ -1,49 +1,66 @@
 // The phone app, the browser twin of crossing_assist/runtime/live.py: bundle -> session;
-// Start -> camera + audio; each new camera frame -> (frozen check) -> model -> Decider
-// (logic.js) -> beacon (audio.js) and the helper view. A decision plays only if it is fresh
-// (made within the watchdog period of its frame's capture); a watchdog polled every 20 ms
-// stops the beacon and plays the stop/scan cue when no fresh decision arrived for 0.5 s
-// (frozen or covered camera, a hung model).
+// Start -> (first run: headphone check and sound tutorial) -> camera + audio; each new camera
+// frame, at most 10 a second -> (frozen check) -> model -> Decider (logic.js) -> beacon
+// (audio.js), spoken sentence (speech.js), vibration (haptics.js) and the helper view.
 //
-// With "Use the gyroscope" on, the turn the user made between two frames (DeviceMotionEvent)
-// is the Decider's yaw input (the hold and the belief follow the turn); off, it is 0, as in
-// the desktop live loop.
+// Guards (each one a stop: the beacon never plays a direction it cannot vouch for):
+// * a decision plays only if it is fresh (made within the watchdog period of its frame's
+//   capture); a watchdog polled every 20 ms plays the stop cue when no fresh decision arrived
+//   for 0.5 s (frozen or covered camera, a hung model);
+// * audio that cannot play (the AudioContext suspended or interrupted by a call or another
+//   app) is failed guidance: its own vibration and "Audio stopped. Tap to resume."; a tap or
+//   the return to the app resumes it;
+// * in the background guidance pauses (stop cue, no inference); back in front, the Decider
+//   starts afresh (no stale heading) and the screen wake lock is requested again;
+// * the field of view comes from the frame's orientation (portrait / landscape): the user's
+//   setting for it, else the bundle's default (geometry.js); a new FOV starts a fresh Decider,
+//   and an invalid one stops.
+//
+// The whole screen above the helper bar is one control: tap to start; while guiding, a double
+// tap or a long press ends guidance (a single tap only says how), and a tap resumes lost audio.
 //
 // URL flags: ?test=1 keeps a trace of every step (and copies of the frames the model saw) in
 // window.crossingAssist for the end-to-end test; ?bundle=URL loads another bundle folder;
-// ?gyro=1 ticks "Use the gyroscope".
+// ?gyro=1 ticks "Use the gyroscope"; ?threads=N sets the WASM threads; ?tutorial_speed=K plays
+// the tutorial K times faster.
 
 import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
+import { cameraFov, FovError, orientation, zoomedFov } from './geometry.js';
+import { Haptics } from './haptics.js';
 import { isFresh, sameFrame, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
 import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs } from './logic.js';
-import { fetchBundle, Model } from './model.js';
+import { fetchBundle, openBest } from './model.js';
+import { loadSettings, saveSettings } from './settings.js';
+import { Speaker, SpeechPolicy } from './speech.js';
+import { playTutorial } from './tutorial.js';
 import { replayVectors } from './vectors.js';
-import { HelperView, statusMessage } from './view.js';
+import { HelperView } from './view.js';
 
 const POLL_MS = 20;
 const FRAME_WAIT_MS = 100;
+export const MIN_FRAME_INTERVAL_S = 0.1; // inference at most 10 times a second
+export const DOUBLE_TAP_MS = 500;
+export const LONG_PRESS_MS = 700;
 const STOP_CUE = { kind: KIND_STOP };
 const params = new URLSearchParams(location.search);
 const TEST = params.get('test') === '1';
+const TUTORIAL_SPEED = Math.max(1, Number(params.get('tutorial_speed')) || 1);
 const MAX_TRACE = 5000;
-const MAX_FRAMES = 400;
+const MAX_FRAMES = 600;
 
 const $ = (id) => document.getElementById(id);
 const app = {
-  ready: false, running: false, meta: null, model: null, decider: null, audio: null, stream: null,
-  grabber: null, watchdog: null, trace: [], frames: [], last: null, error: null, offline: 'not yet', t0: 0,
+  ready: false, running: false, mode: 'loading', meta: null, model: null, decider: null, fov: null, audio: null,
+  stream: null, grabber: null, watchdog: null, trace: [], frames: [], last: null, error: null, offline: 'not yet',
+  t0: performance.now(), settings: loadSettings(), policy: new SpeechPolicy(), haptics: new Haptics(),
+  speaker: new Speaker(true), audioFailed: false, paused: false, wakeLock: null, wakeLockRequests: 0,
+  perf: { frames: 0, busyS: 0, startedS: 0 },
 };
 window.crossingAssist = app;
 const view = new HelperView(document);
 
-function showError(message) {
-  app.error = message;
-  $('error').textContent = message;
-  $('error').hidden = false;
-}
-
-/** Seconds since Start (the Decider's clock). */
+/** Seconds since the page loaded (the Decider's clock). */
 function now() {
   return (performance.now() - app.t0) / 1000;
 }
@@ -54,11 +71,152 @@ function record(entry) {
   if (app.trace.length > MAX_TRACE) app.trace.shift();
 }
 
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+// ----------------------------------------------------------------------------- screen, speech, touch
+
+/** The control's label and hint (its box never changes: see style.css). */
+function setControl(label, hint = '', state = '') {
+  $('control-label').textContent = label;
+  $('control-hint').textContent = hint;
+  $('control').className = `control ${state}`;
+}
+
+function showError(message) {
+  app.error = message;
+  $('error').textContent = message;
+  $('error').hidden = false;
+  app.speaker.say(message);
+}
+
+function clearError() {
+  app.error = null;
+  $('error').textContent = '';
+  $('error').hidden = true;
+}
+
+/** Show and speak one sentence ([text, cls] from statusMessage). */
+function announce([text, cls], t = now()) {
+  view.status(text, cls);
+  app.speaker.say(text);
+  record({ kind: 'speech', t, text });
+}
+
+/** What a decision means for the user beyond the beacon: the sentence (hysteresis) and the vibration. */
+function feedback(t, d) {
+  const msg = app.policy.step(t, d);
+  if (msg) announce(msg, t);
+  const pattern = d.stop ? app.haptics.stop(d.reason) : app.haptics.go(t, d.heading_deg);
+  if (pattern) record({ kind: 'vibrate', t, reason: d.stop ? d.reason : 'direction', pattern });
+}
+
+/** A stop the app itself decides (audio lost, background, invalid FOV): said and felt at once. */
+function appStop(reason) {
+  const t = now();
+  app.audio?.render(STOP_CUE);
+  const msg = app.policy.force(t, reason);
+  if (msg) announce(msg, t);
+  const pattern = app.haptics.stop(reason);
+  if (pattern) record({ kind: 'vibrate', t, reason, pattern });
+}
+
+let lastTapMs = -Infinity;
+let pressTimer = null;
+let hintTimer = null;
+let longPressed = false;
+
+function onControlDown() {
+  longPressed = false;
+  clearTimeout(pressTimer);
+  if (app.mode !== 'running') return;
+  pressTimer = setTimeout(() => {
+    longPressed = true;
+    record({ kind: 'end', t: now(), how: 'long press' });
+    stop();
+  }, LONG_PRESS_MS);
+}
+
+function onControlUp() {
+  clearTimeout(pressTimer);
+}
+
+function onControlClick() {
+  if (longPressed) {
+    longPressed = false;
+    return;
+  }
+  const ms = performance.now();
+  if (app.mode === 'ready') {
+    start();
+  } else if (app.mode === 'tutorial') {
+    app.skipTutorial = true;
+  } else if (app.mode === 'running') {
+    if (app.audioFailed) {
+      resumeAudio('tap');
+    } else if (ms - lastTapMs <= DOUBLE_TAP_MS) {
+      clearTimeout(hintTimer);
+      lastTapMs = -Infinity;
+      record({ kind: 'end', t: now(), how: 'double tap' });
+      stop();
+      return;
+    } else {
+      record({ kind: 'tap', t: now() });
+      // Said only if no second tap follows (the first half of a double tap stays silent).
+      hintTimer = setTimeout(() => app.running && app.speaker.say('Double tap or hold to end guidance.'), DOUBLE_TAP_MS);
+    }
+  }
+  lastTapMs = ms;
+}
+
+function toggleHelper(open) {
+  const helper = $('helper');
+  helper.classList.toggle('closed', !open);
+  helper.toggleAttribute('inert', !open);
+  helper.setAttribute('aria-hidden', String(!open));
+  $('helper-toggle').setAttribute('aria-expanded', String(open));
+  $('helper-toggle').textContent = open ? 'Close the helper view' : 'Helper view';
+  if (open) helper.scrollTop = 0;
+}
+
+// ----------------------------------------------------------------------------- the live loop
+
+/** The FOV (degrees) for a width x height frame, and a sentence saying where it came from. */
+function currentFov(width, height) {
+  const o = orientation(width, height);
+  const user = app.settings.fov[o];
+  let fov = cameraFov(app.meta.geometry, width, height, user);
+  let source = user === null ? 'the bundle’s default' : 'your setting';
+  const track = app.stream?.getVideoTracks()[0];
+  const zoomed = zoomedFov(fov, track?.getSettings?.(), track?.getCapabilities?.());
+  if (zoomed !== fov) {
+    fov = cameraFov(app.meta.geometry, width, height, zoomed);
+    source += ', narrowed by the camera’s zoom';
+  }
+  return { fov, orientation: o, source };
+}
+
 const plain = (o) => ({ probs: Array.from(o.probs), entropy: o.entropy, mutual_info: o.mutual_info,
   variance: Array.from(o.variance), votes: Array.from(o.votes) });
 
 /** One new (not frozen) camera frame, captured at `captured` s, end to end (live.run_live's loop body). */
 async function step(frame, captured, dt) {
+  let cam;
+  try {
+    cam = currentFov(frame.width, frame.height);
+  } catch (err) {
+    if (!(err instanceof FovError)) throw err;
+    record({ kind: 'fov_error', t: captured, message: err.message });
+    app.fov = null;
+    appStop('fov');
+    return;
+  }
+  if (cam.fov !== app.fov) {
+    // The phone turned (or the setting changed): strips mean other headings; start afresh.
+    app.decider = new Decider(configFromBundle(app.meta, { fov_deg: cam.fov }));
+    app.fov = cam.fov;
+    record({ kind: 'fov', t: captured, fov_deg: cam.fov, orientation: cam.orientation, width: frame.width, height: frame.height });
+  }
+  view.camera(`${cam.orientation} ${frame.width}×${frame.height}, field of view ${cam.fov.toFixed(1)}° (${cam.source})`);
   let outputs = null;
   let obs;
   const t0 = performance.now();
@@ -70,31 +228,44 @@ async function step(frame, captured, dt) {
     obs = { probs: null, uncertainty: Infinity, ok: false };
   }
   const latencyMs = performance.now() - t0;
-  if (!app.running) return;
+  if (!app.running || app.paused) return;
   const yaw = app.yaw ? app.yaw.take(dt) : 0;
   const d = app.decider.step(captured, obs, yaw);
   const fresh = isFresh(now(), captured);
-  app.audio.render(fresh ? cueFor(d) : STOP_CUE);
   if (fresh) app.watchdog.beat(captured);
   app.last = d;
-  record({ kind: 'frame', t: captured, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, obs, decision: d,
-    outputs: outputs && plain(outputs) });
+  if (!app.audioFailed) {
+    app.audio.render(fresh ? cueFor(d) : STOP_CUE);
+    feedback(now(), fresh ? d : { ...d, stop: true, reason: 'stale', heading_deg: null });
+  }
+  app.frameId = (app.frameId || 0) + 1; // unique over restarts (seq restarts with the camera)
+  record({ kind: 'frame', id: app.frameId, t: captured, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, obs, decision: d,
+    fov_deg: cam.fov, width: frame.width, height: frame.height, outputs: outputs && plain(outputs) });
   if (TEST) {
-    app.frames.push({ seq: frame.seq, width: frame.width, height: frame.height, rgb: frame.rgb.slice() });
+    app.frames.push({ id: app.frameId, seq: frame.seq, width: frame.width, height: frame.height, rgb: frame.rgb.slice() });
     if (app.frames.length > MAX_FRAMES) app.frames.shift();
   }
-  view.decision(d, fresh ? statusMessage(d) : statusMessage({ ...d, stop: true, reason: 'stale' }));
+  view.decision(d);
   if (outputs) view.outputs(outputs, app.meta);
 }
 
 async function runLoop() {
-  let frames = 0;
-  let busyS = 0;
+  const p = app.perf;
+  p.frames = 0;
+  p.busyS = 0;
+  p.startedS = now();
   let prev = null;
   let prevCaptured = null;
-  const started = performance.now();
+  let lastRun = -Infinity;
   while (app.running) {
-    if (!(await app.grabber.waitForNewFrame(FRAME_WAIT_MS)) || !app.running) continue;
+    if (app.paused) {
+      await sleep(FRAME_WAIT_MS);
+      prev = null;
+      prevCaptured = null;
+      continue;
+    }
+    while (now() < lastRun + MIN_FRAME_INTERVAL_S) await sleep(Math.max(1, 1000 * (lastRun + MIN_FRAME_INTERVAL_S - now())));
+    if (!(await app.grabber.waitForNewFrame(FRAME_WAIT_MS)) || !app.running || app.paused) continue;
     const captured = now();
     const frame = app.grabber.grab();
     if (!frame) continue;
@@ -104,29 +275,66 @@ async function runLoop() {
       continue;
     }
     prev = { ...frame, rgb: frame.rgb.slice() };
+    lastRun = captured;
     const t0 = performance.now();
     await step(frame, captured, prevCaptured === null ? 0 : captured - prevCaptured);
     prevCaptured = captured;
-    busyS += (performance.now() - t0) / 1000;
-    frames += 1;
-    view.speed(frames / ((performance.now() - started) / 1000), (1000 * busyS) / frames);
+    p.busyS += (performance.now() - t0) / 1000;
+    p.frames += 1;
+    const elapsed = Math.max(1e-3, now() - p.startedS);
+    view.speed(p.frames / elapsed, (1000 * p.busyS) / p.frames, p.busyS / elapsed);
   }
 }
 
-/** The watchdog's poll: stop cue on the transition to stale (watchdog.Watchdog.poll). */
+/** The watchdog's poll (watchdog.Watchdog.poll), and a check that audio can still play. */
 function poll() {
   const t = now();
+  if (app.running && !app.audioFailed && !app.audio.playing()) onAudioLost(app.audio.ctx.state);
+  if (app.paused) return;
   const { fired } = app.watchdog.poll(t);
   if (fired) {
-    app.audio.render(STOP_CUE);
     record({ kind: 'watchdog', t });
-    view.status(...statusMessage({ stop: true, reason: 'stale' }));
+    if (!app.audioFailed) {
+      app.audio.render(STOP_CUE);
+      feedback(t, { stop: true, reason: 'stale', heading_deg: null });
+    }
   }
   app.polls = (app.polls || 0) + 1;
   if (app.polls % 10 === 0) {
     view.levels(app.audio.levels());
     view.turning(app.yaw ? app.turnRate || 0 : null);
   }
+}
+
+/** The AudioContext stopped (suspended, interrupted, closed): guidance has failed until it plays again. */
+function onAudioLost(state) {
+  if (!app.running || app.audioFailed) return;
+  app.audioFailed = true;
+  record({ kind: 'audio_failed', t: now(), state });
+  setControl('Tap to resume audio', 'Audio stopped', 'failed');
+  appStop('audio');
+}
+
+async function resumeAudio(how) {
+  if (!app.audio) return;
+  try {
+    await app.audio.ctx.resume();
+  } catch (err) {
+    console.warn(`audio resume failed: ${err.message || err}`);
+  }
+  if (!app.running || !app.audioFailed || !app.audio.playing()) return;
+  app.audioFailed = false;
+  record({ kind: 'audio_resumed', t: now(), how });
+  setControl('End guidance', 'Double tap or hold', 'running');
+  app.audio.render(STOP_CUE); // until the next fresh decision
+  app.policy.reset(); // the next advice is announced afresh
+  app.haptics.reset();
+  announce(['Audio back. Scan slowly.', '']);
+}
+
+function onAudioState(state) {
+  if (state === 'running') return;
+  onAudioLost(state);
 }
 
 function onMotion(e) {
@@ -137,7 +345,7 @@ function onMotion(e) {
 
 /** Gyroscope on: ask for it (iOS asks the user; must run inside the tap) and listen. */
 async function startGyro() {
-  if (!$('gyro').checked || typeof DeviceMotionEvent === 'undefined') return null;
+  if (!app.settings.gyro || typeof DeviceMotionEvent === 'undefined') return null;
   if (typeof DeviceMotionEvent.requestPermission === 'function'
       && (await DeviceMotionEvent.requestPermission().catch(() => 'denied')) !== 'granted') {
     showError('Motion sensors were not allowed: turns are not followed (gyroscope off).');
@@ -147,61 +355,135 @@ async function startGyro() {
   return new YawIntegrator();
 }
 
-async function start() {
-  $('start').disabled = true;
+/** Keep the screen on while guiding (a sleeping phone stops its camera); asked again on every return. */
+async function requestWakeLock() {
+  app.wakeLockRequests += 1;
+  const lock = await navigator.wakeLock?.request('screen').catch(() => null);
+  record({ kind: 'wakelock', t: now(), ok: Boolean(lock) });
+  return lock || null;
+}
+
+/** The headphone check and sound tutorial (first run, or on request; tutorial.js); a tap skips it. */
+async function runTutorial() {
+  app.mode = 'tutorial';
+  app.skipTutorial = false;
+  setControl('Sound check', 'Tap to skip', 'running');
+  const done = await playTutorial({
+    audio: app.audio,
+    say: (text) => {
+      view.status(text, '');
+      app.speaker.say(text);
+    },
+    vibrate: (p) => app.haptics.vibrate(p),
+    onStep: (step) => record({ kind: 'tutorial', t: now(), ...step }),
+    speed: TUTORIAL_SPEED,
+    skipped: () => app.skipTutorial,
+  });
+  app.speaker.cancel();
+  app.settings.tutorialDone = true;
+  saveSettings(app.settings);
+  record({ kind: 'tutorial_done', t: now(), skipped: !done });
+}
+
+async function start({ tutorial = !app.settings.tutorialDone } = {}) {
+  app.mode = 'starting';
+  $('control').disabled = true;
   try {
     app.yaw = await startGyro(); // first: iOS only asks inside the tap itself
     // The AudioContext must be created/resumed inside the tap (browsers' autoplay rules).
     const ctx = new AudioContext({ latencyHint: 'interactive' });
     await ctx.resume();
     app.audio = new BeaconAudio(ctx);
+    app.speaker = new Speaker(app.settings.speech);
+    app.policy.reset();
+    app.haptics = new Haptics({ directions: app.settings.hapticDirections });
+    $('control').disabled = false;
+    if (tutorial) await runTutorial();
     app.stream = await openCamera($('video'));
     app.stream.getVideoTracks()[0]?.addEventListener('ended', () => {
-      showError('The camera stopped (another app took it, or it was switched off). Tap Stop, then Start.');
+      showError('The camera stopped (another app took it, or it was switched off). Double tap to end, then tap to start.');
     });
     app.grabber = new FrameGrabber($('video'));
-    app.decider = new Decider(configFromBundle(app.meta));
-    app.trace = [];
-    app.frames = [];
-    app.t0 = performance.now();
+    app.decider = null;
+    app.fov = null;
+    app.audioFailed = false;
+    app.paused = false;
+    app.audio.onStateChange = onAudioState;
     app.running = true;
+    app.mode = 'running';
+    clearError(); // a successful start clears what an earlier failure left on screen
+    record({ kind: 'start', t: now() });
     app.audio.render(STOP_CUE); // nothing known yet: scan
-    app.watchdog = new Watchdog(WATCHDOG_S, 0);
+    app.watchdog = new Watchdog(WATCHDOG_S, now());
     app.tick = setInterval(poll, POLL_MS);
     app.loop = runLoop().catch((err) => fail(err));
-    $('start').textContent = 'Stop';
-    $('start').classList.add('running');
-    // Keep the screen on while guiding: a sleeping phone stops its camera.
-    app.wakeLock = await navigator.wakeLock?.request('screen').catch(() => null);
+    setControl('End guidance', 'Double tap or hold', 'running');
+    view.status('Guidance on. Scan slowly.', '');
+    app.wakeLock = await requestWakeLock();
   } catch (err) {
-    await stop();
+    await stop({ quiet: true });
     fail(err);
   } finally {
-    $('start').disabled = false;
+    $('control').disabled = false;
   }
 }
 
-async function stop() {
+async function stop({ quiet = false } = {}) {
+  const wasRunning = app.running;
   app.running = false;
+  app.mode = 'stopping';
   clearInterval(app.tick);
+  clearTimeout(pressTimer);
   window.removeEventListener('devicemotion', onMotion);
   app.yaw = null;
   app.grabber?.close();
   app.stream?.getTracks().forEach((t) => t.stop());
+  app.stream = null;
   await app.loop;
-  await app.audio?.close();
+  if (app.audio) app.audio.onStateChange = null;
+  await app.audio?.close().catch(() => null);
   app.audio = null;
   await app.wakeLock?.release().catch(() => null);
   app.wakeLock = null;
-  $('start').textContent = 'Start';
-  $('start').classList.remove('running');
-  view.status('Stopped. Tap Start to begin.', 'stop');
+  app.audioFailed = false;
+  app.paused = false;
+  app.last = null;
+  view.clear();
+  setControl('Start', 'Tap to start guidance');
+  app.mode = 'ready';
+  if (!quiet || wasRunning) {
+    record({ kind: 'stopped', t: now() });
+    view.status('Guidance ended. Tap to start.', '');
+    app.speaker.say('Guidance ended.');
+  }
 }
 
 function fail(err) {
   console.error(err);
   showError(err instanceof CameraError ? err.message : `${err.name || 'Error'}: ${err.message || err}`);
 }
+
+/** In the background the camera pauses and timers slow down: stop guiding at once; resume on return. */
+async function onVisibility() {
+  if (!app.running) return;
+  if (document.hidden) {
+    app.paused = true;
+    record({ kind: 'hidden', t: now() });
+    appStop('background');
+    return;
+  }
+  app.paused = false;
+  app.decider = null; // no stale heading or belief from before the pause
+  app.fov = null;
+  app.watchdog.beat(now()); // the watchdog's period runs from the return
+  record({ kind: 'visible', t: now() });
+  if (app.audioFailed || !app.audio.playing()) await resumeAudio('return');
+  app.policy.reset();
+  view.status('Guidance on. Scan slowly.', '');
+  app.wakeLock = await requestWakeLock();
+}
+
+// ----------------------------------------------------------------------------- start-up
 
 async function registerWorker(version) {
   if (!('serviceWorker' in navigator) || !version) {
@@ -210,7 +492,26 @@ async function registerWorker(version) {
     return;
   }
   try {
-    await navigator.serviceWorker.register(`sw.js?v=${version}`);
+    const reg = await navigator.serviceWorker.register(`sw.js?v=${version}`);
+    if (!navigator.serviceWorker.controller) {
+      // First visit: wait until the worker has cached everything (however long the download
+      // takes) and claimed this page; the model and the runtime are then read from its cache,
+      // so each file is downloaded once. A worker that fails to install ends 'redundant'.
+      const worker = reg.installing || reg.waiting || reg.active;
+      if (!worker) throw new Error('no service worker after registering');
+      await new Promise((ok) => {
+        const check = () => (['activated', 'redundant'].includes(worker.state) ? ok() : null);
+        worker.addEventListener('statechange', check);
+        check();
+      });
+      if (worker.state === 'redundant') throw new Error('the service worker could not cache the app');
+      if (!navigator.serviceWorker.controller) {
+        await new Promise((ok) => {
+          navigator.serviceWorker.addEventListener('controllerchange', ok, { once: true });
+          setTimeout(ok, 3000);
+        });
+      }
+    }
     await navigator.serviceWorker.ready;
     app.offline = 'ready';
   } catch (err) {
@@ -229,7 +530,7 @@ async function selfTest() {
     const r = replayVectors(await resp.json());
     app.selftest = r;
     out.textContent = r.nFailures === 0
-      ? `Decision logic OK: ${r.steps} decisions and ${r.checks} beacon and action checks match the Python runtime.`
+      ? `Decision logic OK: ${r.steps} decisions and ${r.checks} other checks match the Python runtime.`
       : `Decision logic MISMATCH: ${r.nFailures} differences (first: ${JSON.stringify(r.failures[0])}). Do not rely on this app.`;
   } catch (err) {
     app.selftest = { error: err.message };
@@ -237,42 +538,79 @@ async function selfTest() {
   }
 }
 
-/** In the background the camera pauses and timers slow down: stop guiding at once. */
-function onVisibility() {
-  if (document.hidden && app.running) {
-    app.audio.render(STOP_CUE);
-    record({ kind: 'hidden', t: now() });
-    view.status('Stop. The app is in the background.', 'stop');
+function bindSettings() {
+  const s = app.settings;
+  if (params.get('gyro') === '1') s.gyro = true;
+  const boxes = { speech: 'speech', 'haptic-dir': 'hapticDirections', gyro: 'gyro' };
+  for (const [id, key] of Object.entries(boxes)) {
+    $(id).checked = s[key];
+    $(id).addEventListener('change', () => {
+      s[key] = $(id).checked;
+      saveSettings(s);
+      if (key === 'speech') app.speaker.enabled = s.speech;
+      if (key === 'hapticDirections') app.haptics.directions = s.hapticDirections;
+    });
+  }
+  for (const o of ['landscape', 'portrait']) {
+    const input = $(`fov-${o}`);
+    input.value = s.fov[o] ?? '';
+    input.addEventListener('change', () => {
+      const text = input.value.trim();
+      const value = text === '' ? null : Number(text);
+      try {
+        if (value !== null) cameraFov({ camera_fov_deg: {} }, 1, 1, value);
+        s.fov[o] = value;
+        saveSettings(s);
+        app.fov = null; // the next frame starts a Decider with the new value
+        $('fov-result').textContent = value === null ? `${o}: the bundle’s default` : `${o}: ${value}° saved`;
+      } catch (err) {
+        input.value = s.fov[o] ?? '';
+        $('fov-result').textContent = `Refused: ${err.message}`;
+      }
+    });
   }
 }
 
 async function init() {
-  $('start').addEventListener('click', () => (app.running ? stop() : start()));
+  $('control').addEventListener('click', onControlClick);
+  $('control').addEventListener('pointerdown', onControlDown);
+  for (const ev of ['pointerup', 'pointercancel', 'pointerleave']) $('control').addEventListener(ev, onControlUp);
+  $('control').addEventListener('contextmenu', (e) => e.preventDefault()); // a long press must not open a menu
+  $('helper-toggle').addEventListener('click', () => toggleHelper($('helper').classList.contains('closed')));
+  $('helper-close').addEventListener('click', () => toggleHelper(false));
   document.addEventListener('visibilitychange', onVisibility);
   $('selftest').addEventListener('click', selfTest);
-  $('gyro').checked = params.get('gyro') === '1';
+  $('tutorial').addEventListener('click', () => {
+    toggleHelper(false);
+    if (app.mode === 'ready') start({ tutorial: true });
+  });
+  bindSettings();
   try {
     let version = null;
     try {
-      version = (await (await fetch('precache.json')).json()).version;
+      version = (await (await fetch('precache.json', { cache: 'no-store' })).json()).version;
     } catch {
       version = null;
     }
-    const workerReady = registerWorker(version);
+    await registerWorker(version);
     const base = new URL(params.get('bundle') || 'bundle/', location.href);
     if (!base.pathname.endsWith('/')) base.pathname += '/';
     const bundle = await fetchBundle(base.href);
     app.meta = bundle.meta;
     view.bundle(bundle.meta);
-    const ort = await import('../vendor/ort.wasm.min.mjs');
-    app.model = await Model.open(ort, bundle, new URL('vendor/', location.href).href);
+    for (const o of ['landscape', 'portrait']) $(`fov-default-${o}`).textContent = `${bundle.meta.geometry.camera_fov_deg[o]}°`;
+    const threads = Number(params.get('threads')) || undefined; // ?threads=N: for benchmarks
+    app.model = await openBest(bundle, new URL('vendor/', location.href).href, { threads });
+    view.backend(app.model);
     app.ready = true;
-    $('start').disabled = false;
-    $('start').focus();
-    view.status('Ready. Tap Start.', '');
-    await workerReady;
+    app.mode = 'ready';
+    $('control').disabled = false;
+    setControl('Start', app.settings.tutorialDone ? 'Tap to start guidance' : 'Tap to start: first a short sound check');
+    $('control').focus();
+    view.status('Ready. Tap to start.', '');
   } catch (err) {
     view.status('Not ready', 'stop');
+    setControl('Not ready', 'See the message above');
     fail(err);
   }
 }

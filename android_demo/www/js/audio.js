@@ -6,8 +6,13 @@
 //   exactly beacon.pan_gains) and an interaural time difference (Woodworth; the far ear is
 //   delayed). The pulse rate (rate_hz, 2..6 Hz) says how sure the guidance is.
 // * stop/scan cue: centred, two descending beeps (440 Hz then 330 Hz, 120 ms each) once a
-//   second, plus a vibration where the phone has one.
+//   second (the vibration that goes with it: haptics.js).
 // * silence before Start.
+//
+// The AudioContext can be suspended or interrupted under the app (a phone call, another app
+// taking the audio, the OS): `onStateChange(state)` is called on every change, and
+// `playing()` says whether sound can come out at all. The app treats a context that is not
+// 'running' as failed guidance.
 //
 // Graph:  beaconOsc -> pulseGain -> panner -> splitter -> delayL/delayR -> merger --\
 //         stopOsc   -> stopGain --------------------------------------------------- master -> speakers
@@ -22,7 +27,6 @@ export const SOUND = Object.freeze({
   tone_hz: 1000, pulse_s: 0.06, ramp_s: 0.005, amplitude: 0.5, itd: true,
   stop_hz: 440, stop_beep_s: 0.12, stop_period_s: 1.0,
 });
-export const STOP_VIBRATION_MS = [200, 100, 200];
 const LOOKAHEAD_S = 0.15;
 const TICK_MS = 25;
 const GLIDE_S = 0.02; // time constant of pan / ITD changes (no zipper noise)
@@ -35,7 +39,8 @@ export class BeaconAudio {
     this.cue = { kind: KIND_SILENCE, pan: 0, heading_deg: 0, rate_hz: 1 };
     this.nextPulse = 0;
     this.nextStop = 0;
-    this.vibrations = 0;
+    this.onStateChange = null;
+    ctx.addEventListener('statechange', () => this.onStateChange?.(ctx.state));
 
     this.master = new GainNode(ctx, { gain: 1 });
     this.master.connect(ctx.destination);
@@ -96,10 +101,6 @@ export class BeaconAudio {
       }
       this.nextPulse = now + 0.02;
       this.nextStop = now + 0.02;
-      if (this.cue.kind === KIND_STOP && typeof navigator !== 'undefined' && navigator.vibrate) {
-        navigator.vibrate(STOP_VIBRATION_MS);
-        this.vibrations += 1;
-      }
     }
     this.schedule();
   }
@@ -145,10 +146,15 @@ export class BeaconAudio {
     });
   }
 
-  /** What is playing now: {kind, pan (the panner's current value), rate_hz, levels}. */
+  /** Whether sound can come out: the context is 'running' (not suspended, interrupted or closed). */
+  playing() {
+    return this.ctx.state === 'running';
+  }
+
+  /** What is playing now: {kind, pan (the panner's current value), rate_hz, levels, contextState}. */
   state() {
     return { kind: this.cue.kind, pan: this.panner.pan.value, rate_hz: this.cue.rate_hz, levels: this.levels(),
-      vibrations: this.vibrations, contextState: this.ctx.state };
+      contextState: this.ctx.state };
   }
 
   close() {

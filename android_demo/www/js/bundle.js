@@ -1,11 +1,14 @@
-// bundle.json (schema 1, docs/contracts.md section 3) validation, ported from
+// bundle.json (schemas 1 and 2, docs/contracts.md section 3) validation, ported from
 // crossing_assist/bundle.py: the phone refuses a bundle the Python runtime would refuse, with
 // one line naming the field and the fix. Pure (no DOM): runs in Node (build step, tests) and
 // in the browser.
 
 import { DEFAULT_FOV_DEG, spaceGroups, spaceNames } from './actions.js';
+import { FOV_RANGE_DEG } from './geometry.js';
 
-export const SCHEMA_VERSION = 1;
+export const SCHEMA_VERSION = 2;
+export const SCHEMA_VERSIONS = [1, 2];
+export const FITS = ['letterbox', 'stretch'];
 export const INPUT_NAME = 'frames';
 export const OUTPUT_NAMES = ['probs', 'entropy', 'mutual_info', 'variance', 'votes'];
 export const UNCERTAINTY_MEASURES = ['entropy', 'mutual_info', 'variance'];
@@ -101,16 +104,46 @@ function parseCalibration(d) {
 }
 
 /**
+ * The geometry block (schema 2), or schema 1's implied one: fit 'stretch' and one field of
+ * view (fov_deg) for both orientations. Returns {fit, pad_rgb, strips, camera_fov_deg:
+ * {landscape, portrait}, train_fov_deg}.
+ */
+export function parseGeometry(meta, version, fovDeg) {
+  if (version < 2) {
+    return { fit: 'stretch', pad_rgb: null, strips: 'frame', camera_fov_deg: { landscape: fovDeg, portrait: fovDeg },
+      train_fov_deg: fovDeg };
+  }
+  const g = get(meta, 'geometry', '');
+  const fit = get(g, 'fit', 'geometry');
+  if (!FITS.includes(fit)) throw new BundleError(`bundle.json: geometry.fit = ${JSON.stringify(fit)} unknown; valid: ${FITS.join(', ')}`);
+  let pad = null;
+  if (fit === 'letterbox') {
+    pad = get(g, 'pad_rgb', 'geometry');
+    if (!Array.isArray(pad) || pad.length !== 3 || !pad.every((v) => Number.isInteger(v) && v >= 0 && v <= 255)) {
+      throw new BundleError(`bundle.json: geometry.pad_rgb = ${JSON.stringify(pad)} invalid; valid: 3 integers in 0..255`);
+    }
+  }
+  const strips = g.strips ?? 'frame';
+  if (strips !== 'frame') throw new BundleError(`bundle.json: geometry.strips = ${JSON.stringify(strips)} unsupported; valid: 'frame'`);
+  const fovs = get(g, 'camera_fov_deg', 'geometry');
+  const [lo, hi] = FOV_RANGE_DEG;
+  const camera = {};
+  for (const o of ['landscape', 'portrait']) camera[o] = num(get(fovs, o, 'geometry.camera_fov_deg'), `geometry.camera_fov_deg.${o}`, lo, hi);
+  const train = num(get(g, 'train_fov_deg', 'geometry'), 'geometry.train_fov_deg', lo, hi);
+  return { fit, pad_rgb: pad, strips, camera_fov_deg: camera, train_fov_deg: train };
+}
+
+/**
  * Validate a parsed bundle.json object; returns a normalised copy
- * ({schema_version, model_file, actions: {n, names, bins}, fov_deg, input, mc, calibration,
+ * ({schema_version, model_file, actions: {n, names, bins}, fov_deg, geometry, input, mc, calibration,
  * precision, model_sha256, model_size, raw}) or throws BundleError (one line).
  */
 export function parseBundleMeta(meta) {
   const version = get(meta, 'schema_version', '');
   if (!Number.isInteger(version)) throw new BundleError(`bundle.json: schema_version = ${JSON.stringify(version)} must be an integer`);
-  if (version !== SCHEMA_VERSION) {
+  if (!SCHEMA_VERSIONS.includes(version)) {
     const fix = version > SCHEMA_VERSION ? 'update the app' : 're-export the bundle';
-    throw new BundleError(`bundle.json: schema_version ${version} unsupported (this app reads ${SCHEMA_VERSION}); ${fix}`);
+    throw new BundleError(`bundle.json: schema_version ${version} unsupported (this app reads ${SCHEMA_VERSIONS.join(' and ')}); ${fix}`);
   }
   const modelFile = get(meta, 'model_file', '');
   if (typeof modelFile !== 'string' || !/^[^/\\]+\.onnx$/.test(modelFile) || modelFile.startsWith('.')) {
@@ -125,11 +158,13 @@ export function parseBundleMeta(meta) {
     throw new BundleError(`bundle.json: precision = ${JSON.stringify(precision)} unknown; valid: fp32, int8`);
   }
   const mc = get(meta, 'mc', '');
+  const fovDeg = num(get(meta, 'fov_deg', ''), 'fov_deg', 0, 180, { loOpen: true, hiOpen: true });
   return {
     schema_version: version,
     model_file: modelFile,
     actions: parseActions(get(meta, 'actions', '')),
-    fov_deg: num(get(meta, 'fov_deg', ''), 'fov_deg', 0, 180, { loOpen: true, hiOpen: true }),
+    fov_deg: fovDeg,
+    geometry: parseGeometry(meta, version, fovDeg),
     input: parseInput(get(meta, 'input', '')),
     mc: { samples: int(get(mc, 'samples', 'mc'), 'mc.samples', 1, 1024), p: num(get(mc, 'p', 'mc'), 'mc.p', 0, 1, { hiOpen: true }) },
     calibration: parseCalibration(get(meta, 'calibration', '')),

@@ -1,29 +1,35 @@
 // The live loop's guards, ported from crossing_assist/runtime/live.py and watchdog.py (pure:
 // the clock is passed in, so Node tests can freeze time):
 //
-// * frozen camera: a frame identical to the previous one (compared on every 7th row and
-//   column, as live._same does) is not fresh: it is skipped and does not feed the Decider;
+// * frozen camera: a frame identical to the previous one (same size, every byte equal: the
+//   rule of live.same_frame) is not fresh: it is skipped and does not feed the Decider;
 // * freshness: a decision counts only if it is made within watchdog_s of its frame's capture
 //   (a slow model makes stale decisions, and a stale direction is worse than silence);
 // * watchdog: when no fresh decision arrived for more than watchdog_s, the beacon stops and
 //   the stop/scan cue plays, independently of the Decider (defence in depth).
 
 export const WATCHDOG_S = 0.5; // live.LiveConfig.watchdog_s
-export const FROZEN_STRIDE = 7;
 
 /**
- * True when two frames are the same size and equal on every 7th row and column (all three
- * channels): live._same(a, b) with a[::7, ::7]. Frames: {rgb: Uint8Array(h * w * 3), width, height}.
+ * The frozen-frame rule, live.same_frame's: true when both frames have the same width and
+ * height and every byte of their RGB is equal (a live sensor's noise changes some pixel of
+ * every real frame). Frames: {rgb: Uint8Array(h * w * 3), width, height}; compared 4 bytes at a
+ * time where the buffers allow (a 640 x 480 frame: well under a millisecond).
  */
 export function sameFrame(prev, cur) {
   if (!prev || prev.width !== cur.width || prev.height !== cur.height) return false;
-  const { width: w, height: h } = cur;
-  for (let y = 0; y < h; y += FROZEN_STRIDE) {
-    for (let x = 0; x < w; x += FROZEN_STRIDE) {
-      const i = (y * w + x) * 3;
-      if (prev.rgb[i] !== cur.rgb[i] || prev.rgb[i + 1] !== cur.rgb[i + 1] || prev.rgb[i + 2] !== cur.rgb[i + 2]) return false;
-    }
+  const a = prev.rgb;
+  const b = cur.rgb;
+  if (a.length !== b.length) return false;
+  const n4 = a.length >> 2;
+  let i = 0;
+  if (a.byteOffset % 4 === 0 && b.byteOffset % 4 === 0) {
+    const a32 = new Uint32Array(a.buffer, a.byteOffset, n4);
+    const b32 = new Uint32Array(b.buffer, b.byteOffset, n4);
+    for (let k = 0; k < n4; k += 1) if (a32[k] !== b32[k]) return false;
+    i = n4 << 2;
   }
+  for (; i < a.length; i += 1) if (a[i] !== b[i]) return false;
   return true;
 }
 

@@ -1,6 +1,10 @@
 // The bundle on the phone: fetch bundle.json + model.onnx, check the model's SHA-256 against
-// the json, open an onnxruntime-web session (WASM backend, one thread: no cross-origin
-// isolation needed) and run one RGB frame through it.
+// the json, open an onnxruntime-web session and run one RGB frame through it.
+//
+// Backend: WebGPU where the browser has an adapter (vendor/ort.webgpu.min.mjs, loaded only
+// then, not cached for offline use), else WASM with SIMD, on several threads when the page is
+// cross-origin isolated (SharedArrayBuffer; the server sends COOP/COEP) and on one otherwise.
+// Model.open says which it got ({backend, threads}); the helper view shows it.
 //
 // The graph takes raw uint8 NHWC RGB frames and resizes/normalises itself (contracts.md
 // section 3), so the app only turns the camera's RGBA pixels into RGB.
@@ -61,12 +65,12 @@ export class Model {
    * Open a session for a fetched bundle. `ort` is the onnxruntime-web module
    * (vendor/ort.wasm.min.mjs); `wasmBase` the URL of the folder holding its .wasm/.mjs.
    */
-  static async open(ort, { meta, modelBytes }, wasmBase) {
+  static async open(ort, { meta, modelBytes }, wasmBase, { threads = 1, backend = 'wasm' } = {}) {
     ort.env.wasm.wasmPaths = wasmBase;
-    ort.env.wasm.numThreads = 1;
+    ort.env.wasm.numThreads = threads;
     ort.env.wasm.proxy = false;
     const session = await ort.InferenceSession.create(modelBytes, {
-      executionProviders: ['wasm'],
+      executionProviders: backend === 'webgpu' ? ['webgpu', 'wasm'] : ['wasm'],
       graphOptimizationLevel: 'all',
     });
     if (session.inputNames.length !== 1 || session.inputNames[0] !== INPUT_NAME) {
@@ -74,7 +78,10 @@ export class Model {
     }
     const missing = OUTPUT_NAMES.filter((n) => !session.outputNames.includes(n));
     if (missing.length) throw new BundleError(`bundle: graph lacks outputs ${JSON.stringify(missing)}; re-export the bundle`);
-    return new Model(ort, session, meta);
+    const model = new Model(ort, session, meta);
+    model.backend = backend;
+    model.threads = backend === 'wasm' ? threads : null;
+    return model;
   }
 
   /**
@@ -102,4 +109,29 @@ export function rgbaToRgb(rgba, rgb = new Uint8Array((rgba.length / 4) * 3)) {
     rgb[j + 2] = rgba[i + 2];
   }
   return rgb;
+}
+
+/** WASM threads to ask for: cores - 1, at most 4, where SharedArrayBuffer works (cross-origin isolated), else 1. */
+export function wasmThreads(isolated = globalThis.crossOriginIsolated, cores = globalThis.navigator?.hardwareConcurrency) {
+  return isolated ? Math.max(1, Math.min(4, (cores || 1) - 1)) : 1; // one core left for the camera, audio and page
+}
+
+/**
+ * Load onnxruntime-web and open the bundle on the best backend this browser has: WebGPU when an
+ * adapter is there (falls back to WASM if that fails), else WASM SIMD on wasmThreads() threads.
+ * `vendor`: URL of the folder holding the onnxruntime-web files.
+ */
+export async function openBest(bundle, vendor, { allowWebGpu = true, threads = wasmThreads() } = {}) {
+  if (allowWebGpu && globalThis.navigator?.gpu) {
+    try {
+      if (await navigator.gpu.requestAdapter()) {
+        const ort = await import(new URL('ort.webgpu.min.mjs', vendor).href);
+        return await Model.open(ort, bundle, vendor, { backend: 'webgpu' });
+      }
+    } catch (err) {
+      console.warn(`WebGPU unavailable, using WASM: ${err.message || err}`);
+    }
+  }
+  const ort = await import(new URL('ort.wasm.min.mjs', vendor).href);
+  return Model.open(ort, bundle, vendor, { threads });
 }

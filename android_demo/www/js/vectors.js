@@ -7,9 +7,12 @@
 // max(1, |expected|); the belief element by element.
 
 import { headingToPan, spaceGroups } from './actions.js';
+import { cameraFov, FovError, orientation } from './geometry.js';
+import { isFresh, sameFrame, Watchdog } from './live.js';
 import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains } from './logic.js';
+import { statusMessage } from './view.js';
 
-const SUPPORTED_VERSION = 1;
+const SUPPORTED_VERSIONS = [1, 2];
 
 function close(a, b, tol) {
   return Math.abs(a - b) <= tol * Math.max(1, Math.abs(b));
@@ -48,8 +51,8 @@ function obsFromJson(o, measure) {
  * failures: [...] (at most 20 listed), nFailures, maxRelDiff}.
  */
 export function replayVectors(vectors) {
-  if (vectors.version !== SUPPORTED_VERSION) {
-    throw new RangeError(`test vectors version ${vectors.version} unsupported (this app reads ${SUPPORTED_VERSION}); update the app`);
+  if (!SUPPORTED_VERSIONS.includes(vectors.version)) {
+    throw new RangeError(`test vectors version ${vectors.version} unsupported (this app reads ${SUPPORTED_VERSIONS.join(', ')}); update the app`);
   }
   const tol = vectors.tolerance;
   const failures = [];
@@ -62,9 +65,21 @@ export function replayVectors(vectors) {
     nFailures += 1;
   };
   for (const sc of vectors.scenarios) {
-    const decider = new Decider(sc.config);
+    let decider = new Decider(sc.config);
+    let fovNow = null;
     const { measure } = decisionConfig(sc.config);
     sc.steps.forEach((row, i) => {
+      if (row.frame) {
+        // The app's rule: the FOV of this frame's orientation; a new FOV starts a fresh Decider.
+        const [w, h] = row.frame;
+        const fov = cameraFov(sc.geometry, w, h, sc.fov_override?.[orientation(w, h)] ?? null);
+        checks += 1;
+        if (!close(fov, row.fov_deg, tol)) fail({ scenario: sc.name, step: i, field: 'fov_deg', got: fov, expected: row.fov_deg });
+        if (fov !== fovNow) {
+          decider = new Decider({ ...sc.config, fov_deg: fov });
+          fovNow = fov;
+        }
+      }
       const obs = obsFromJson(row.obs, measure);
       if (obs && row.obs.ok && !close(obs.uncertainty, row.obs.uncertainty, tol)) {
         fail({ scenario: sc.name, step: i, field: 'obs.uncertainty', got: obs.uncertainty, expected: row.obs.uncertainty });
@@ -99,6 +114,52 @@ export function replayVectors(vectors) {
     checks += 1;
     if (JSON.stringify(spaceGroups(Number(n))) !== JSON.stringify(groups)) {
       fail({ scenario: 'actions', field: n, got: spaceGroups(Number(n)), expected: groups });
+    }
+  }
+  const g = vectors.guards || {};
+  const frame = (f) => f && { width: f.width, height: f.height, rgb: Uint8Array.from(f.rgb) };
+  (g.same_frame || []).forEach((v, i) => {
+    checks += 1;
+    const got = sameFrame(frame(v.prev), frame(v.cur));
+    if (got !== v.same) fail({ scenario: 'guards.same_frame', field: String(i), got, expected: v.same });
+  });
+  for (const v of g.fresh || []) {
+    checks += 1;
+    const got = isFresh(v.now, v.captured, v.watchdog_s);
+    if (got !== v.fresh) fail({ scenario: 'guards.fresh', field: `${v.now}-${v.captured}`, got, expected: v.fresh });
+  }
+  if (g.watchdog) {
+    const dog = new Watchdog(g.watchdog.period_s, g.watchdog.start);
+    g.watchdog.ops.forEach((op, i) => {
+      checks += 1;
+      if (op.op === 'beat') {
+        dog.beat(op.t);
+        return;
+      }
+      const { stale, fired } = dog.poll(op.t);
+      if (stale !== op.stale || fired !== op.fired) {
+        fail({ scenario: 'guards.watchdog', field: String(i), got: { stale, fired }, expected: { stale: op.stale, fired: op.fired } });
+      }
+    });
+  }
+  for (const v of vectors.status || []) {
+    checks += 1;
+    const [text, cls] = statusMessage(v);
+    if (text !== v.text || cls !== v.cls) fail({ scenario: 'status', field: `${v.reason} ${v.heading_deg}`, got: [text, cls], expected: [v.text, v.cls] });
+  }
+  for (const v of vectors.geometry?.fov_choice || []) {
+    checks += 1;
+    const [w, h] = v.frame;
+    let got;
+    try {
+      got = cameraFov(v.geometry, w, h, v.override);
+    } catch (err) {
+      if (!(err instanceof FovError)) throw err;
+      got = null;
+    }
+    const okOrientation = orientation(w, h) === v.orientation;
+    if (!okOrientation || (got === null) !== (v.fov_deg === null) || (got !== null && !close(got, v.fov_deg, tol))) {
+      fail({ scenario: 'geometry.fov_choice', field: `${w}x${h} override ${v.override}`, got, expected: v.fov_deg });
     }
   }
   return { version: vectors.version, scenarios: vectors.scenarios.length, steps, checks, failures, nFailures, maxRelDiff };

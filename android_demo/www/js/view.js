@@ -1,22 +1,44 @@
 // What the screen shows: a big status line for the user (a polite screen-reader live region
-// that only changes when the advice changes, not on every frame) and the helper view for a
+// that changes only when speech.js announces a change of advice) and the helper view for a
 // sighted companion: the camera with its 12 strips, the probability of each strip, the
 // decision, heading, uncertainty against the bundle's threshold, the audio levels, speed.
 
 import { N_BINS } from './actions.js';
 
-/** One short sentence for the user; changes only when the advice changes. Pure. */
+/** Stop sentences by reason: the Decider's (uncertain, stale, failed) and the app's own. */
+export const STATUS_STOP = Object.freeze({
+  uncertain: 'Stop. Not sure: scan slowly.',
+  stale: 'Stop. Camera stalled.',
+  failed: 'Stop. The model failed.',
+  audio: 'Audio stopped. Tap to resume.',
+  background: 'Stop. The app is in the background.',
+  fov: 'Stop. The camera field of view setting is invalid.',
+});
+export const STRAIGHT_DEG = 7.5;
+export const SLIGHT_DEG = 22.5;
+
+/**
+ * The one sentence shown and spoken for a decision ({stop, reason, heading_deg}) and its
+ * style: [text, 'stop' | 'go']. Pure; the same as vectors.status_message in Python (the shared
+ * test vectors' `status` section).
+ */
 export function statusMessage(d) {
-  if (d.stop) {
-    if (d.reason === 'stale') return ['Stop. Camera or model stalled.', 'stop'];
-    if (d.reason === 'failed') return ['Stop. The model failed on this frame.', 'stop'];
-    return ['Stop. Not sure: scan slowly.', 'stop'];
-  }
+  if (d.stop || d.heading_deg === null || d.heading_deg === undefined) return [STATUS_STOP[d.reason] || STATUS_STOP.uncertain, 'stop'];
   const h = d.heading_deg;
   const side = h < 0 ? 'left' : 'right';
-  if (Math.abs(h) < 7.5) return ['Go straight ahead.', 'go'];
-  if (Math.abs(h) < 22.5) return [`Bear slightly ${side}.`, 'go'];
+  if (Math.abs(h) < STRAIGHT_DEG) return ['Go straight ahead.', 'go'];
+  if (Math.abs(h) < SLIGHT_DEG) return [`Bear slightly ${side}.`, 'go'];
   return [`Turn ${side}.`, 'go'];
+}
+
+/** One line naming the bundle: its model's SHA-256 (first 12 hex digits) and date, and its facts. */
+export function bundleSummary(meta) {
+  const t = meta.raw.training || {};
+  const created = meta.raw.provenance?.created || 'date unknown';
+  return `model ${meta.model_sha256.slice(0, 12)}, ${created}; schema ${meta.schema_version}, ${meta.actions.n} actions, `
+    + `${meta.input.size.join('×')} canvas (${meta.geometry.fit}), T=${meta.mc.samples}, ${meta.precision}, `
+    + `${t.backbone || 'unknown backbone'}; gate: ${meta.calibration.uncertainty.measure} ≤ `
+    + `${fmt(meta.calibration.uncertainty.threshold)}`;
 }
 
 const fmt = (v, digits = 2) => (v === null || v === undefined || !Number.isFinite(v) ? '–' : v.toFixed(digits));
@@ -53,10 +75,25 @@ export class HelperView {
 
   bundle(meta) {
     this.meta = meta;
-    const t = meta.raw.training || {};
-    this.el('bundle').textContent = `${meta.actions.n} actions, ${meta.input.size.join('×')} input, `
-      + `T=${meta.mc.samples}, ${meta.precision}, ${t.backbone || 'unknown backbone'}; `
-      + `gate: ${meta.calibration.uncertainty.measure} ≤ ${fmt(meta.calibration.uncertainty.threshold)}`;
+    this.el('bundle').textContent = bundleSummary(meta);
+  }
+
+  backend(model) {
+    this.el('backend').textContent = model.backend === 'wasm'
+      ? `onnxruntime-web, WASM SIMD, ${model.threads} thread${model.threads === 1 ? '' : 's'}`
+      : `onnxruntime-web, ${model.backend}`;
+  }
+
+  /** Which field of view the headings use now, and where it came from. */
+  camera(text) {
+    this.el('camera').textContent = text;
+  }
+
+  /** Back to "nothing known": no strip highlighted, no heading (after stopping). */
+  clear() {
+    this.cells.forEach((cell) => cell.classList.remove('on'));
+    this.bars.forEach((bar) => bar.classList.remove('on'));
+    for (const id of ['decision', 'heading', 'beacon', 'uncertainty']) this.el(id).textContent = '–';
   }
 
   offline(text) {
@@ -83,9 +120,8 @@ export class HelperView {
       + `mutual info ${fmt(out.mutual_info, 3)}, top ${meta.actions.names[best]} ${Math.round(100 * out.probs[best])}%`;
   }
 
-  /** Show a decision and update the status line when the advice changed. */
-  decision(d, [text, cls]) {
-    this.status(text, cls);
+  /** Show a decision in the helper view (the status line is speech.js's: it has hysteresis). */
+  decision(d) {
     this.el('decision').textContent = `${d.gate} (${d.reason})${d.stop ? ' — stop cue' : ''}`;
     this.el('heading').textContent = d.heading_deg === null ? '–' : `${fmt(d.heading_deg, 1)}° (pan ${fmt(d.pan)})`;
     this.el('beacon').textContent = d.stop ? 'stop / scan cue' : `${fmt(d.rate_hz, 1)} pulses/s`;
@@ -103,7 +139,8 @@ export class HelperView {
     this.el('turning').textContent = rateDps === null ? 'gyroscope off' : `${fmt(Math.abs(rateDps), 0)}°/s ${side}`;
   }
 
-  speed(fps, ms) {
-    this.el('speed').textContent = `${fmt(fps, 1)} frames/s, model ${fmt(ms, 0)} ms/frame`;
+  /** Frames per second, model ms per frame and the duty cycle (share of the time spent in the model). */
+  speed(fps, ms, duty) {
+    this.el('speed').textContent = `${fmt(fps, 1)} frames/s, model ${fmt(ms, 0)} ms/frame, duty ${fmt(100 * duty, 0)}%`;
   }
 }
