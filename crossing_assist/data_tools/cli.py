@@ -69,6 +69,20 @@ def _cmd_negatives(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_photo_clip(args: argparse.Namespace) -> int:
+    from crossing_assist.data_tools.photo_clip import PhotoClipConfig, make_photo_clip
+
+    try:
+        aw, ah = (float(v) for v in args.aspect.split(":"))
+        aspect = aw / ah
+    except (ValueError, ZeroDivisionError):
+        raise ManifestError(f"--aspect {args.aspect!r} invalid; expected W:H, e.g. 3:4") from None
+    clip, side, fov = make_photo_clip(PhotoClipConfig(Path(args.dataset), Path(args.out), args.split, args.count,
+                                                      args.seconds_each, args.fps, aspect, args.height))
+    print(f"wrote {clip} and {side}; the frames see {fov:.1f} deg across: crossing-demo {clip} --fov {fov:.1f}")
+    return 0
+
+
 def _cmd_synth(args: argparse.Namespace) -> int:
     from crossing_assist.data_tools import synth
     if args.video:
@@ -165,6 +179,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_negatives)
+
+    p = sub.add_parser("photo-clip", help="a clip panning a phone-shaped window across labelled photos, with ground truth")
+    p.add_argument("dataset", help="dataset folder (manifest.csv) with far_x, e.g. imported PTL")
+    p.add_argument("--out", required=True, help="clip path (.mp4); the ground truth goes beside it (.json)")
+    p.add_argument("--split", default="val")
+    p.add_argument("--count", type=int, default=6, help="photos in the clip")
+    p.add_argument("--seconds-each", type=float, default=3.0)
+    p.add_argument("--fps", type=float, default=10.0)
+    p.add_argument("--aspect", default="3:4", help="the phone frame's W:H, e.g. 3:4 (portrait) or 4:3 (landscape)")
+    p.add_argument("--height", type=int, default=320, help="frame height in pixels")
+    p.set_defaults(func=_cmd_photo_clip)
 
     p = sub.add_parser("stats", help="counts per bin / action space / split, majority baseline, histogram")
     p.add_argument("dataset", help="dataset folder (with manifest.csv)")

@@ -21,6 +21,7 @@ HELP = {
     "calib_folds": "folds (whole sources) for the held-out coverage: each measured with a calibration fitted on the others",
     "coverage": "target coverage of the conformal action sets",
     "measure": "the gate's uncertainty measure: entropy | mutual_info",
+    "gate_scale": "multiply the fitted gate threshold by this (pick it on held-out sources' risk-coverage curve: scripts/choose_gate.py)",
     "int8": "quantise the convolutions to int8 (static QDQ, calibrated on real frames)",
     "int8_mode": "static: int8 weights and activations in the backbone's convolutions; weights: int8 weights only (float activations)",
     "int8_frames": "calibration frames for the int8 ranges",

@@ -61,6 +61,7 @@ class ExportConfig:
     calib_folds: int = 5            # folds (whole sources) for the held-out coverage measurement
     coverage: float = 0.9
     measure: str = "entropy"
+    gate_scale: float = 1.0         # multiplies the fitted gate threshold (chosen on held-out sources)
     int8: bool = False
     int8_mode: str = "static"       # static: weights + activations; weights: int8 weights only
     int8_frames: int = 128
@@ -77,6 +78,7 @@ class ExportConfig:
             (self.p is None or 0.0 <= self.p < 1.0, f"--p {self.p}; valid: 0 <= p < 1"),
             (0.0 < self.coverage < 1.0, f"--coverage {self.coverage}; valid: 0 < coverage < 1"),
             (self.calib_folds >= 2, f"--calib-folds {self.calib_folds}; valid: >= 2"),
+            (0.05 <= self.gate_scale <= 20, f"--gate-scale {self.gate_scale}; valid: 0.05..20"),
             (self.measure in ("entropy", "mutual_info"), f"--measure {self.measure!r}; valid: entropy, mutual_info"),
             (self.int8_mode in INT8_MODES, f"--int8-mode {self.int8_mode!r}; valid: {', '.join(INT8_MODES)}"),
             (not self.int8 or self.calib_data, "--int8 needs --calib-data (real frames to calibrate the int8 ranges)"),
@@ -263,7 +265,7 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
         temperature=temperature, coverage=cfg.coverage,
         threshold=cal.conformal_threshold(got["probs"], data.actions, cfg.coverage),
         n_frames=len(data.actions), measure=cfg.measure,
-        uncertainty_threshold=cal.uncertainty_threshold(got[cfg.measure], correct))
+        uncertainty_threshold=cfg.gate_scale * cal.uncertainty_threshold(got[cfg.measure], correct))
     full = _measure(got, data, calib.threshold, meta["actions"]["n"], majority)
     log(f"{cfg.calib_split} through onnxruntime (T={meta['mc']['samples']}): accuracy {full['accuracy']:.4f} "
         f"on {full['n']} frames")

@@ -245,8 +245,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     for extra in cfg.extra_data:  # cached per folder, so adding data never recomputes the main set
         ex = read_manifest(extra).split("train")
         if len(ex):
-            tr = _concat(tr, _to_split(fs(ex, variants, f"train {Path(extra).name}"), cfg.actions))
-            n_extra += len(ex)
+            ex_fs = fs(ex, variants, f"train {Path(extra).name}")
+            ex_split, _ = _hold_out(_to_split(ex_fs, cfg.actions), ex_fs, ex, cfg.holdout)  # held-out sources stay out
+            tr = _concat(tr, ex_split)
+            n_extra += int(sum(r.source not in cfg.holdout for r in ex.rows))
     val = _to_split(fs(val_ds, make_variants(False), "val"), cfg.actions) if val_ds is not None else None
     sel = val if cfg.select_on == "val" else held
     majority = int(np.bincount(tr.actions, minlength=cfg.actions).argmax())

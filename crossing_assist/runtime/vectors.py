@@ -38,6 +38,7 @@ import numpy as np
 
 from crossing_assist.actions import get_space, heading_to_pan
 from crossing_assist.fileio import atomic_write_text
+from crossing_assist.geometry import FOV_RANGE_DEG, Geometry, orientation
 from crossing_assist.runtime.beacon import BeaconConfig, itd_seconds, pan_gains
 from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
 from crossing_assist.runtime.engine import measure_value
@@ -52,12 +53,6 @@ VERSION = 2
 # reader's ``Bundle.camera_fov`` must agree (tests/test_android_logic.py checks it where present).
 
 ORIENTATIONS = ("landscape", "portrait")
-FOV_RANGE_DEG = (20.0, 170.0)
-
-
-def orientation(width: int, height: int) -> str:
-    """``portrait`` when the frame is taller than wide, else ``landscape``."""
-    return "portrait" if height > width else "landscape"
 
 
 def geometry_of(meta: dict) -> dict:
@@ -75,11 +70,8 @@ def camera_fov(geometry: dict, width: int, height: int, override: float | None =
     device's value for this orientation) if given, else ``geometry.camera_fov_deg`` of the
     frame's orientation. Raises ValueError outside 20..170 degrees (the runtime then plays the
     stop cue)."""
-    fov = geometry["camera_fov_deg"][orientation(width, height)] if override is None else override
-    lo, hi = FOV_RANGE_DEG
-    if not (isinstance(fov, (int, float)) and math.isfinite(fov) and lo <= fov <= hi):
-        raise ValueError(f"Invalid field of view: {fov} degrees; valid: {lo:g}..{hi:g}")
-    return float(fov)
+    cam = geometry["camera_fov_deg"]
+    return Geometry(camera_fov_deg=(cam["landscape"], cam["portrait"])).camera_fov(width, height, override)
 
 
 # ----------------------------------------------------------------------------- status sentences

@@ -1,0 +1,127 @@
+"""Choose the default bundle's gate threshold on photographers the model never trained on.
+
+For each fold of a leave-one-photographer-out run (``crossing-train --cv source``, folder
+``CV/fold-<source>``): export the fold's model as a bundle, calibrated on PTL val *without* the
+held-out photographer; play the held-out photographer's unseen photos (their train-split
+photos, which the fold never saw) and unseen no-crossing views (the ``negatives`` rows that no
+model trained on) through the runtime (:mod:`crossing_assist.runtime.listen`); sweep the gate
+threshold as a multiple ``m`` of the bundle's own fitted threshold. The folds' rates are pooled
+per ``m``, and ``m*`` is the largest beacon-on rate with confidently wrong <= 0.5 % and silence on
+no-crossing frames >= 98 % (else the point nearest those targets). Writes ``CV/gate.json`` and
+``CV/gate_risk_coverage.png``; ``scripts/build_default_bundle.sh`` exports with
+``--gate-scale m*``.
+
+    .venv/bin/python scripts/choose_gate.py runs/default/cv --ptl runs/data/ptl --neg runs/data/neg \
+        --used-neg runs/data/neg_half --frames 200
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from crossing_assist.data_tools.images import load_frame
+from crossing_assist.data_tools.manifest import read_manifest, write_manifest
+from crossing_assist.runtime.listen import Listener, summarise
+
+SCALES = tuple(float(v) for v in np.round(np.geomspace(0.25, 4.0, 17), 4))
+
+
+def _subset(ds, rows, out: Path) -> Path:
+    """A dataset folder holding ``rows`` of ``ds`` (image paths re-rooted, nothing copied)."""
+    out.mkdir(parents=True, exist_ok=True)
+    fixed = [r.__class__(os.path.relpath(ds.image_path(r), out), r.label, r.far_x, r.source, r.split, r.votes, r.flags)
+             for r in rows]
+    write_manifest(out, fixed)
+    return out
+
+
+def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int) -> dict:
+    from crossing_assist.export.exporter import ExportConfig, export_bundle
+    from crossing_assist.runtime.engine import Engine
+
+    bundle = fold / "bundle"
+    if not (bundle / "bundle.json").is_file():
+        cal = _subset(ptl, [r for r in ptl.rows if r.split == "val" and r.source != source], fold / "calib_data")
+        export_bundle(ExportConfig(run=str(fold), out=str(bundle), calib_data=str(cal), calib_split="val",
+                                   progress=False, threads=1), log=lambda s: print(f"  {s}", file=sys.stderr))
+    rng = np.random.default_rng(seed)
+    pos = [r for r in ptl.rows if r.split == "train" and r.source == source]
+    negs = [r for r in neg.rows if r.source == source and r.image not in used]
+    pos = [pos[i] for i in sorted(rng.choice(len(pos), min(n_frames, len(pos)), replace=False))]
+    negs = [negs[i] for i in sorted(rng.choice(len(negs), min(n_frames // 2, len(negs)), replace=False))]
+    engine = Engine(bundle, threads=1)
+    lis = Listener(engine)
+    for ds, rows in ((ptl, pos), (neg, negs)):
+        for r in rows:
+            lis.add(load_frame(ds.image_path(r), r.flags), r.label)
+    t0 = engine.decision_config().threshold
+    return {"source": source, "threshold": t0, "frames": len(pos), "no_crossing_frames": len(negs),
+            "curve": [{"scale": m, **summarise(lis.heard(m * t0))} for m in SCALES]}
+
+
+def pool(folds: list[dict]) -> list[dict]:
+    """Per scale, the folds' rates weighted by their frame counts."""
+    out = []
+    for i, m in enumerate(SCALES):
+        pts = [(f["curve"][i], f["frames"], f["no_crossing_frames"]) for f in folds]
+        on = sum(c["beacon_on"] * a for c, a, _ in pts) / sum(a for _, a, _ in pts)
+        wrong = sum(c["confidently_wrong"] * a for c, a, _ in pts) / sum(a for _, a, _ in pts)
+        sil_n = sum(b for _, _, b in pts)
+        sil = sum((c["silence_no_crossing"] or 0) * b for c, _, b in pts) / sil_n if sil_n else None
+        out.append({"scale": m, "beacon_on": on, "confidently_wrong": wrong, "silence_no_crossing": sil,
+                    "per_fold": {f["source"]: f["curve"][i] for f in folds}})
+    return out
+
+
+def choose(curve: list[dict], max_wrong: float = 0.005, min_silence: float = 0.98) -> tuple[dict, bool]:
+    ok = [c for c in curve if c["confidently_wrong"] <= max_wrong and (c["silence_no_crossing"] or 1) >= min_silence]
+    if ok:
+        return max(ok, key=lambda c: (c["beacon_on"], -c["scale"])), True
+    # nearest to the targets: the smallest excess over them, then the most beacon-on
+    excess = lambda c: max(0, c["confidently_wrong"] - max_wrong) / max_wrong + \
+        max(0, min_silence - (c["silence_no_crossing"] or 1)) / (1 - min_silence)  # noqa: E731
+    return min(curve, key=lambda c: (excess(c), -c["beacon_on"])), False
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("cv", type=Path, help="the --cv source run folder (fold-* inside)")
+    ap.add_argument("--ptl", default="runs/data/ptl")
+    ap.add_argument("--neg", default="runs/data/neg")
+    ap.add_argument("--used-neg", default="runs/data/neg_half", help="negatives the models trained on (excluded)")
+    ap.add_argument("--frames", type=int, default=200, help="held-out photos per fold (half as many negatives)")
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+    summary = json.loads((a.cv / "cv.json").read_text())
+    ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
+    used = {r.image for r in read_manifest(a.used_neg).rows}   # same names: neg_half links neg's images
+    folds = []
+    for f in summary["folds"]:
+        fold = a.cv / ("fold-" + "".join(ch if ch.isalnum() or ch in "_.-" else "_" for ch in f["source"]))
+        print(f"fold {f['source']}: export + listen", file=sys.stderr, flush=True)
+        folds.append(fold_curve(fold, f["source"], ptl, neg, used, a.frames, a.seed))
+    curve = pool(folds)
+    best, met = choose(curve)
+    one = next(c for c in curve if c["scale"] == 1.0)
+    result = {"scale": best["scale"], "targets_met": met, "at_scale": best, "at_fitted_threshold": one,
+              "curve": curve, "folds": [{k: v for k, v in f.items() if k != "curve"} for f in folds]}
+    (a.cv / "gate.json").write_text(json.dumps(result, indent=1))
+    from crossing_assist.models.plots import plot_risk_coverage
+
+    plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"], a.cv / "gate_risk_coverage.png",
+                       "held-out photographers: gate threshold x scale")
+    fmt = lambda c: (f"beacon on {c['beacon_on']:.3f}, confidently wrong {100 * c['confidently_wrong']:.2f} %, "  # noqa: E731
+                     f"silence off-crossing {c['silence_no_crossing'] if c['silence_no_crossing'] is None else round(c['silence_no_crossing'], 3)}")
+    print(f"fitted threshold (scale 1): {fmt(one)}")
+    print(f"chosen scale {best['scale']:g} ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
