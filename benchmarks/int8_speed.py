@@ -106,7 +106,8 @@ def accuracy_block(fp32: bytes, int8: bytes, data: Frames, idx: np.ndarray, repe
     for name, (_, p) in res.items():
         hit = p[np.arange(len(idx)), labels] >= threshold
         sizes = (p >= threshold).sum(1)
-        print(f"{name}: coverage with the bundle's threshold {threshold:.3f}: {hit.mean():.3f}, mean set {sizes.mean():.2f}")
+        print(f"{name}: coverage with the bundle's threshold {threshold:.3f}: {hit.mean():.3f}, "
+              f"mean set {sizes.mean():.2f}")
 
 
 def lopo_block(model: onnx.ModelProto, fp32: bytes, data: Frames, args: argparse.Namespace) -> None:

@@ -144,10 +144,13 @@ def load_split(data_dir: str, split: str, n_actions: int) -> Frames:
     from crossing_assist.data_tools.images import load_rgb
     from crossing_assist.data_tools.manifest import read_manifest
 
-    ds = read_manifest(data_dir).split(split)
-    if len(ds.rows) < 2:
-        raise SystemExit(f"error: {data_dir}: split {split!r} has {len(ds.rows)} frames; need >= 2")
-    images = [load_rgb(ds.image_path(r)) for r in ds.rows]
+    try:
+        ds = read_manifest(data_dir).split(split)
+        if len(ds.rows) < 2:
+            raise ValueError(f"{data_dir}: split {split!r} has {len(ds.rows)} frames; need >= 2")
+        images = [load_rgb(ds.image_path(r)) for r in ds.rows]
+    except (OSError, ValueError) as exc:  # ManifestError is a ValueError
+        raise SystemExit(f"error: {exc}") from None
     labels = get_space(n_actions).bins_to_actions(ds.labels())
     return Frames(images, np.asarray(labels), np.asarray([r.source for r in ds.rows]))
 
