@@ -2,21 +2,25 @@
 
 Two modes (``crossing-export --int8 --int8-mode static|weights``):
 
-* ``static`` (default): onnxruntime's static QDQ quantisation of the backbone's convolutions,
-  weights per channel and activations per tensor, ranges from the 99.99th percentile of the
-  activations on real frames. The first convolution (it reads the normalised image) and the
-  head's 1-D convolutions (on row-pooled features, where a max over rows meets a per-tensor
-  range) keep float activations.
+* ``static`` (default): onnxruntime's static QDQ quantisation of the backbone proper (after
+  its first convolution, up to its last 2-D convolution and that one's activation): the
+  convolutions, the residual ``Add`` nodes and the ``Clip``/``Relu`` activations, weights int8
+  per output channel (symmetric), activations **uint8** per tensor (asymmetric), ranges from
+  the 99.99th percentile of the activations on real frames. Quantising the ``Add`` and
+  activation nodes too lets onnxruntime fuse every backbone convolution into a
+  ``QLinearConv``/``QLinearAdd`` chain that stays int8 from the first block to the last; uint8
+  activations (U8S8) are what its x86 kernels are fast for. The first convolution (it reads
+  the normalised image) and the head (row-pooled features, where a max over rows meets a
+  per-tensor range) keep float weights and activations: a ``DequantizeLinear`` in front of a
+  float weight is not folded by onnxruntime and runs on every frame.
 * ``weights``: every convolution keeps float activations; only its weights are stored int8.
   The file is as small and accuracy is fp32's, but onnxruntime keeps the
   ``DequantizeLinear`` nodes: on the default model it ran 2.4x slower than fp32 (x86).
 
-Weights kept out of static QDQ are stored int8 all the same (symmetric, per output channel;
-the head's per input channel, as its inputs are a row mean and a row max of very different
-scale) behind a ``DequantizeLinear``. The resize/normalise front, the fully connected layers,
-the random masks and the softmax/log tail stay float32: quantising the tail made mutual
-information negative in a trial, and it is a negligible share of the compute. What each mode
-cost on the default model is in docs/export.md.
+The resize/normalise front, the fully connected layers, the random masks and the
+softmax/log tail stay float32: quantising the tail made mutual information negative in a
+trial, and it is a negligible share of the compute. What each choice cost, measured with
+onnxruntime's profiler (``benchmarks/int8_speed.py``), is in docs/export.md.
 """
 
 from __future__ import annotations
@@ -54,8 +58,9 @@ INT8_MODES = ("static", "weights")
 
 
 def quantize_convs(model: Any, frames: Sequence[np.ndarray], *, mode: str = "static", batch: int = 8) -> Any:
-    """Return an int8 copy of ``model`` (onnx.ModelProto): its Conv weights int8 and, in
-    ``static`` mode, the backbone's Conv activations too (module docstring).
+    """Return an int8 copy of ``model`` (onnx.ModelProto): in ``weights`` mode every Conv
+    weight int8; in ``static`` mode the backbone proper in int8, weights and activations
+    (module docstring).
 
     ``frames``: calibration frames (H×W×3 uint8 RGB, one shape), e.g. 64-200 real frames
     (unused in ``weights`` mode). The metadata of ``model`` is carried over.
@@ -85,7 +90,8 @@ def quantize_convs(model: Any, frames: Sequence[np.ndarray], *, mode: str = "sta
     class Reader(_Frames, CalibrationDataReader):
         pass
 
-    keep_float = float_activation_convs(model)
+    model = _named(model)
+    quantize = backbone_nodes(model)
     logging.getLogger("root").setLevel(logging.ERROR)
     with tempfile.TemporaryDirectory(prefix="crossing-int8-") as tmp:
         src, dst = Path(tmp) / "fp32.onnx", Path(tmp) / "int8.onnx"
@@ -93,19 +99,66 @@ def quantize_convs(model: Any, frames: Sequence[np.ndarray], *, mode: str = "sta
         with contextlib.redirect_stdout(io.StringIO()):  # the calibrator prints progress to stdout
             quantize_static(
                 str(src), str(dst), Reader(frames, batch),
-                quant_format=QuantFormat.QDQ, op_types_to_quantize=["Conv"], per_channel=True,
-                nodes_to_exclude=keep_float,
-                activation_type=QuantType.QInt8, weight_type=QuantType.QInt8,
+                quant_format=QuantFormat.QDQ, op_types_to_quantize=list(STATIC_OPS), per_channel=True,
+                nodes_to_quantize=quantize,
+                activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
                 calibrate_method=CalibrationMethod.Percentile,
                 extra_options={"ActivationSymmetric": False, "WeightSymmetric": True, "CalibPercentile": PERCENTILE},
             )
         out = onnx.load_model(str(dst))
-    int8_weights(out, keep_float)
     del out.metadata_props[:]
     for p in model.metadata_props:
         e = out.metadata_props.add()
         e.key, e.value = p.key, p.value
     return out
+
+
+# Node types quantised in ``static`` mode (inside the backbone only): with the activations and
+# the residual adds quantised, onnxruntime fuses each Conv's QDQ pairs into a QLinearConv.
+STATIC_OPS = ("Conv", "Add", "Clip", "Relu")
+
+
+def _named(model: Any) -> Any:
+    """``model``, or a copy whose unnamed nodes got unique names (the quantiser selects by name)."""
+    import onnx
+
+    if all(n.name for n in model.graph.node) and len({n.name for n in model.graph.node}) == len(model.graph.node):
+        return model
+    out = onnx.ModelProto()
+    out.CopyFrom(model)
+    for i, n in enumerate(out.graph.node):
+        n.name = f"{n.op_type}_{i}_{n.name}"
+    return out
+
+
+def backbone_nodes(model: Any) -> list[str]:
+    """Names of the ``STATIC_OPS`` nodes of the backbone proper: descendants of the first
+    convolution (itself excluded) that lead to the last 2-D convolution, that convolution and
+    the activation right after it. The head, the front and the tail are outside."""
+    convs = _conv_weights(model)
+    conv2d = [n.name for n in model.graph.node if n.name in convs and len(convs[n.name][1].dims) == 4]
+    if not conv2d:
+        return []
+    by_name = {n.name: n for n in model.graph.node}
+    producer = {o: n for n in model.graph.node for o in n.output}
+
+    def ancestors(name: str) -> set[str]:
+        seen, todo = set(), [by_name[name]]
+        while todo:
+            for i in todo.pop().input:
+                p = producer.get(i)
+                if p is not None and p.name not in seen:
+                    seen.add(p.name)
+                    todo.append(p)
+        return seen
+
+    first, last = conv2d[0], conv2d[-1]
+    inside = (ancestors(last) | {last}) - ancestors(first) - {first}
+    tail = by_name[last].output[0]
+    users = [n for n in model.graph.node if tail in n.input]
+    if len(users) == 1 and users[0].op_type in ("Clip", "Relu"):
+        inside.add(users[0].name)
+    return [n.name for n in model.graph.node if n.name in inside and n.op_type in STATIC_OPS]
 
 
 def _conv_weights(model: Any) -> dict[str, tuple[Any, Any]]:
@@ -116,11 +169,10 @@ def _conv_weights(model: Any) -> dict[str, tuple[Any, Any]]:
 
 
 def float_activation_convs(model: Any) -> list[str]:
-    """Names of the convs that keep float activations in ``static`` mode: the first and the
-    1-D ones (the head's, on row-pooled features)."""
-    convs = _conv_weights(model)
-    order = [n.name for n in model.graph.node if n.name in convs]
-    return [n for i, n in enumerate(order) if i == 0 or len(convs[n][1].dims) == 3]
+    """Names of the convs that keep float weights and activations in ``static`` mode: those
+    outside the backbone proper (the first, and the head's 1-D ones on row-pooled features)."""
+    inside = set(backbone_nodes(model))
+    return [n.name for n in model.graph.node if n.name in _conv_weights(model) and n.name not in inside]
 
 
 def int8_weights(model: Any, names: Sequence[str]) -> None:
