@@ -31,6 +31,20 @@ if [ ! -f "$DATA/manifest.csv" ]; then
     "$PY" -m crossing_assist.data_tools.cli import-ptl "$PTL" --out "$DATA" --images reference --quiet
 fi
 
+# The gate threshold: the fitted one times the scale chosen on held-out photographers
+# (scripts/choose_gate.py over the leave-one-photographer-out folds in $RUN/cv), never on
+# photographers the model trained on.
+CV_DIR=${CV_DIR:-$RUN/cv}
+if [ -z "${GATE_SCALE:-}" ]; then
+    if [ -f "$CV_DIR/gate.json" ]; then
+        GATE_SCALE=$("$PY" -c "import json,sys; print(json.load(open(sys.argv[1]))['scale'])" "$CV_DIR/gate.json")
+    else
+        GATE_SCALE=1.0
+        echo "no $CV_DIR/gate.json (run scripts/choose_gate.py $CV_DIR): gate threshold as fitted" >&2
+    fi
+fi
+echo "gate threshold scale $GATE_SCALE" >&2
+
 TMP=$(mktemp -d "${TMPDIR:-/tmp}/default_bundle.XXXXXX")
 trap 'rm -rf "$TMP"' EXIT
 
@@ -40,7 +54,7 @@ trap 'rm -rf "$TMP"' EXIT
 SRC=""
 for MODE in static weights; do
     "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/$MODE" --samples "$SAMPLES" \
-        --calib-data "$DATA" --calib-split val --int8 --int8-mode "$MODE" --quiet
+        --calib-data "$DATA" --calib-split val --int8 --int8-mode "$MODE" --gate-scale "$GATE_SCALE" --quiet
     KEEP=$("$PY" - "$TMP/$MODE/bundle.json" "$MAX_INT8_DROP" "$MAX_INT8_SLOWDOWN" <<'PYEOF'
 import json, sys
 m = json.load(open(sys.argv[1]))["metrics"]["int8_vs_fp32"]
@@ -57,19 +71,35 @@ done
 if [ -z "$SRC" ]; then
     echo "shipping fp32" >&2
     "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/fp32" --samples "$SAMPLES" \
-        --calib-data "$DATA" --calib-split val --quiet
+        --calib-data "$DATA" --calib-split val --gate-scale "$GATE_SCALE" --quiet
     SRC="$TMP/fp32"
 fi
 
 # Replace the embedded bundle in one rename (write_bundle validates and swaps atomically).
-"$PY" - "$SRC" "$OUT" <<'PYEOF'
+# bundle.json (and the graph's copy) also carry the leave-one-photographer-out figures.
+"$PY" - "$SRC" "$OUT" "$CV_DIR" <<'PYEOF'
 import json, sys
 from pathlib import Path
+import onnx
 from crossing_assist.bundle import read_bundle, write_bundle
-src, out = Path(sys.argv[1]), Path(sys.argv[2])
+from crossing_assist.export.graph import model_bytes, set_metadata
+src, out, cv = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
 b = read_bundle(src)
 meta = json.loads((src / "bundle.json").read_text())
-write_bundle(out, b.model_path.read_bytes(), meta)
+if (cv / "cv.json").is_file():
+    c = json.loads((cv / "cv.json").read_text())
+    meta["metrics"]["leave_one_photographer_out"] = {
+        "epochs": c["config"]["epochs"], "folds": c["folds"],
+        **{k: c[k] for k in ("accuracy", "bin_mae", "far_x_error", "majority_accuracy")}}
+if (cv / "gate.json").is_file():
+    g = json.loads((cv / "gate.json").read_text())
+    meta["metrics"]["gate_held_out"] = {k: g[k] for k in ("scale", "targets_met", "folds")} | {
+        "at_scale": {k: v for k, v in g["at_scale"].items() if k != "per_fold"},
+        "at_fitted_threshold": {k: v for k, v in g["at_fitted_threshold"].items() if k != "per_fold"}}
+model = onnx.load_model_from_string(b.model_path.read_bytes())
+set_metadata(model, meta)
+write_bundle(out, model_bytes(model), meta)
+b = read_bundle(out)
 full, cross = b.metrics["full_split"], b.metrics["cross_fit"]
 print(f"default bundle written: {out} ({b.model_size / 1e6:.1f} MB, {b.precision}, val accuracy "
       f"{full['accuracy']:.3f}, held-out coverage {cross['coverage']:.3f} at target {b.calibration.conformal.coverage})")

@@ -56,8 +56,16 @@ def true_aspect(image: np.ndarray, flags: tuple[str, ...] = ()) -> np.ndarray:
 
 def load_frame(path: str | os.PathLike, flags: tuple[str, ...] = ()) -> np.ndarray:
     """A dataset frame as the camera saw it: :func:`load_rgb` (EXIF orientation applied) then
-    :func:`true_aspect` for the row's flags."""
-    return true_aspect(load_rgb(path), flags)
+    :func:`true_aspect` for the row's flags. Frames under 8 px a side or beyond 8:1 raise
+    ImageError (a model cannot place a crossing in them)."""
+    from crossing_assist.geometry import GeometryError, check_frame_shape
+
+    img = true_aspect(load_rgb(path), flags)
+    try:
+        check_frame_shape(img.shape[0], img.shape[1])
+    except GeometryError as exc:
+        raise ImageError(f"{path}: {exc}") from None
+    return img
 
 
 def save_rgb(path: str | os.PathLike, image: np.ndarray, *, quality: int = 92) -> Path:
