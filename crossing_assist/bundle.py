@@ -15,6 +15,7 @@ only fields left out of the copy embedded in the ONNX metadata (``bundle_json``)
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import hashlib
 import json
 import math
@@ -36,9 +37,11 @@ UNCERTAINTY_MEASURES = ("entropy", "mutual_info", "variance")
 PRECISIONS = ("fp32", "int8")
 BYTE_FIELDS = ("model_sha256", "model_size")
 MIN_ONNX_BYTES = 64
+MAX_NAME = 200          # longest model_file accepted (file systems stop at 255 bytes)
+MAX_JSON_BYTES = 1 << 22  # a bundle.json is a few kB; refuse anything absurd before parsing it
 
 
-class BundleError(ValueError):
+class BundleError(UserError):
     """A bundle that cannot be used; the message is one line naming the problem and the fix."""
 
 
@@ -147,35 +150,50 @@ def _get(d: Mapping[str, Any], key: str, where: str) -> Any:
     return d[key]
 
 
+def _short(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters (a 5000-digit number must not flood the line)."""
+    try:
+        text = repr(value)
+    except ValueError:  # an int too long for str() (over sys.get_int_max_str_digits)
+        return f"<{type(value).__name__} too long to show>"
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 def _num(value: Any, name: str, lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise BundleError(f"bundle.json: {name} = {value!r} is not a finite number")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise BundleError(f"bundle.json: {name} = {_short(value)} is not a finite number")
+    try:
+        finite = math.isfinite(value)
+    except OverflowError:  # an integer beyond float range
+        finite = False
+    if not finite:
+        raise BundleError(f"bundle.json: {name} = {_short(value)} is not a finite number")
     ok_lo = value > lo if lo_open else value >= lo
     ok_hi = value < hi if hi_open else value <= hi
     if not (ok_lo and ok_hi):
         rng = f"{'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
-        raise BundleError(f"bundle.json: {name} = {value!r} is out of range; valid: {rng}")
+        raise BundleError(f"bundle.json: {name} = {_short(value)} is out of range; valid: {rng}")
     return float(value)
 
 
 def _int(value: Any, name: str, lo: int, hi: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
-        raise BundleError(f"bundle.json: {name} = {value!r} must be an integer")
+        raise BundleError(f"bundle.json: {name} = {_short(value)} must be an integer")
     if value < lo or (hi is not None and value > hi):
         valid = f"{lo}..{hi}" if hi is not None else f">= {lo}"
-        raise BundleError(f"bundle.json: {name} = {value} is out of range; valid: {valid}")
+        raise BundleError(f"bundle.json: {name} = {_short(value)} is out of range; valid: {valid}")
     return value
 
 
 def _choice(value: Any, name: str, valid: tuple) -> Any:
     if value not in valid:
-        raise BundleError(f"bundle.json: {name} = {value!r} unknown; valid: {', '.join(map(str, valid))}")
+        raise BundleError(f"bundle.json: {name} = {_short(value)} unknown; valid: {', '.join(map(str, valid))}")
     return value
 
 
 def _triple(value: Any, name: str, *, positive: bool) -> tuple[float, float, float]:
     if not isinstance(value, list) or len(value) != 3:
-        raise BundleError(f"bundle.json: {name} must be a list of 3 numbers (R, G, B), got {value!r}")
+        raise BundleError(f"bundle.json: {name} must be a list of 3 numbers (R, G, B), got {_short(value)}")
     lo = 0.0
     return tuple(_num(v, f"{name}[{i}]", lo, 1e6, lo_open=positive) for i, v in enumerate(value))  # type: ignore
 
@@ -183,11 +201,11 @@ def _triple(value: Any, name: str, *, positive: bool) -> tuple[float, float, flo
 def _parse_actions(d: Any) -> ActionsSpec:
     n = _get(d, "n", "actions")
     if isinstance(n, bool) or not isinstance(n, int) or n not in VALID_SPACES:
-        raise BundleError(f"bundle.json: actions.n = {n!r} invalid; valid: 4, 8, 13")
+        raise BundleError(f"bundle.json: actions.n = {_short(n)} invalid; valid: 4, 8, 13")
     space = get_space(n)
     names, bins = _get(d, "names", "actions"), _get(d, "bins", "actions")
     if names != list(space.names):
-        raise BundleError(f"bundle.json: actions.names {names!r} disagree with the {n}-action space "
+        raise BundleError(f"bundle.json: actions.names {_short(names)} disagree with the {n}-action space "
                           f"{list(space.names)!r}; re-export the bundle")
     if bins != [list(g) for g in space.groups]:
         raise BundleError(f"bundle.json: actions.bins disagree with the {n}-action space "
@@ -199,11 +217,11 @@ def _parse_input(d: Any) -> InputSpec:
     for key, want in (("layout", "NHWC"), ("dtype", "uint8"), ("color", "RGB")):
         got = _get(d, key, "input")
         if got != want:
-            raise BundleError(f"bundle.json: input.{key} = {got!r} unsupported; valid: {want!r}")
+            raise BundleError(f"bundle.json: input.{key} = {_short(got)} unsupported; valid: {want!r}")
     size = _get(d, "size", "input")
     if (not isinstance(size, list) or len(size) != 2
             or not all(isinstance(s, int) and not isinstance(s, bool) and 16 <= s <= 4096 for s in size)):
-        raise BundleError(f"bundle.json: input.size = {size!r} invalid; valid: [H, W] integers in 16..4096")
+        raise BundleError(f"bundle.json: input.size = {_short(size)} invalid; valid: [H, W] integers in 16..4096")
     return InputSpec(size=(size[0], size[1]), mean=_triple(_get(d, "mean", "input"), "input.mean", positive=False),
                      std=_triple(_get(d, "std", "input"), "input.std", positive=True))
 
@@ -227,6 +245,12 @@ def _parse_calibration(d: Any) -> Calibration:
     return Calibration(temperature=temp, conformal=conformal, uncertainty=unc)
 
 
+def _str(value: Any, name: str) -> str:
+    if not isinstance(value, str):
+        raise BundleError(f"bundle.json: {name} = {_short(value)} must be a string")
+    return value
+
+
 def _obj(value: Any, name: str) -> Mapping[str, Any]:
     if not isinstance(value, dict):
         raise BundleError(f"bundle.json: {name} must be an object, got {type(value).__name__}")
@@ -240,20 +264,22 @@ def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_by
         raise BundleError("bundle.json: the top level must be a JSON object; re-export the bundle")
     version = _get(meta, "schema_version", "")
     if isinstance(version, bool) or not isinstance(version, int):
-        raise BundleError(f"bundle.json: schema_version = {version!r} must be an integer")
+        raise BundleError(f"bundle.json: schema_version = {_short(version)} must be an integer")
     if version != SCHEMA_VERSION:
         fix = "upgrade crossing_assist" if version > SCHEMA_VERSION else "re-export the bundle"
-        raise BundleError(f"bundle.json: schema_version {version} unsupported (this package reads "
+        raise BundleError(f"bundle.json: schema_version {_short(version)} unsupported (this package reads "
                           f"{SCHEMA_VERSION}); {fix}")
     model_file = _get(meta, "model_file", "")
-    if not isinstance(model_file, str) or not model_file.endswith(".onnx") or Path(model_file).name != model_file:
-        raise BundleError(f"bundle.json: model_file = {model_file!r} must be a plain file name ending in .onnx")
+    if (not isinstance(model_file, str) or not model_file.endswith(".onnx") or Path(model_file).name != model_file
+            or len(model_file) > MAX_NAME or "\x00" in model_file or model_file.startswith(".")):
+        raise BundleError(f"bundle.json: model_file = {_short(model_file)} must be a plain file name ending in "
+                          f".onnx (at most {MAX_NAME} characters)")
     mc = _get(meta, "mc", "")
     sha, size = meta.get("model_sha256", ""), meta.get("model_size", 0)
     if need_bytes:
         sha, size = _get(meta, "model_sha256", ""), _get(meta, "model_size", "")
         if not isinstance(sha, str) or len(sha) != 64 or any(ch not in "0123456789abcdef" for ch in sha):
-            raise BundleError(f"bundle.json: model_sha256 = {sha!r} is not a lowercase hex SHA-256")
+            raise BundleError(f"bundle.json: model_sha256 = {_short(sha)} is not a lowercase hex SHA-256")
         size = _int(size, "model_size", MIN_ONNX_BYTES)
     return Bundle(
         dir=Path(bundle_dir),
@@ -268,7 +294,7 @@ def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_by
         precision=_choice(_get(meta, "precision", ""), "precision", PRECISIONS),
         training=_obj(_get(meta, "training", ""), "training"),
         metrics=_obj(_get(meta, "metrics", ""), "metrics"),
-        package_version=str(_get(meta, "package_version", "")),
+        package_version=_str(_get(meta, "package_version", ""), "package_version"),
         provenance=_obj(_get(meta, "provenance", ""), "provenance"),
         model_sha256=sha,
         model_size=size,
@@ -313,11 +339,16 @@ def read_bundle(bundle_dir: str | os.PathLike, *, verify_hash: bool = True) -> B
     jpath = root / BUNDLE_JSON
     if not jpath.is_file():
         raise BundleError(f"bundle: {jpath} is missing; pass a folder written by crossing-export")
+    if jpath.stat().st_size > MAX_JSON_BYTES:
+        raise BundleError(f"bundle: {jpath} is {jpath.stat().st_size} bytes (at most {MAX_JSON_BYTES}); "
+                          "re-export the bundle")
     try:
         meta = json.loads(jpath.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (UnicodeDecodeError, ValueError) as exc:  # JSONDecodeError, or an int over the digit limit
         raise BundleError(f"bundle: {jpath} is not valid JSON ({exc.__class__.__name__}: "
-                          f"{str(exc).splitlines()[0]}); re-export the bundle") from None
+                          f"{_short(str(exc).splitlines()[0] if str(exc) else '', 120)}); re-export the bundle") from None
+    except RecursionError:
+        raise BundleError(f"bundle: {jpath} is nested too deeply to be a bundle.json; re-export the bundle") from None
     bundle = parse_meta(meta, root)
     _check_model_file(bundle.model_path, bundle.model_size, bundle.model_sha256, verify_hash=verify_hash)
     return bundle
@@ -328,20 +359,47 @@ def embedded_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in meta.items() if k not in BYTE_FIELDS}
 
 
-def write_bundle(bundle_dir: str | os.PathLike, onnx_bytes: bytes, meta: Mapping[str, Any]) -> Path:
+def check_replaceable(bundle_dir: str | os.PathLike, *, force: bool = False) -> None:
+    """Refuse to write a bundle over anything but nothing, an empty folder or a bundle (a folder
+    holding only bundle.json and .onnx files): replacing a run folder, a dataset or a file would
+    delete it. ``force=True`` allows it. Raises :class:`BundleError` (one line)."""
+    root = Path(bundle_dir)
+    if force or not (root.exists() or root.is_symlink()):
+        return
+    if not root.is_dir() or root.is_symlink():
+        raise BundleError(f"bundle: {root} exists and is not a folder; pick a new --out or pass --force to "
+                          "replace it")
+    names = sorted(p.name for p in root.iterdir())
+    if not names:
+        return
+    foreign = [n for n in names if n != BUNDLE_JSON and not n.endswith(".onnx")]
+    if foreign or BUNDLE_JSON not in names:
+        shown = ", ".join((foreign or names)[:4]) + (", ..." if len(foreign or names) > 4 else "")
+        raise BundleError(f"bundle: {root} exists and is not a bundle (holds {shown}); replacing it would "
+                          "delete that: pick a new --out or pass --force")
+
+
+def write_bundle(bundle_dir: str | os.PathLike, onnx_bytes: bytes, meta: Mapping[str, Any], *,
+                 force: bool = False) -> Path:
     """Write ``model.onnx`` + ``bundle.json`` atomically and return the folder.
 
     ``meta`` is the bundle.json dict; ``model_sha256`` and ``model_size`` are computed here. The
     bundle is written to a temporary sibling folder, validated with :func:`read_bundle`, then
-    renamed into place (an existing bundle there is replaced; only whole bundles are visible).
+    renamed into place. An existing bundle (or empty folder) there is replaced; anything else is
+    refused unless ``force`` (see :func:`check_replaceable`). Only whole bundles are visible, and
+    temporary folders a killed writer left beside it are swept first.
     """
+    from crossing_assist.fileio import sweep_orphans, tmp_tag
+
     root = Path(bundle_dir)
     full = dict(embedded_meta(meta))
     full["model_sha256"] = hashlib.sha256(onnx_bytes).hexdigest()
     full["model_size"] = len(onnx_bytes)
     parse_meta(full, root)  # refuse bad metadata before touching the disk
+    check_replaceable(root, force=force)
     root.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.tmp-", dir=root.parent))
+    sweep_orphans(root.parent, prefix=f".{root.name}.")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.{tmp_tag()}-", dir=root.parent))
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes 0700; a bundle is an ordinary folder
@@ -358,7 +416,7 @@ def write_bundle(bundle_dir: str | os.PathLike, onnx_bytes: bytes, meta: Mapping
         read_bundle(tmp)
         old = None
         if root.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{root.name}.old-", dir=root.parent))
+            old = Path(tempfile.mkdtemp(prefix=f".{root.name}.old{os.getpid()}-", dir=root.parent))
             os.replace(root, old / root.name)
         os.replace(tmp, root)
         if old is not None:
@@ -377,7 +435,7 @@ def check_session(bundle: Bundle, session: Any) -> None:
 
     Compares the input name/dtype, output names, the action dimension where the graph states
     it, and the bundle facts embedded in the model's metadata (actions, input size/mean/std,
-    mc, calibration). Raises :class:`BundleError` with one line on the first mismatch.
+    fov_deg, mc, calibration). Raises :class:`BundleError` with one line on the first mismatch.
     """
     inputs = session.get_inputs()
     if len(inputs) != 1 or inputs[0].name != INPUT_NAME or inputs[0].type != "tensor(uint8)":
@@ -400,7 +458,7 @@ def check_session(bundle: Bundle, session: Any) -> None:
     except json.JSONDecodeError:
         raise BundleError("bundle: the graph's 'bundle_json' metadata is not JSON; re-export the bundle") from None
     mine = embedded_meta(bundle.raw)
-    for key in ("schema_version", "actions", "input", "mc", "calibration", "precision"):
+    for key in ("schema_version", "actions", "fov_deg", "input", "mc", "calibration", "precision"):
         if graph_meta.get(key) != mine.get(key):
             raise BundleError(f"bundle: bundle.json '{key}' = {json.dumps(mine.get(key))} disagrees with the "
                               f"graph's {json.dumps(graph_meta.get(key))}; re-export the bundle")

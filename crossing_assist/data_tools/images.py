@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import os
 from pathlib import Path
 
@@ -11,7 +12,7 @@ import numpy as np
 from crossing_assist.data_tools.manifest import atomic_write_bytes
 
 
-class ImageError(ValueError):
+class ImageError(UserError):
     """An image that cannot be read or written; the message names the path."""
 
 

@@ -19,6 +19,7 @@ the width absorbs rounding at strip boundaries); image paths are unique.
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import csv
 import io
 import math
@@ -38,7 +39,7 @@ SPLITS = ("train", "val", "test")
 BIN_TOLERANCE = 1e-5
 
 
-class ManifestError(ValueError):
+class ManifestError(UserError):
     """A manifest that cannot be trusted; the message names the file line or the row."""
 
 

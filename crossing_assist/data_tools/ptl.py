@@ -15,6 +15,7 @@ fails with a clear error naming the line if the dataset or the PTL folder is mov
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import csv
 import os
 from dataclasses import dataclass
@@ -31,7 +32,7 @@ IMAGE_MODES = ("copy", "reference")
 LIGHTS = {"0": "red", "1": "green", "2": "countdown_green", "3": "countdown_blank", "4": "none"}
 
 
-class PTLError(ValueError):
+class PTLError(UserError):
     """A PTL folder that cannot be imported; names the labels.csv line."""
 
 

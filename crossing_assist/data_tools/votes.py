@@ -24,6 +24,7 @@ Agreement
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import csv
 import json
 import re
@@ -40,7 +41,7 @@ TIE_RULES = ("unknown", "drop")
 _UPLOAD_PREFIX = re.compile(r"^[0-9a-f]{8}-")
 
 
-class VotesError(ValueError):
+class VotesError(UserError):
     """Votes that cannot be used; names the file and line (or task)."""
 
 

@@ -18,6 +18,7 @@ Steps (:func:`export_bundle`):
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import hashlib
 import math
 import shlex
@@ -33,7 +34,7 @@ import torch
 
 import crossing_assist
 from crossing_assist.actions import get_space
-from crossing_assist.bundle import SCHEMA_VERSION, read_bundle, write_bundle
+from crossing_assist.bundle import SCHEMA_VERSION, check_replaceable, read_bundle, write_bundle
 from crossing_assist.export import calibrate as cal
 from crossing_assist.export.evaluate import conformal_report, predict_bundle
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
@@ -42,7 +43,7 @@ from crossing_assist.export.quantize import INT8_MODES, quantize_convs
 PARITY_TOL = 1e-4
 
 
-class ExportError(ValueError):
+class ExportError(UserError):
     """A user-facing export failure (one line)."""
 
 
@@ -68,6 +69,7 @@ class ExportConfig:
     threads: int = 2
     seed: int = 0                   # PyTorch's dropout masks while calibrating (global RNG untouched)
     progress: bool = True
+    force: bool = False             # replace an existing --out even if it is not a bundle (deletes it)
 
     def __post_init__(self) -> None:
         checks = [
@@ -261,6 +263,7 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
 
 def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> ExportResult:
     """Run the whole pipeline (module docstring) and return where the bundle went."""
+    check_replaceable(cfg.out, force=cfg.force)  # before minutes of work, and again when writing
     torch.set_num_threads(max(1, cfg.threads))
     policy, ckpt = _load_policy(cfg.run)
     n = policy.n_actions
@@ -316,7 +319,7 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     meta = _meta(policy, ckpt, spec, calib, precision, metrics, cfg)
     set_metadata(model, meta)
     data_bytes = model_bytes(model)
-    write_bundle(out, data_bytes, meta)
+    write_bundle(out, data_bytes, meta, force=cfg.force)
     read_bundle(out)
     return ExportResult(out, len(data_bytes), parity, calib, metrics, tuple(notes))
 

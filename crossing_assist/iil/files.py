@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import csv
 import io
 import math
@@ -10,7 +11,7 @@ from pathlib import Path
 from ..fileio import atomic_write_text
 
 
-class RunError(ValueError):
+class RunError(UserError):
     """A run cannot start or continue (bad arguments or folder, mismatching configuration)."""
 
 

@@ -10,6 +10,7 @@ events (the episode continues after a reset); queries = steps whose expert actio
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,7 +25,7 @@ ORDER = ("supervised", "forward", "smile", "dagger", "aggrevate", "dropout-dagge
          "upms-ne-sl", "ensemble-dagger", "hg-dagger", "thrifty-dagger")
 
 
-class ReportError(ValueError):
+class ReportError(UserError):
     """No runs found, or unreadable run folders."""
 
 

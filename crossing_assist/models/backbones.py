@@ -13,6 +13,7 @@ torchvision ``.pth`` file), which is how offline users bring ImageNet weights.
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
@@ -24,7 +25,7 @@ IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 
 
-class BackboneError(ValueError):
+class BackboneError(UserError):
     """A backbone or its weights cannot be created (one clear line, says what to do)."""
 
 

@@ -12,28 +12,34 @@ from .config import TrainConfig
 _DEFAULTS = {f.name: f.default for f in fields(TrainConfig) if f.name not in ("data", "out")}
 
 
-def _user_errors() -> tuple[type[BaseException], ...]:
-    from ..bundle import BundleError
-    from ..data_tools.images import ImageError
-    from ..data_tools.manifest import ManifestError
-    from .backbones import BackboneError
-    from .checkpoint import CheckpointError
-    from .config import ConfigError
-    from .heads import HeadError
+def _run(func: Callable[[], int], argv: Sequence[str] | None = None, interrupted: Callable[[], str] = str) -> int:
+    """Run ``func`` through the shared wrapper (exit 2 user error, 130 Ctrl-C, ``--debug``)."""
+    from ..errors import run_cli
 
-    return (ConfigError, ManifestError, ImageError, BackboneError, CheckpointError, HeadError, BundleError,
-            FileNotFoundError, NotADirectoryError)
+    return run_cli(lambda _args: func(), argv, interrupted=interrupted)
 
 
-def _run(func: Callable[[], int]) -> int:
-    try:
-        return func()
-    except _user_errors() as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("error: interrupted (resume with --resume)", file=sys.stderr)
-        return 130
+def _args(argv: Sequence[str] | None) -> list[str]:
+    from ..errors import split_debug
+
+    return split_debug(argv)[0]
+
+
+def _given(parser: argparse.ArgumentParser, args: list[str]) -> set[str]:
+    """Names of the options given on the command line (not left at their defaults)."""
+    for action in parser._actions:
+        action.default = argparse.SUPPRESS
+    return set(vars(parser.parse_args(args)))
+
+
+def _resume_hint(out: str) -> Callable[[], str]:
+    from pathlib import Path
+
+    def hint() -> str:
+        if (Path(out) / "weights" / "last.pt").is_file():
+            return "run the same command with --resume to continue from the last finished epoch"
+        return "no epoch finished yet, so there is nothing to resume; run the same command again"
+    return hint
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -87,16 +93,18 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=d["threads"])
     p.add_argument("--cache-dir", default=d["cache_dir"])
     p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p.add_argument("--resume", action="store_true", help="continue the run in --out from weights/last.pt")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out from weights/last.pt "
+                   "(options must match the run's args.yaml; a larger --epochs extends it)")
+    p.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     return p
 
 
 def train_main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``crossing-train``."""
-    a = train_parser().parse_args(argv)
+    a = train_parser().parse_args(_args(argv))
 
     def go() -> int:
-        from .train import train
+        from .train import resume_config, train, trained_epochs
 
         cfg = TrainConfig(
             data=a.data, out=a.out, extra_data=tuple(a.extra_data), backbone=a.backbone, weights=a.weights, head=a.head, actions=a.actions,
@@ -106,12 +114,14 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             smoothing=a.smoothing, aux_x=a.aux_x, select_on=a.select_on,
             holdout=tuple(s.strip() for s in a.holdout.split(",") if s.strip()), seed=a.seed,
             threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
+        if a.resume:
+            cfg = resume_config(cfg, _given(train_parser(), _args(argv)))
         out = train(cfg, resume=a.resume)
         best = out / "weights" / "best.pt"
-        print(f"trained {cfg.epochs} epochs -> {best} ({best.stat().st_size / 1e6:.1f} MB)")
+        print(f"trained {trained_epochs(out)} epochs -> {best} ({best.stat().st_size / 1e6:.1f} MB)")
         return 0
 
-    return _run(go)
+    return _run(go, argv, interrupted=_resume_hint(a.out))
 
 
 def eval_parser() -> argparse.ArgumentParser:
@@ -128,12 +138,13 @@ def eval_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--cache-dir", default=_DEFAULTS["cache_dir"])
     p.add_argument("--quiet", action="store_true")
+    p.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     return p
 
 
 def eval_main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``crossing-eval``."""
-    a = eval_parser().parse_args(argv)
+    a = eval_parser().parse_args(_args(argv))
 
     def go() -> int:
         from .config import ConfigError
@@ -152,7 +163,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                   f"mean size {c['mean_size']:.2f} actions, empty {c['empty']:.3f}")
         return 0
 
-    return _run(go)
+    return _run(go, argv)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
