@@ -24,7 +24,8 @@ from pathlib import Path, PurePosixPath
 from tqdm import tqdm
 
 from crossing_assist.actions import parse_label
-from crossing_assist.data_tools.manifest import SPLITS, Row, check_row, write_manifest
+from crossing_assist.data_tools.images import check_image_file
+from crossing_assist.data_tools.manifest import SPLITS, Row, check_row, is_file, reading_csv, write_manifest
 from crossing_assist.fileio import link_or_copy
 
 REQUIRED = ("image", "split", "photographer", "far_x", "bin12")
@@ -78,8 +79,8 @@ def read_ptl_labels(ptl_dir: Path) -> list[Row]:
     if not path.is_file():
         raise PTLError(f"{path}: not found; a PTL folder holds labels.csv and the images")
     rows: list[Row] = []
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
+    with reading_csv(path, PTLError) as state, open(path, newline="", encoding="utf-8") as fh:
+        reader = state["reader"] = csv.DictReader(fh)
         missing = [c for c in REQUIRED if c not in (reader.fieldnames or [])]
         if missing:
             raise PTLError(f"{path} line 1: header lacks column(s) {', '.join(missing)}")
@@ -95,8 +96,11 @@ def read_ptl_labels(ptl_dir: Path) -> list[Row]:
             if image in seen:
                 raise PTLError(f"{path} line {line}: duplicate image {image!r} (first at line {seen[image]})")
             seen[image] = line
-            if not (Path(ptl_dir) / image).is_file():
+            if not is_file(Path(ptl_dir) / image):
                 raise PTLError(f"{path} line {line}: image {image!r} not found in {ptl_dir}")
+            bad = check_image_file(Path(ptl_dir) / image)
+            if bad:
+                raise PTLError(f"{path} line {line}: image {image!r} {bad}; replace or remove it")
             rows.append(row)
     if not rows:
         raise PTLError(f"{path}: no rows")
