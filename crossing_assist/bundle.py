@@ -37,6 +37,7 @@ UNCERTAINTY_MEASURES = ("entropy", "mutual_info", "variance")
 PRECISIONS = ("fp32", "int8")
 BYTE_FIELDS = ("model_sha256", "model_size")
 MIN_ONNX_BYTES = 64
+MAX_ONNX_BYTES = 1 << 40  # 1 TiB: any larger model_size is a corrupt bundle.json
 MAX_NAME = 200          # longest model_file accepted (file systems stop at 255 bytes)
 MAX_JSON_BYTES = 1 << 22  # a bundle.json is a few kB; refuse anything absurd before parsing it
 
@@ -280,7 +281,7 @@ def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_by
         sha, size = _get(meta, "model_sha256", ""), _get(meta, "model_size", "")
         if not isinstance(sha, str) or len(sha) != 64 or any(ch not in "0123456789abcdef" for ch in sha):
             raise BundleError(f"bundle.json: model_sha256 = {_short(sha)} is not a lowercase hex SHA-256")
-        size = _int(size, "model_size", MIN_ONNX_BYTES)
+        size = _int(size, "model_size", MIN_ONNX_BYTES, MAX_ONNX_BYTES)
     return Bundle(
         dir=Path(bundle_dir),
         schema_version=version,

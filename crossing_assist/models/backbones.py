@@ -140,7 +140,9 @@ def _load_file(model: nn.Module, path: Path, name: str) -> str:
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:
-        raise BackboneError(f"cannot read weights file {path}: {type(exc).__name__}: {exc}") from None
+        raise BackboneError(f"cannot read weights file {path} ({type(exc).__name__}): not a state dict saved with "
+                            "torch.save (corrupt, truncated or another format); pass a .pth state dict, "
+                            "imagenet or none") from None
     if isinstance(state, dict) and "state_dict" in state and isinstance(state["state_dict"], dict):
         state = state["state_dict"]
     if not isinstance(state, dict):
