@@ -107,7 +107,7 @@ def read_votes_csv(path: Path, index: FrameIndex) -> list[tuple[str, str, int, s
         fields = reader.fieldnames or []
         col = "label" if "label" in fields else "bin" if "bin" in fields else None
         if "frame" not in fields or "annotator" not in fields or col is None:
-            raise VotesError(f"{path} line 1: header must have frame,annotator,label (got {','.join(fields)})")
+            raise VotesError(f"{path} line 1: header must have frame,annotator,label (got {','.join(fields)[:120]!r})")
         votes = []
         for rec in reader:
             where = f"{path} line {reader.line_num}"
