@@ -15,6 +15,9 @@ nothing                   body's  (the body's own output)
 anything else             1       ``error: internal error (<Type>: <first line>); rerun with --debug``
 ========================  ======  ==============================================================
 
+SIGTERM (``kill PID``) is turned into ``SystemExit(143)`` while the body runs, so the clean-up
+of temporary files runs as it does for Ctrl-C (only SIGKILL skips it; the next run sweeps those).
+
 ``--debug`` anywhere on the command line (or ``CROSSING_DEBUG=1``) re-raises instead, so the
 traceback is shown. The flag is taken out of the arguments before the command's parser sees them.
 """
@@ -22,6 +25,7 @@ traceback is shown. The flag is taken out of the arguments before the command's 
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from typing import Callable, Sequence
 
@@ -67,6 +71,7 @@ def run_cli(body: Callable[[list[str]], int], argv: Sequence[str] | None = None,
     printed after ``interrupted`` on Ctrl-C (a callable is asked at that moment, so it can check
     whether there is anything to resume)."""
     args, debug = split_debug(argv)
+    previous = _on_sigterm()
     try:
         return int(body(args) or 0)
     except SystemExit:
@@ -104,3 +109,19 @@ def run_cli(body: Callable[[list[str]], int], argv: Sequence[str] | None = None,
         print(f"error: internal error ({type(exc).__name__}: {first_line(exc)}); rerun with {DEBUG_FLAG} "
               "for the traceback and report it", file=sys.stderr)
         return EXIT_INTERNAL
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _terminate(signum, frame) -> None:  # noqa: ARG001
+    raise SystemExit(128 + signal.SIGTERM)
+
+
+def _on_sigterm():
+    """Install :func:`_terminate` for SIGTERM; returns the previous handler (None when not the
+    main thread, where handlers cannot be set)."""
+    try:
+        return signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:
+        return None

@@ -467,3 +467,21 @@ def test_ctrl_c_hint_says_resume_only_when_there_is_something_to_resume(tmp_path
     (tmp_path / "run" / "weights").mkdir(parents=True)
     (tmp_path / "run" / "weights" / "last.pt").write_bytes(b"x")
     assert "--resume" in hint()
+
+
+def test_sigterm_cleans_up_like_ctrl_c(tmp_path):
+    """``kill PID`` (SIGTERM) mid-write: exit 143 and the temporary file is removed."""
+    code = ("import sys, time\n"
+            "from crossing_assist.errors import run_cli\n"
+            "from crossing_assist.fileio import atomic_path\n"
+            "def body(args):\n"
+            "    with atomic_path(sys.argv[1]) as tmp:\n"
+            "        tmp.write_text('half'); print('ready', flush=True); time.sleep(60)\n"
+            "sys.exit(run_cli(body, []))\n")
+    target = tmp_path / "out.txt"
+    proc = subprocess.Popen([sys.executable, "-c", code, str(target)], stdout=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+    assert proc.stdout.readline().strip() == "ready"
+    proc.terminate()
+    assert proc.wait(timeout=30) == 143
+    assert list(tmp_path.iterdir()) == []
