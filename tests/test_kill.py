@@ -34,8 +34,21 @@ KILLS = 3
 RNG = np.random.default_rng(int(os.environ.get("KILL_SEED", "16")))
 
 
+SYS_TMP: Path | None = None  # the commands' temporary folder (TMPDIR), checked for leftovers too
+
+
 def _env():
-    return {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    return {**env, "TMPDIR": str(SYS_TMP)} if SYS_TMP else env
+
+
+@pytest.fixture(autouse=True)
+def _own_tmpdir(tmp_path):
+    global SYS_TMP
+    SYS_TMP = tmp_path / "systmp"
+    SYS_TMP.mkdir()
+    yield
+    SYS_TMP = None
 
 
 def _timed(args) -> float:
@@ -162,9 +175,10 @@ def test_sigkill_during_export_then_retry_gives_the_same_bundle(export_work, tmp
         r = subprocess.run(_export_args(export_work, out), capture_output=True, text=True, env=_env())
         assert r.returncode == 0, r.stderr
         assert whole(), f"kill at {moment:.1f}s"
-        assert _leftovers(out.parent) == [], f"kill at {moment:.1f}s"
+        assert _leftovers(out.parent) == [] and list(SYS_TMP.iterdir()) == [], f"kill at {moment:.1f}s"
         _kill_at(_export_args(export_work, out), moment)  # over an existing bundle: it stays whole
         assert whole(), f"kill at {moment:.1f}s over an existing bundle"
     r = subprocess.run(_export_args(export_work, out), capture_output=True, text=True, env=_env())
     assert r.returncode == 0, r.stderr
     assert whole() and _leftovers(out.parent) == []  # the retry swept what the killed writers left
+    assert list(SYS_TMP.iterdir()) == []

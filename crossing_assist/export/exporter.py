@@ -245,7 +245,10 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
     the held-out figure is ``cross_fit``)."""
     import tempfile
 
-    with tempfile.TemporaryDirectory(prefix="crossing-export-") as tmp:
+    from crossing_assist.fileio import sweep_orphans, tmp_tag
+
+    sweep_orphans(tempfile.gettempdir(), prefix=".crossing-export.")  # what killed exports left there
+    with tempfile.TemporaryDirectory(prefix=f".crossing-export.{tmp_tag()}-") as tmp:
         set_metadata(model, meta)
         bundle = read_bundle(write_bundle(Path(tmp) / "bundle", model_bytes(model), meta))
         got = predict_bundle(bundle, data.images, batch=cfg.batch, progress=cfg.progress)
