@@ -479,9 +479,11 @@ def test_sigterm_cleans_up_like_ctrl_c(tmp_path):
             "        tmp.write_text('half'); print('ready', flush=True); time.sleep(60)\n"
             "sys.exit(run_cli(body, []))\n")
     target = tmp_path / "out.txt"
-    proc = subprocess.Popen([sys.executable, "-c", code, str(target)], stdout=subprocess.PIPE, text=True,
+    proc = subprocess.Popen([sys.executable, "-c", code, str(target)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
-    assert proc.stdout.readline().strip() == "ready"
+    ready = proc.stdout.readline().strip()
     proc.terminate()
-    assert proc.wait(timeout=30) == 143
+    _, err = proc.communicate(timeout=120)
+    assert ready == "ready" and proc.returncode == 143, err
     assert list(tmp_path.iterdir()) == []
