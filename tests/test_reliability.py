@@ -39,8 +39,6 @@ def one_error_line(text: str) -> bool:
 def test_every_module_error_is_a_user_error():
     from crossing_assist.data_tools import frames, images, manifest, ptl, splits, synth, votes
     from crossing_assist.export.exporter import ExportError
-    from crossing_assist.iil.files import RunError
-    from crossing_assist.iil.report import ReportError
     from crossing_assist.models.backbones import BackboneError
     from crossing_assist.models.checkpoint import CheckpointError
     from crossing_assist.models.config import ConfigError
@@ -49,7 +47,7 @@ def test_every_module_error_is_a_user_error():
     from crossing_assist.runtime.demo import DemoError
     from crossing_assist.runtime.sources import SourceError
 
-    classes = [BundleError, ExportError, RunError, ReportError, BackboneError, CheckpointError, ConfigError,
+    classes = [BundleError, ExportError, BackboneError, CheckpointError, ConfigError,
                HeadError, AudioDeviceError, DemoError, SourceError, frames.VideoError, images.ImageError,
                manifest.ManifestError, ptl.PTLError, splits.SplitError, synth.SynthError, votes.VotesError]
     assert all(issubclass(c, UserError) for c in classes)

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
+from ..errors import UserError
 from .config import LearnerConfig
 from .envs import ENV_NAMES
 from .files import RunError
@@ -138,8 +139,13 @@ def _main(argv: list[str]) -> int:
         return 0
     try:
         return _cmd_run(a) if a.cmd == "run" else _cmd_report(a)
-    except (ImportError, RuntimeError) as exc:  # a missing optional package or simulator: the user's to fix
-        raise RunError(str(exc)) from exc
+    except (RunError, ReportError, ImportError, RuntimeError) as exc:
+        # bad options, a missing optional package or simulator: the user's to fix. (RunError and
+        # ReportError live in iil/files.py and iil/report.py; until they derive from UserError
+        # themselves, they are mapped here.)
+        if isinstance(exc, UserError):
+            raise
+        raise UserError(str(exc)) from exc
 
 
 if __name__ == "__main__":

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 import csv
 import io
 import math
@@ -11,7 +10,7 @@ from pathlib import Path
 from ..fileio import atomic_write_text
 
 
-class RunError(UserError):
+class RunError(ValueError):
     """A run cannot start or continue (bad arguments or folder, mismatching configuration)."""
 
 

@@ -10,7 +10,6 @@ events (the episode continues after a reset); queries = steps whose expert actio
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +24,7 @@ ORDER = ("supervised", "forward", "smile", "dagger", "aggrevate", "dropout-dagge
          "upms-ne-sl", "ensemble-dagger", "hg-dagger", "thrifty-dagger")
 
 
-class ReportError(UserError):
+class ReportError(ValueError):
     """No runs found, or unreadable run folders."""
 
 
