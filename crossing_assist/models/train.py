@@ -334,7 +334,8 @@ def resume_config(cfg: TrainConfig, given: set[str]) -> TrainConfig:
     names = {alias.get(g, g) for g in given}
     saved = load_checkpoint(last_path)["train_config"]
     mine = cfg.to_dict()
-    return TrainConfig.from_dict({**saved, **{k: v for k, v in mine.items() if k in names or k in ("out", "progress", "threads")}})
+    keep = names | {"out", "progress", "threads"}
+    return TrainConfig.from_dict({**saved, **{k: v for k, v in mine.items() if k in keep}})
 
 
 def trained_epochs(out: Path) -> int:
