@@ -1,6 +1,6 @@
 """Hostile-user cases of issue 16 against a code tree (the audit behind the issue's numbers).
 
-    python scripts/reliability_audit.py CODE_ROOT WORK_DIR      # e.g. . /tmp/audit (WORK_DIR is wiped)
+    python scripts/reliability_audit.py CODE_ROOT WORK_DIR      # e.g. . /tmp/audit (WORK_DIR: new, or an earlier audit's)
 
 Each case runs a command in a subprocess and is classed: clean (expected outcome, at most one
 error line), traceback, crash (killed by a signal), data-loss (a file that must survive is gone),
@@ -15,9 +15,13 @@ import numpy as np, cv2
 from crossing_assist.data_tools.images import save_rgb
 from runtime_toy import make_toy_bundle, bar_frame
 
+MARK = ".reliability_audit"
+if WORK.exists() and any(WORK.iterdir()) and not (WORK / MARK).is_file():
+    sys.exit(f"error: {WORK} is not empty and not an earlier audit folder; pick a new WORK_DIR")
 if WORK.exists():
-    shutil.rmtree(WORK)
+    shutil.rmtree(WORK)  # an earlier audit's folder (it holds the mark)
 WORK.mkdir(parents=True)
+(WORK / MARK).write_text("")
 PY = sys.executable
 ENV = {**os.environ, "PYTHONPATH": str(CODE), "OMP_NUM_THREADS": "1"}
 CLI = {"data": [PY, "-m", "crossing_assist.data_tools.cli"], "train": [PY, "-m", "crossing_assist.models.cli", "train"],
