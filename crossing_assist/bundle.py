@@ -18,6 +18,7 @@ only fields left out of the copy embedded in the ONNX metadata (``bundle_json``)
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import hashlib
 import json
 import math
@@ -41,9 +42,12 @@ UNCERTAINTY_MEASURES = ("entropy", "mutual_info", "variance")
 PRECISIONS = ("fp32", "int8")
 BYTE_FIELDS = ("model_sha256", "model_size")
 MIN_ONNX_BYTES = 64
+MAX_ONNX_BYTES = 1 << 40  # 1 TiB: any larger model_size is a corrupt bundle.json
+MAX_NAME = 200          # longest model_file accepted (file systems stop at 255 bytes)
+MAX_JSON_BYTES = 1 << 22  # a bundle.json is a few kB; refuse anything absurd before parsing it
 
 
-class BundleError(ValueError):
+class BundleError(UserError):
     """A bundle that cannot be used; the message is one line naming the problem and the fix."""
 
 
@@ -159,23 +163,38 @@ def _get(d: Mapping[str, Any], key: str, where: str) -> Any:
     return d[key]
 
 
+def _short(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters (a 5000-digit number must not flood the line)."""
+    try:
+        text = repr(value)
+    except ValueError:  # an int too long for str() (over sys.get_int_max_str_digits)
+        return f"<{type(value).__name__} too long to show>"
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 def _num(value: Any, name: str, lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise BundleError(f"bundle.json: {name} = {value!r} is not a finite number")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise BundleError(f"bundle.json: {name} = {_short(value)} is not a finite number")
+    try:
+        finite = math.isfinite(value)
+    except OverflowError:  # an integer beyond float range
+        finite = False
+    if not finite:
+        raise BundleError(f"bundle.json: {name} = {_short(value)} is not a finite number")
     ok_lo = value > lo if lo_open else value >= lo
     ok_hi = value < hi if hi_open else value <= hi
     if not (ok_lo and ok_hi):
         rng = f"{'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
-        raise BundleError(f"bundle.json: {name} = {value!r} is out of range; valid: {rng}")
+        raise BundleError(f"bundle.json: {name} = {_short(value)} is out of range; valid: {rng}")
     return float(value)
 
 
 def _int(value: Any, name: str, lo: int, hi: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
-        raise BundleError(f"bundle.json: {name} = {value!r} must be an integer")
+        raise BundleError(f"bundle.json: {name} = {_short(value)} must be an integer")
     if value < lo or (hi is not None and value > hi):
         valid = f"{lo}..{hi}" if hi is not None else f">= {lo}"
-        raise BundleError(f"bundle.json: {name} = {value} is out of range; valid: {valid}")
+        raise BundleError(f"bundle.json: {name} = {_short(value)} is out of range; valid: {valid}")
     return value
 
 
@@ -264,6 +283,10 @@ def _parse_geometry(d: Any, fov_deg: float, version: int) -> Geometry:
             raise BundleError(f"bundle.json: geometry.pad_rgb = {pad!r} must be three integers 0..255")
     train = _num(d.get("train_fov_deg", fovs[0]), "geometry.train_fov_deg", 0.0, 180.0, lo_open=True, hi_open=True)
     return Geometry(fit=fit, pad_rgb=tuple(pad), camera_fov_deg=(fovs[0], fovs[1]), train_fov_deg=train)
+def _str(value: Any, name: str) -> str:
+    if not isinstance(value, str):
+        raise BundleError(f"bundle.json: {name} = {_short(value)} must be a string")
+    return value
 
 
 def _obj(value: Any, name: str) -> Mapping[str, Any]:
@@ -285,15 +308,17 @@ def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_by
         raise BundleError(f"bundle.json: schema_version {version} unsupported (this package reads "
                           f"{', '.join(map(str, READABLE_SCHEMAS))}); {fix}")
     model_file = _get(meta, "model_file", "")
-    if not isinstance(model_file, str) or not model_file.endswith(".onnx") or Path(model_file).name != model_file:
-        raise BundleError(f"bundle.json: model_file = {model_file!r} must be a plain file name ending in .onnx")
+    if (not isinstance(model_file, str) or not model_file.endswith(".onnx") or Path(model_file).name != model_file
+            or len(model_file) > MAX_NAME or "\x00" in model_file or model_file.startswith(".")):
+        raise BundleError(f"bundle.json: model_file = {_short(model_file)} must be a plain file name ending in "
+                          f".onnx (at most {MAX_NAME} characters)")
     mc = _get(meta, "mc", "")
     sha, size = meta.get("model_sha256", ""), meta.get("model_size", 0)
     if need_bytes:
         sha, size = _get(meta, "model_sha256", ""), _get(meta, "model_size", "")
         if not isinstance(sha, str) or len(sha) != 64 or any(ch not in "0123456789abcdef" for ch in sha):
             raise BundleError(f"bundle.json: model_sha256 = {sha!r} is not a lowercase hex SHA-256")
-        size = _int(size, "model_size", MIN_ONNX_BYTES)
+        size = _int(size, "model_size", MIN_ONNX_BYTES, MAX_ONNX_BYTES)
     fov = _num(_get(meta, "fov_deg", ""), "fov_deg", 0.0, 180.0, lo_open=True, hi_open=True)
     return Bundle(
         dir=Path(bundle_dir),
@@ -308,7 +333,7 @@ def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_by
         precision=_choice(_get(meta, "precision", ""), "precision", PRECISIONS),
         training=_obj(_get(meta, "training", ""), "training"),
         metrics=_obj(_get(meta, "metrics", ""), "metrics"),
-        package_version=str(_get(meta, "package_version", "")),
+        package_version=_str(_get(meta, "package_version", ""), "package_version"),
         provenance=_obj(_get(meta, "provenance", ""), "provenance"),
         model_sha256=sha,
         model_size=size,
@@ -354,11 +379,16 @@ def read_bundle(bundle_dir: str | os.PathLike, *, verify_hash: bool = True) -> B
     jpath = root / BUNDLE_JSON
     if not jpath.is_file():
         raise BundleError(f"bundle: {jpath} is missing; pass a folder written by crossing-export")
+    if jpath.stat().st_size > MAX_JSON_BYTES:
+        raise BundleError(f"bundle: {jpath} is {jpath.stat().st_size} bytes (at most {MAX_JSON_BYTES}); "
+                          "re-export the bundle")
     try:
         meta = json.loads(jpath.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (UnicodeDecodeError, ValueError) as exc:  # JSONDecodeError, or an int over the digit limit
         raise BundleError(f"bundle: {jpath} is not valid JSON ({exc.__class__.__name__}: "
-                          f"{str(exc).splitlines()[0]}); re-export the bundle") from None
+                          f"{_short(str(exc).splitlines()[0] if str(exc) else '', 120)}); re-export the bundle") from None
+    except RecursionError:
+        raise BundleError(f"bundle: {jpath} is nested too deeply to be a bundle.json; re-export the bundle") from None
     bundle = parse_meta(meta, root)
     _check_model_file(bundle.model_path, bundle.model_size, bundle.model_sha256, verify_hash=verify_hash)
     return bundle
@@ -369,20 +399,47 @@ def embedded_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in meta.items() if k not in BYTE_FIELDS}
 
 
-def write_bundle(bundle_dir: str | os.PathLike, onnx_bytes: bytes, meta: Mapping[str, Any]) -> Path:
+def check_replaceable(bundle_dir: str | os.PathLike, *, force: bool = False) -> None:
+    """Refuse to write a bundle over anything but nothing, an empty folder or a bundle (a folder
+    holding only bundle.json and .onnx files): replacing a run folder, a dataset or a file would
+    delete it. ``force=True`` allows it. Raises :class:`BundleError` (one line)."""
+    root = Path(bundle_dir)
+    if force or not (root.exists() or root.is_symlink()):
+        return
+    if not root.is_dir() or root.is_symlink():
+        raise BundleError(f"bundle: {root} exists and is not a folder; pick a new --out or pass --force to "
+                          "replace it")
+    names = sorted(p.name for p in root.iterdir())
+    if not names:
+        return
+    foreign = [n for n in names if n != BUNDLE_JSON and not n.endswith(".onnx")]
+    if foreign or BUNDLE_JSON not in names:
+        shown = ", ".join((foreign or names)[:4]) + (", ..." if len(foreign or names) > 4 else "")
+        raise BundleError(f"bundle: {root} exists and is not a bundle (holds {shown}); replacing it would "
+                          "delete that: pick a new --out or pass --force")
+
+
+def write_bundle(bundle_dir: str | os.PathLike, onnx_bytes: bytes, meta: Mapping[str, Any], *,
+                 force: bool = False) -> Path:
     """Write ``model.onnx`` + ``bundle.json`` atomically and return the folder.
 
     ``meta`` is the bundle.json dict; ``model_sha256`` and ``model_size`` are computed here. The
     bundle is written to a temporary sibling folder, validated with :func:`read_bundle`, then
-    renamed into place (an existing bundle there is replaced; only whole bundles are visible).
+    renamed into place. An existing bundle (or empty folder) there is replaced; anything else is
+    refused unless ``force`` (see :func:`check_replaceable`). Only whole bundles are visible, and
+    temporary folders a killed writer left beside it are swept first.
     """
+    from crossing_assist.fileio import sweep_orphans, tmp_tag
+
     root = Path(bundle_dir)
     full = dict(embedded_meta(meta))
     full["model_sha256"] = hashlib.sha256(onnx_bytes).hexdigest()
     full["model_size"] = len(onnx_bytes)
     parse_meta(full, root)  # refuse bad metadata before touching the disk
+    check_replaceable(root, force=force)
     root.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.tmp-", dir=root.parent))
+    sweep_orphans(root.parent, prefix=f".{root.name}.")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.{tmp_tag()}-", dir=root.parent))
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes 0700; a bundle is an ordinary folder
@@ -399,7 +456,7 @@ def write_bundle(bundle_dir: str | os.PathLike, onnx_bytes: bytes, meta: Mapping
         read_bundle(tmp)
         old = None
         if root.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{root.name}.old-", dir=root.parent))
+            old = Path(tempfile.mkdtemp(prefix=f".{root.name}.old{os.getpid()}-", dir=root.parent))
             os.replace(root, old / root.name)
         os.replace(tmp, root)
         if old is not None:
@@ -418,7 +475,7 @@ def check_session(bundle: Bundle, session: Any) -> None:
 
     Compares the input name/dtype, output names, the action dimension where the graph states
     it, and the bundle facts embedded in the model's metadata (actions, input size/mean/std,
-    mc, calibration). Raises :class:`BundleError` with one line on the first mismatch.
+    fov_deg, mc, calibration). Raises :class:`BundleError` with one line on the first mismatch.
     """
     inputs = session.get_inputs()
     if len(inputs) != 1 or inputs[0].name != INPUT_NAME or inputs[0].type != "tensor(uint8)":

@@ -3,16 +3,66 @@
 Whatever matters (labels, manifests, checkpoints, plots, WAVs, run state) is written to a
 temporary file in the destination folder and moved into place with ``os.replace``, so a kill
 or a crash leaves either the old file or the new one, never half of one.
+
+Temporary names carry the writer's process id (:func:`tmp_tag`, ``.tmp<pid>``): what a killed
+process left behind (SIGKILL runs no clean-up) is removed by :func:`sweep_orphans` the next
+time a command writes into that folder, and never while the writer still runs.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
+
+
+def tmp_tag() -> str:
+    """``tmp<pid>``: the mark of this process's temporary files and folders."""
+    return f"tmp{os.getpid()}"
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists (on this machine)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    return True
+
+
+_ORPHAN = re.compile(r"\.(?:tmp|old)(\d+)(?:[-.][^/]*)?$")
+
+
+def sweep_orphans(folder: str | os.PathLike, *, prefix: str = ".") -> list[Path]:
+    """Remove temporary files/folders in ``folder`` whose name starts with ``prefix`` and carries
+    the tag (``.tmp<pid>`` / ``.old<pid>``) of a process that no longer runs; returns them.
+    Nothing else is touched, and a missing folder is fine."""
+    removed: list[Path] = []
+    try:
+        entries = list(Path(folder).iterdir())
+    except OSError:
+        return removed
+    for entry in entries:
+        m = _ORPHAN.search(entry.name)
+        if not entry.name.startswith(prefix) or m is None or pid_alive(int(m.group(1))):
+            continue
+        try:
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
+            removed.append(entry)
+        except OSError:
+            pass
+    return removed
 
 
 @contextmanager
@@ -25,7 +75,7 @@ def atomic_path(path: str | os.PathLike, *, mode: int = 0o644, fsync: bool = Fal
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".{tmp_tag()}{path.suffix}", dir=path.parent)
     os.close(fd)
     try:
         yield Path(tmp)

@@ -46,10 +46,10 @@ def test_augment_writes_exact_labels_for_train_only(tmp_path):
 def test_augment_refuses_its_own_input_and_bad_datasets(tmp_path):
     _dataset(tmp_path / "ds")
     proc = _cli("augment", tmp_path / "ds", "--out", tmp_path / "ds")
-    assert proc.returncode == 1 and "is the input dataset" in proc.stderr
+    assert proc.returncode == 2 and "is the input dataset" in proc.stderr
     (tmp_path / "ds" / "a.png").unlink()
     proc = _cli("augment", tmp_path / "ds", "--out", tmp_path / "aug")
-    assert proc.returncode == 1 and "line 2: image 'a.png' not found" in proc.stderr
+    assert proc.returncode == 2 and "line 2: image 'a.png' not found" in proc.stderr
 
 
 def test_split_command_reassigns_by_source(tmp_path):

@@ -36,7 +36,7 @@ def test_cli_defaults_match_configs():
     assert (a.seconds, a.fps) == (c.seconds, c.fps)
 
 
-def test_main_returns_one_on_user_error(tmp_path, capsys):
-    assert main(["stats", str(tmp_path)]) == 1
+def test_main_returns_two_on_user_error(tmp_path, capsys):
+    assert main(["stats", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1

@@ -77,7 +77,7 @@ def test_cli_exit_status_and_messages(tmp_path):
     assert "6 frames from 1 of 2 videos" in proc.stdout and "Traceback" not in proc.stderr
     proc = subprocess.run(cmd[:4] + [str(good), "--fps", "0", "--out", str(tmp_path / "o2")],
                           capture_output=True, text=True)
-    assert proc.returncode == 1 and "fps=0.0 invalid" in proc.stderr
+    assert proc.returncode == 2 and "fps=0.0 invalid" in proc.stderr
     with pytest.raises(VideoError):
         extract_frames(FramesConfig((), tmp_path))
 

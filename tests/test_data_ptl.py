@@ -73,7 +73,7 @@ def test_broken_ptl_folders_name_the_line_and_write_nothing(tmp_path, bad, messa
         import_ptl(PTLImportConfig(ptl, tmp_path / "ds", progress=False))
     assert not (tmp_path / "ds" / "manifest.csv").exists()
     proc = _cli("import-ptl", ptl, "--out", tmp_path / "ds", "--quiet")
-    assert proc.returncode == 1 and proc.stderr.startswith("error: ") and "Traceback" not in proc.stderr
+    assert proc.returncode == 2 and proc.stderr.startswith("error: ") and "Traceback" not in proc.stderr
     assert message in proc.stderr
 
 
@@ -93,7 +93,7 @@ def test_stats_counts_baseline_and_leakage(tmp_path):
 
 def test_stats_cli_on_a_missing_dataset(tmp_path):
     proc = _cli("stats", tmp_path / "nothing")
-    assert proc.returncode == 1 and "error:" in proc.stderr and "no manifest" in proc.stderr
+    assert proc.returncode == 2 and "error:" in proc.stderr and "no manifest" in proc.stderr
 
 
 def test_shared_ptl_imports_with_its_split_and_bins(ptl_dir, tmp_path):

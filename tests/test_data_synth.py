@@ -85,7 +85,7 @@ def test_synth_cli_writes_a_valid_dataset_and_extends_with_more_frames(tmp_path)
 ])
 def test_synth_cli_rejects_bad_settings(tmp_path, args, message):
     proc = _cli("synth", *[tmp_path / a if a in ("clip.avi", "d") else a for a in args])
-    assert proc.returncode == 1 and message in proc.stderr and "Traceback" not in proc.stderr
+    assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr
 
 
 def _read_video(path):

@@ -81,7 +81,7 @@ def test_bad_votes_name_the_line(tmp_path, line, message):
         build_voted_dataset(VotesConfig(d, (votes,)))
     proc = subprocess.run([sys.executable, "-m", "crossing_assist.data_tools.cli", "votes", str(d), str(votes)],
                           capture_output=True, text=True)
-    assert proc.returncode == 1 and message in proc.stderr and "Traceback" not in proc.stderr
+    assert proc.returncode == 2 and message in proc.stderr and "Traceback" not in proc.stderr
 
 
 def _ls_task(tid, url, *anns):

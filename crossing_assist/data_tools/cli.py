@@ -1,27 +1,14 @@
 """``crossing-data``: the data tools' command line. Each sub-command parses its arguments,
-builds a frozen config and calls the library; user errors print one ``error: ...`` line."""
+builds a frozen config and calls the library through :func:`crossing_assist.errors.run_cli`:
+user errors print one ``error: ...`` line and exit 2 (``--debug`` shows the traceback)."""
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
-from crossing_assist.data_tools.images import ImageError
-from crossing_assist.data_tools.manifest import ManifestError
-
-USER_ERRORS: tuple[type[BaseException], ...] = (ManifestError, ImageError, OSError)
-
-
-def _user_errors() -> tuple[type[BaseException], ...]:
-    from crossing_assist.data_tools.ptl import PTLError
-    from crossing_assist.data_tools.frames import VideoError
-    from crossing_assist.data_tools.splits import SplitError
-    from crossing_assist.data_tools.synth import SynthError
-    from crossing_assist.data_tools.votes import VotesError
-    return USER_ERRORS + (PTLError, SynthError, VideoError, VotesError, SplitError)
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -267,20 +254,15 @@ def synth_defaults():
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``crossing-data``; returns the exit status."""
-    args = build_parser().parse_args(argv)
-    func: Callable[[argparse.Namespace], int] = args.func
-    try:
-        return func(args)
-    except BrokenPipeError:          # e.g. `crossing-data stats DIR | head`: not an error
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
-    except _user_errors() as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
+    """Entry point of ``crossing-data``; returns the exit status (2 user error, 130 Ctrl-C)."""
+    from crossing_assist.errors import run_cli
+
+    def body(args: list[str]) -> int:
+        ns = build_parser().parse_args(args)
+        func: Callable[[argparse.Namespace], int] = ns.func
+        return func(ns)
+
+    return run_cli(body, argv)
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ Label Studio tasks served from local files (``/data/local-files/?d=<OUT name>/<i
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import csv
 import io
 import json
@@ -30,7 +31,7 @@ FRAMES_CSV = "frames.csv"
 LABEL_STUDIO_TASKS = "label_studio_tasks.json"
 
 
-class VideoError(ValueError):
+class VideoError(UserError):
     """A video that cannot be read; names the file."""
 
 

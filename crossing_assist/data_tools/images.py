@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import os
 from pathlib import Path
 
@@ -11,7 +12,7 @@ import numpy as np
 from crossing_assist.data_tools.manifest import atomic_write_bytes
 
 
-class ImageError(ValueError):
+class ImageError(UserError):
     """An image that cannot be read or written; the message names the path."""
 
 
@@ -66,6 +67,33 @@ def load_frame(path: str | os.PathLike, flags: tuple[str, ...] = ()) -> np.ndarr
     except GeometryError as exc:
         raise ImageError(f"{path}: {exc}") from None
     return img
+
+
+def check_image_file(path: str | os.PathLike) -> str | None:
+    """A cheap check that ``path`` holds a whole image: None when it looks fine, else what is
+    wrong ("is empty", "is not an image", "is truncated ..."). JPEG and PNG are checked by their
+    start and end markers (a truncated JPEG still decodes, with a grey bottom, so decoding alone
+    would pass it); other formats are decoded."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+            fh.seek(max(0, size - 4096))
+            tail = fh.read()
+    except (OSError, ValueError) as exc:
+        return f"cannot be read ({getattr(exc, 'strerror', None) or exc})"
+    if size == 0:
+        return "is empty"
+    if head[:3] == b"\xff\xd8\xff":
+        return None if b"\xff\xd9" in tail else "is truncated (no JPEG end marker)"
+    if head == b"\x89PNG\r\n\x1a\n":
+        return None if b"IEND" in tail[-16:] else "is truncated (no PNG end chunk)"
+    try:
+        load_rgb(path)
+    except ImageError:
+        return "is not a readable image (unknown format or corrupt)"
+    return None
 
 
 def save_rgb(path: str | os.PathLike, image: np.ndarray, *, quality: int = 92) -> Path:

@@ -18,7 +18,7 @@ import numpy as np
 
 from crossing_assist.actions import format_label
 from crossing_assist.data_tools.frames import FRAMES_CSV
-from crossing_assist.data_tools.manifest import Row, atomic_write_text, write_manifest
+from crossing_assist.data_tools.manifest import Row, atomic_write_text, reading_csv, write_manifest
 from crossing_assist.data_tools.splits import SplitConfig, assign_splits
 from crossing_assist.data_tools.votes import (
     TIE_RULES, FrameIndex, VotesError, agreement_table, fleiss_kappa, majority, read_label_studio,
@@ -59,8 +59,8 @@ def read_frames_csv(frames_dir: Path) -> dict[str, str]:
     path = Path(frames_dir) / FRAMES_CSV
     if not path.is_file():
         raise VotesError(f"{path}: not found; run crossing-data frames first")
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
+    with reading_csv(path, VotesError) as state, open(path, newline="", encoding="utf-8") as fh:
+        reader = state["reader"] = csv.DictReader(fh)
         if not {"image", "source"} <= set(reader.fieldnames or []):
             raise VotesError(f"{path} line 1: header must have image,source")
         return {r["image"]: r["source"] for r in reader}

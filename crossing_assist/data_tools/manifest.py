@@ -19,13 +19,15 @@ the width absorbs rounding at strip boundaries); image paths are unique.
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import csv
 import io
 import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
-from typing import Iterable
+from contextlib import contextmanager
+from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -38,7 +40,44 @@ SPLITS = ("train", "val", "test")
 BIN_TOLERANCE = 1e-5
 
 
-class ManifestError(ValueError):
+MAX_PATH = 1024  # longest image path accepted (file systems stop at 4096, a name at 255)
+
+
+def is_file(path: Path) -> bool:
+    """``path.is_file()``, False (not an exception) for a name too long or otherwise unusable."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
+
+def _bad_utf8_where(path: Path) -> str:
+    """``PATH line N`` of the first byte that is not UTF-8 (the csv reader decodes in chunks)."""
+    try:
+        Path(path).read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = exc.object[:exc.start].count(b"\n") + 1
+        return f"{path} line {line}"
+    except OSError:
+        pass
+    return str(path)
+
+
+@contextmanager
+def reading_csv(path: Path, error: type[Exception]) -> Iterator[dict]:
+    """Turn what the csv module and the UTF-8 decoder raise inside the block into ``error``
+    naming the file and line. The block sets ``state["reader"]`` to its csv reader."""
+    state: dict = {}
+    where = lambda: f"{path} line {state['reader'].line_num + 1}" if "reader" in state else str(path)  # noqa: E731
+    try:
+        yield state
+    except UnicodeDecodeError as exc:
+        raise error(f"{_bad_utf8_where(path)}: not UTF-8 text ({exc.reason}); save the file as UTF-8") from None
+    except csv.Error as exc:
+        raise error(f"{where()}: not a readable CSV ({exc})") from None
+
+
+class ManifestError(UserError):
     """A manifest that cannot be trusted; the message names the file line or the row."""
 
 
@@ -73,7 +112,7 @@ class Dataset:
     def split(self, name: str) -> "Dataset":
         """The rows of one split (``train``, ``val`` or ``test``), same root."""
         if name not in SPLITS:
-            raise ValueError(f"Unknown split: {name!r}; valid: {', '.join(SPLITS)}")
+            raise ManifestError(f"Unknown split: {name!r}; valid: {', '.join(SPLITS)}")
         return Dataset(self.root, tuple(r for r in self.rows if r.split == name))
 
     def image_path(self, row: Row) -> Path:
@@ -130,6 +169,9 @@ def check_row(row: Row) -> None:
     img = row.image
     if not img or "\\" in img or PurePosixPath(img).is_absolute() or img != img.strip():
         raise ValueError(f"image {img!r} invalid; expected a POSIX path relative to the dataset folder")
+    if any(ord(c) < 32 for c in img) or len(img) > MAX_PATH:
+        raise ValueError(f"image {img[:80]!r} invalid; a path without control characters, at most {MAX_PATH} "
+                         "characters")
     _check_bin_value(row.label, "label")
     if not row.source or any(c.isspace() for c in row.source):
         raise ValueError(f"source {row.source!r} invalid; expected a non-empty id such as ptl:john")
@@ -189,8 +231,8 @@ def read_manifest(dataset_dir: str | os.PathLike, *, check_images: bool = True) 
     path = root / MANIFEST_NAME
     if not path.is_file():
         raise ManifestError(f"{path}: no manifest here; is {root} a dataset folder?")
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
+    with reading_csv(path, ManifestError) as state, open(path, newline="", encoding="utf-8") as fh:
+        reader = state["reader"] = csv.DictReader(fh)
         missing = [c for c in COLUMNS if c not in (reader.fieldnames or [])]
         if missing:
             raise ManifestError(f"{path} line 1: header lacks column(s) {', '.join(missing)}; "
@@ -209,7 +251,7 @@ def read_manifest(dataset_dir: str | os.PathLike, *, check_images: bool = True) 
                 raise ManifestError(f"{path} line {line}: duplicate image {row.image!r} "
                                     f"(first at line {seen[row.image]})")
             seen[row.image] = line
-            if check_images and not (root / row.image).is_file():
+            if check_images and not is_file(root / row.image):
                 raise ManifestError(f"{path} line {line}: image {row.image!r} not found "
                                     f"(looked at {(root / row.image).resolve()}); was the dataset "
                                     "or the folder it references moved?")

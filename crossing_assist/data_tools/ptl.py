@@ -15,6 +15,7 @@ fails with a clear error naming the line if the dataset or the PTL folder is mov
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import csv
 import os
 from dataclasses import dataclass
@@ -23,7 +24,8 @@ from pathlib import Path, PurePosixPath
 from tqdm import tqdm
 
 from crossing_assist.actions import parse_label
-from crossing_assist.data_tools.manifest import SPLITS, Row, check_row, write_manifest
+from crossing_assist.data_tools.images import check_image_file
+from crossing_assist.data_tools.manifest import SPLITS, Row, check_row, is_file, reading_csv, write_manifest
 from crossing_assist.fileio import link_or_copy
 
 REQUIRED = ("image", "split", "photographer", "far_x", "bin12")
@@ -34,7 +36,7 @@ PTL_ASPECT = "4:3"
 LIGHTS = {"0": "red", "1": "green", "2": "countdown_green", "3": "countdown_blank", "4": "none"}
 
 
-class PTLError(ValueError):
+class PTLError(UserError):
     """A PTL folder that cannot be imported; names the labels.csv line."""
 
 
@@ -86,8 +88,8 @@ def read_ptl_labels(ptl_dir: Path) -> list[Row]:
     if not path.is_file():
         raise PTLError(f"{path}: not found; a PTL folder holds labels.csv and the images")
     rows: list[Row] = []
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
+    with reading_csv(path, PTLError) as state, open(path, newline="", encoding="utf-8") as fh:
+        reader = state["reader"] = csv.DictReader(fh)
         missing = [c for c in REQUIRED if c not in (reader.fieldnames or [])]
         if missing:
             raise PTLError(f"{path} line 1: header lacks column(s) {', '.join(missing)}")
@@ -103,8 +105,11 @@ def read_ptl_labels(ptl_dir: Path) -> list[Row]:
             if image in seen:
                 raise PTLError(f"{path} line {line}: duplicate image {image!r} (first at line {seen[image]})")
             seen[image] = line
-            if not (Path(ptl_dir) / image).is_file():
+            if not is_file(Path(ptl_dir) / image):
                 raise PTLError(f"{path} line {line}: image {image!r} not found in {ptl_dir}")
+            bad = check_image_file(Path(ptl_dir) / image)
+            if bad:
+                raise PTLError(f"{path} line {line}: image {image!r} {bad}; replace or remove it")
             rows.append(row)
     if not rows:
         raise PTLError(f"{path}: no rows")

@@ -7,6 +7,7 @@ sources and the fractions are met as closely as source sizes allow.
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -14,7 +15,7 @@ import numpy as np
 from crossing_assist.data_tools.manifest import SPLITS, Row
 
 
-class SplitError(ValueError):
+class SplitError(UserError):
     """Split fractions that cannot be met."""
 
 

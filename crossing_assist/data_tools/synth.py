@@ -16,6 +16,8 @@ sidecar records the command and the per-frame ground truth.
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
+
 import json
 import math
 import os
@@ -32,7 +34,7 @@ from crossing_assist.data_tools.manifest import Row, atomic_write_text, write_ma
 from crossing_assist.data_tools.synth_scene import Camera, Occluder, Scene, goal_label, render, sample_scene
 
 
-class SynthError(ValueError):
+class SynthError(UserError):
     """Bad synthesis settings or an output that cannot be written."""
 
 

@@ -24,6 +24,7 @@ Agreement
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import csv
 import json
 import re
@@ -31,16 +32,18 @@ import urllib.parse
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
+from typing import Any
 
 import numpy as np
 
 from crossing_assist.actions import N_BINS, UNKNOWN, format_label, parse_label
+from crossing_assist.data_tools.manifest import reading_csv
 
 TIE_RULES = ("unknown", "drop")
 _UPLOAD_PREFIX = re.compile(r"^[0-9a-f]{8}-")
 
 
-class VotesError(ValueError):
+class VotesError(UserError):
     """Votes that cannot be used; names the file and line (or task)."""
 
 
@@ -99,12 +102,12 @@ class FrameIndex:
 def read_votes_csv(path: Path, index: FrameIndex) -> list[tuple[str, str, int, str]]:
     """Votes ``(frame, annotator, bin, where)`` from a CSV; VotesError names the bad line."""
     path = Path(path)
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
+    with reading_csv(path, VotesError) as state, open(path, newline="", encoding="utf-8") as fh:
+        reader = state["reader"] = csv.DictReader(fh)
         fields = reader.fieldnames or []
         col = "label" if "label" in fields else "bin" if "bin" in fields else None
         if "frame" not in fields or "annotator" not in fields or col is None:
-            raise VotesError(f"{path} line 1: header must have frame,annotator,label (got {','.join(fields)})")
+            raise VotesError(f"{path} line 1: header must have frame,annotator,label (got {','.join(fields)[:120]!r})")
         votes = []
         for rec in reader:
             where = f"{path} line {reader.line_num}"
@@ -131,38 +134,78 @@ def _ls_image_ref(url: str) -> str:
     return _UPLOAD_PREFIX.sub("", urllib.parse.unquote(name))
 
 
+def _ls_annotator(ann: dict, where: str, k: int, j: int) -> str:
+    """``ls:<email or id>``; an annotation without ``completed_by`` counts as its own annotator."""
+    who = ann.get("completed_by")
+    if isinstance(who, dict):
+        who = who.get("email", who.get("id"))
+    if who is None or who == "":
+        return f"ls:anonymous-annotation-{ann.get('id', f'{k}.{j}')}"
+    if isinstance(who, bool) or not isinstance(who, (int, str)):
+        raise VotesError(f"{where}: annotation {ann.get('id', j)!r} completed_by {who!r} invalid; "
+                         "expected a user id or email")
+    return f"ls:{who}"
+
+
+def _ls_list(value: Any, what: str, where: str) -> list:
+    if value is None:
+        return []
+    if not isinstance(value, list):
+        raise VotesError(f"{where}: {what} is a {type(value).__name__}; expected a list (Label Studio 'JSON' export)")
+    return value
+
+
+def _ls_choices(ann: dict, where: str) -> list:
+    choices = []
+    for r in _ls_list(ann.get("result"), "annotation result", where):
+        if not isinstance(r, dict) or r.get("type") != "choices":
+            continue
+        value = r.get("value")
+        if not isinstance(value, dict):
+            raise VotesError(f"{where}: result value is a {type(value).__name__}; expected an object")
+        choices += _ls_list(value.get("choices"), "value.choices", where)
+    return choices
+
+
 def read_label_studio(path: Path, index: FrameIndex, *, image_key: str = "image") -> list[tuple[str, str, int, str]]:
     """Votes ``(frame, annotator, bin, where)`` from a Label Studio JSON export."""
     path = Path(path)
     try:
         tasks = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise VotesError(f"{path}: not UTF-8 text ({exc.reason}); export it again from Label Studio") from None
     except json.JSONDecodeError as exc:
         raise VotesError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    except (ValueError, RecursionError) as exc:  # an int over the digit limit, absurd nesting
+        raise VotesError(f"{path}: not a usable JSON export ({type(exc).__name__})") from None
     if not isinstance(tasks, list):
         raise VotesError(f"{path}: expected a list of tasks (Label Studio 'JSON' export)")
     votes = []
     for k, task in enumerate(tasks):
-        where = f"{path} task {k} (id {task.get('id', '?') if isinstance(task, dict) else '?'})"
-        url = task.get("data", {}).get(image_key) if isinstance(task, dict) else None
+        tid = task.get("id", "?") if isinstance(task, dict) else "?"
+        where = f"{path} task {k} (id {tid if isinstance(tid, (int, str)) else '?'})"
+        data = task.get("data") if isinstance(task, dict) else None
+        url = data.get(image_key) if isinstance(data, dict) else None
         if not isinstance(url, str):
             raise VotesError(f"{where}: no data.{image_key}")
         frame = index.resolve(_ls_image_ref(url))
         if frame is None:
-            raise VotesError(f"{where}: image {url!r} is not in frames.csv")
-        for ann in task.get("annotations", []):
+            raise VotesError(f"{where}: image {url[:200]!r} is not in frames.csv")
+        for j, ann in enumerate(_ls_list(task.get("annotations"), "annotations", where)):
+            if not isinstance(ann, dict):
+                raise VotesError(f"{where}: annotation {j} is a {type(ann).__name__}; expected an object")
             if ann.get("was_cancelled"):
                 continue
-            who = ann.get("completed_by")
-            who = who.get("email", who.get("id")) if isinstance(who, dict) else who
-            choices = [c for r in ann.get("result", []) if r.get("type") == "choices"
-                       for c in r.get("value", {}).get("choices", [])]
-            if len(choices) != 1:
-                raise VotesError(f"{where}: annotation {ann.get('id', '?')} has {len(choices)} choices; expected 1")
+            who = _ls_annotator(ann, where, k, j)
+            choices = _ls_choices(ann, where)
+            if len(choices) != 1 or isinstance(choices[0], bool) or not isinstance(choices[0], (str, int)):
+                raise VotesError(f"{where}: annotation {ann.get('id', j)!r} has {len(choices)} choices; "
+                                 "expected 1 (a strip 1..12 or unknown)")
             try:
                 b = parse_label(choices[0])
             except ValueError:
-                raise VotesError(f"{where}: choice {choices[0]!r} invalid; valid: 1..12 or unknown") from None
-            votes.append((frame, f"ls:{who}", b, where))
+                raise VotesError(f"{where}: choice {str(choices[0])[:40]!r} invalid; valid: 1..12 or unknown") from None
+            votes.append((frame, who, b, where))
     return votes
 
 

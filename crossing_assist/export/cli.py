@@ -13,7 +13,7 @@ from typing import Sequence
 
 HELP = {
     "run": "run folder (uses weights/best.pt) or a .pt checkpoint",
-    "out": "bundle folder to write (replaced atomically if it exists)",
+    "out": "bundle folder to write (an existing bundle is replaced atomically; anything else is refused)",
     "samples": "MC dropout samples T folded into the batch",
     "p": "drop probability of the sampled layers (default: the checkpoint's, 0.5 in the thesis)",
     "calib_data": "dataset folder (manifest.csv) with labelled frames to calibrate on",
@@ -31,6 +31,7 @@ HELP = {
     "threads": "CPU threads for PyTorch",
     "seed": "seed of the PyTorch dropout masks drawn while calibrating",
     "progress": "progress bars",
+    "force": "replace --out even if it is not a bundle (deletes what is there)",
 }
 
 
@@ -50,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
         else:
             kind = {"int": int, "float": float, "float | None": float}.get(str(f.type), str)
             p.add_argument(flag, type=kind, default=f.default, help=f"{HELP[f.name]} (default: {f.default})")
+    p.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     return p
 
 
@@ -59,34 +61,19 @@ def _fields():
     return fields(ExportConfig)
 
 
-def _user_errors() -> tuple[type[BaseException], ...]:
-    from crossing_assist.bundle import BundleError
-    from crossing_assist.export.exporter import ExportError
-
-    errs: list[type[BaseException]] = [BundleError, ExportError, FileNotFoundError]
-    for mod, name in (("crossing_assist.data_tools.manifest", "ManifestError"),
-                      ("crossing_assist.data_tools.images", "ImageError"),
-                      ("crossing_assist.models.checkpoint", "CheckpointError"),
-                      ("crossing_assist.models.backbones", "BackboneError")):
-        try:
-            errs.append(getattr(__import__(mod, fromlist=[name]), name))
-        except (ImportError, AttributeError):
-            pass
-    return tuple(errs)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``crossing-export``."""
+    """Entry point of ``crossing-export`` (exit 2 user error, 130 Ctrl-C; ``--debug`` for tracebacks)."""
+    from crossing_assist.errors import run_cli
+
+    return run_cli(_main, argv)
+
+
+def _main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
     from crossing_assist.export.exporter import ExportConfig, export_bundle
 
-    errors = _user_errors()
-    try:
-        cfg = ExportConfig(**{f.name: getattr(args, f.name) for f in _fields()})
-        res = export_bundle(cfg, log=lambda m: print(m, file=sys.stderr))
-    except errors as exc:
-        print(f"error: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}", file=sys.stderr)
-        return 2
+    cfg = ExportConfig(**{f.name: getattr(args, f.name) for f in _fields()})
+    res = export_bundle(cfg, log=lambda m: print(m, file=sys.stderr))
     for note in res.notes:
         print(f"note: {note}", file=sys.stderr)
     full, cross = res.metrics.get("full_split"), res.metrics.get("cross_fit")

@@ -19,6 +19,7 @@ Steps (:func:`export_bundle`):
 from __future__ import annotations
 
 import dataclasses
+from crossing_assist.errors import UserError
 import hashlib
 import math
 import shlex
@@ -34,7 +35,7 @@ import torch
 
 import crossing_assist
 from crossing_assist.actions import get_space
-from crossing_assist.bundle import SCHEMA_VERSION, read_bundle, write_bundle
+from crossing_assist.bundle import SCHEMA_VERSION, check_replaceable, read_bundle, write_bundle
 from crossing_assist.export import calibrate as cal
 from crossing_assist.export.evaluate import conformal_report, predict_bundle
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
@@ -44,7 +45,7 @@ from crossing_assist.geometry import PAD_RGB, TRAIN_FOV_DEG, Geometry
 PARITY_TOL = 1e-4
 
 
-class ExportError(ValueError):
+class ExportError(UserError):
     """A user-facing export failure (one line)."""
 
 
@@ -71,6 +72,7 @@ class ExportConfig:
     threads: int = 2
     seed: int = 0                   # PyTorch's dropout masks while calibrating (global RNG untouched)
     progress: bool = True
+    force: bool = False             # replace an existing --out even if it is not a bundle (deletes it)
 
     def __post_init__(self) -> None:
         checks = [
@@ -256,7 +258,10 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
     the held-out figure is ``cross_fit``)."""
     import tempfile
 
-    with tempfile.TemporaryDirectory(prefix="crossing-export-") as tmp:
+    from crossing_assist.fileio import sweep_orphans, tmp_tag
+
+    sweep_orphans(tempfile.gettempdir(), prefix=".crossing-export.")  # what killed exports left there
+    with tempfile.TemporaryDirectory(prefix=f".crossing-export.{tmp_tag()}-") as tmp:
         set_metadata(model, meta)
         bundle = read_bundle(write_bundle(Path(tmp) / "bundle", model_bytes(model), meta))
         got = predict_bundle(bundle, data.images, batch=cfg.batch, progress=cfg.progress)
@@ -274,6 +279,7 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
 
 def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> ExportResult:
     """Run the whole pipeline (module docstring) and return where the bundle went."""
+    check_replaceable(cfg.out, force=cfg.force)  # before minutes of work, and again when writing
     torch.set_num_threads(max(1, cfg.threads))
     policy, ckpt = _load_policy(cfg.run)
     n = policy.n_actions
@@ -329,7 +335,7 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     meta = _meta(policy, ckpt, spec, calib, precision, metrics, cfg)
     set_metadata(model, meta)
     data_bytes = model_bytes(model)
-    write_bundle(out, data_bytes, meta)
+    write_bundle(out, data_bytes, meta, force=cfg.force)
     read_bundle(out)
     return ExportResult(out, len(data_bytes), parity, calib, metrics, tuple(notes))
 

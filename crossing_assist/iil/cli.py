@@ -10,10 +10,12 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 from typing import Sequence
 
+from ..errors import UserError
 from .config import LearnerConfig
 from .envs import ENV_NAMES
 from .files import RunError
@@ -62,12 +64,30 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="Table 3 (markdown/CSV) and Figures 4.4-4.7 from run folders")
     rep.add_argument("dirs", type=Path, nargs="+")
     rep.add_argument("--out", type=Path, default=None, help="default: DIRS[0]/report")
+    for parser in (p, r, rep):
+        parser.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     return p
 
 
-def _cmd_run(a: argparse.Namespace) -> int:
+def _check_run_args(a: argparse.Namespace) -> None:
+    """Refuse impossible numbers before any work (one line naming the option and the valid range)."""
     if a.episodes < 1 or a.horizon < 1:
         raise RunError(f"--episodes={a.episodes} and --horizon={a.horizon} must both be >= 1")
+    for flag, value in (("--epochs", a.epochs), ("--mc-samples", a.mc_samples), ("--ensemble", a.ensemble),
+                        ("--threads", a.threads)):
+        if value < 1:
+            raise RunError(f"Invalid {flag} {value}; valid: >= 1")
+    if not (math.isfinite(a.lr) and a.lr > 0):
+        raise RunError(f"Invalid --lr {a.lr}; valid: a finite number > 0")
+    for flag, value in (("--expert-threshold", a.expert_threshold), ("--learner-threshold", a.learner_threshold)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise RunError(f"Invalid {flag} {value}; valid: a finite number > 0 (the uncertainty where alpha = 1/2)")
+    if a.binary_expert is not None and not math.isfinite(a.binary_expert):
+        raise RunError(f"Invalid --binary-expert {a.binary_expert}; valid: a finite risk")
+
+
+def _cmd_run(a: argparse.Namespace) -> int:
+    _check_run_args(a)
     import torch  # noqa: PLC0415
     from tqdm import tqdm  # noqa: PLC0415
 
@@ -102,23 +122,30 @@ def _cmd_report(a: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    a = build_parser().parse_args(argv)
-    try:
-        if a.cmd == "list":
-            from .algorithms import THESIS_ALGORITHMS, list_algorithms  # noqa: PLC0415
+    """Entry point of ``crossing-iil`` (exit 2 user error, 130 Ctrl-C; ``--debug`` for tracebacks)."""
+    from crossing_assist.errors import run_cli
 
-            print("environments:", ", ".join(ENV_NAMES))
-            print("algorithms:", ", ".join(list_algorithms()))
-            print("thesis:", ", ".join(THESIS_ALGORITHMS))
-            return 0
+    return run_cli(_main, argv, interrupted="run the same command again to continue from the last finished episode")
+
+
+def _main(argv: list[str]) -> int:
+    a = build_parser().parse_args(argv)
+    if a.cmd == "list":
+        from .algorithms import THESIS_ALGORITHMS, list_algorithms  # noqa: PLC0415
+
+        print("environments:", ", ".join(ENV_NAMES))
+        print("algorithms:", ", ".join(list_algorithms()))
+        print("thesis:", ", ".join(THESIS_ALGORITHMS))
+        return 0
+    try:
         return _cmd_run(a) if a.cmd == "run" else _cmd_report(a)
-    except (RunError, ReportError, FileNotFoundError, ImportError, RuntimeError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("error: interrupted; run the same command again to continue from the last finished episode",
-              file=sys.stderr)
-        return 130
+    except (RunError, ReportError, ImportError, RuntimeError) as exc:
+        # bad options, a missing optional package or simulator: the user's to fix. (RunError and
+        # ReportError live in iil/files.py and iil/report.py; until they derive from UserError
+        # themselves, they are mapped here.)
+        if isinstance(exc, UserError):
+            raise
+        raise UserError(str(exc)) from exc
 
 
 if __name__ == "__main__":

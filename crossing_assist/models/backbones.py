@@ -13,6 +13,7 @@ torchvision ``.pth`` file), which is how offline users bring ImageNet weights.
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
@@ -24,7 +25,7 @@ IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 
 
-class BackboneError(ValueError):
+class BackboneError(UserError):
     """A backbone or its weights cannot be created (one clear line, says what to do)."""
 
 
@@ -139,7 +140,9 @@ def _load_file(model: nn.Module, path: Path, name: str) -> str:
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:
-        raise BackboneError(f"cannot read weights file {path}: {type(exc).__name__}: {exc}") from None
+        raise BackboneError(f"cannot read weights file {path} ({type(exc).__name__}): not a state dict saved with "
+                            "torch.save (corrupt, truncated or another format); pass a .pth state dict, "
+                            "imagenet or none") from None
     if isinstance(state, dict) and "state_dict" in state and isinstance(state["state_dict"], dict):
         state = state["state_dict"]
     if not isinstance(state, dict):

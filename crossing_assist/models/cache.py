@@ -25,6 +25,7 @@ import torch
 from tqdm import tqdm
 
 from ..data_tools.manifest import Dataset
+from ..fileio import sweep_orphans
 from .backbones import Backbone
 from .data import Variant, load_variants, normalise
 
@@ -99,9 +100,20 @@ def compute_features(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: 
     path = Path(cache_dir) / key
     if (path / "meta.json").is_file():
         return _open(path)
+    sweep_orphans(cache_dir, prefix="")  # half-written entries of killed runs (<key>.tmp<pid>)
     tmp = Path(cache_dir) / f"{key}.tmp{os.getpid()}"
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
+    try:
+        return _compute(backbone, frozen_blocks, ds, size, variants, fov_deg, Path(cache_dir), batch_size,
+                        progress, desc, key, tmp, path)
+    finally:  # an error or Ctrl-C: no half-written entry stays behind (a finished one was moved)
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _compute(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: tuple[int, int],
+             variants: tuple[Variant, ...], fov_deg: float, cache_dir: Path, batch_size: int, progress: bool,
+             desc: str, key: str, tmp: Path, path: Path) -> FeatureSet:
     backbone.eval()
     n = len(ds.rows) * len(variants)
     probe = backbone.forward_until(torch.zeros(1, 3, *size), frozen_blocks)

@@ -7,6 +7,7 @@ objects, so ``torch.load(weights_only=True)`` reads it and a checkpoint cannot r
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import json
 import os
 from dataclasses import replace
@@ -22,7 +23,7 @@ FORMAT = "crossing_assist.policy"
 VERSION = 1
 
 
-class CheckpointError(ValueError):
+class CheckpointError(UserError):
     """A checkpoint that is missing, corrupt or not ours (one line naming the file)."""
 
 

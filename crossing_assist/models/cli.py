@@ -12,28 +12,34 @@ from .config import TrainConfig
 _DEFAULTS = {f.name: f.default for f in fields(TrainConfig) if f.name not in ("data", "out")}
 
 
-def _user_errors() -> tuple[type[BaseException], ...]:
-    from ..bundle import BundleError
-    from ..data_tools.images import ImageError
-    from ..data_tools.manifest import ManifestError
-    from .backbones import BackboneError
-    from .checkpoint import CheckpointError
-    from .config import ConfigError
-    from .heads import HeadError
+def _run(func: Callable[[], int], argv: Sequence[str] | None = None, interrupted: Callable[[], str] = str) -> int:
+    """Run ``func`` through the shared wrapper (exit 2 user error, 130 Ctrl-C, ``--debug``)."""
+    from ..errors import run_cli
 
-    return (ConfigError, ManifestError, ImageError, BackboneError, CheckpointError, HeadError, BundleError,
-            FileNotFoundError, NotADirectoryError)
+    return run_cli(lambda _args: func(), argv, interrupted=interrupted)
 
 
-def _run(func: Callable[[], int]) -> int:
-    try:
-        return func()
-    except _user_errors() as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("error: interrupted (resume with --resume)", file=sys.stderr)
-        return 130
+def _args(argv: Sequence[str] | None) -> list[str]:
+    from ..errors import split_debug
+
+    return split_debug(argv)[0]
+
+
+def _given(parser: argparse.ArgumentParser, args: list[str]) -> set[str]:
+    """Names of the options given on the command line (not left at their defaults)."""
+    for action in parser._actions:
+        action.default = argparse.SUPPRESS
+    return set(vars(parser.parse_args(args)))
+
+
+def _resume_hint(out: str) -> Callable[[], str]:
+    from pathlib import Path
+
+    def hint() -> str:
+        if (Path(out) / "weights" / "last.pt").is_file():
+            return "run the same command with --resume to continue from the last finished epoch"
+        return "no epoch finished yet, so there is nothing to resume; run the same command again"
+    return hint
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -91,18 +97,20 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=d["threads"])
     p.add_argument("--cache-dir", default=d["cache_dir"])
     p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p.add_argument("--resume", action="store_true", help="continue the run in --out from weights/last.pt")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out from weights/last.pt "
+                   "(options must match the run's args.yaml; a larger --epochs extends it)")
     p.add_argument("--cv", choices=("source",), help="leave-one-source-out cross-validation: one run per "
                    "train source in OUT/fold-SOURCE, mean +- sd in OUT/cv.json (finished folds are kept)")
+    p.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     return p
 
 
 def train_main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``crossing-train``."""
-    a = train_parser().parse_args(argv)
+    a = train_parser().parse_args(_args(argv))
 
     def go() -> int:
-        from .train import train
+        from .train import resume_config, train, trained_epochs
 
         cfg = TrainConfig(
             data=a.data, out=a.out, extra_data=tuple(a.extra_data), backbone=a.backbone, weights=a.weights, head=a.head, actions=a.actions,
@@ -118,12 +126,14 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             summary = cross_validate(cfg, resume=a.resume)
             print(format_cv(summary))
             return 0
+        if a.resume:
+            cfg = resume_config(cfg, _given(train_parser(), _args(argv)))
         out = train(cfg, resume=a.resume)
         best = out / "weights" / "best.pt"
-        print(f"trained {cfg.epochs} epochs -> {best} ({best.stat().st_size / 1e6:.1f} MB)")
+        print(f"trained {trained_epochs(out)} epochs -> {best} ({best.stat().st_size / 1e6:.1f} MB)")
         return 0
 
-    return _run(go)
+    return _run(go, argv, interrupted=_resume_hint(a.out))
 
 
 def eval_parser() -> argparse.ArgumentParser:
@@ -131,7 +141,7 @@ def eval_parser() -> argparse.ArgumentParser:
     p.add_argument("--run", help="run folder (uses weights/best.pt) or a .pt checkpoint")
     p.add_argument("--bundle", help="bundle folder (model.onnx + bundle.json) instead of --run")
     p.add_argument("--data", required=True, help="dataset folder (manifest.csv)")
-    p.add_argument("--split", default="val", help="val | test | train")
+    p.add_argument("--split", default="val", choices=("val", "test", "train"), help="val | test | train")
     p.add_argument("--out", help="output folder (default RUN/eval_SPLIT or BUNDLE/eval_SPLIT)")
     p.add_argument("--samples", type=int, default=1, help="MC dropout samples for checkpoints (1 = deterministic)")
     p.add_argument("--examples", type=int, default=12, help="frames on the example sheet")
@@ -145,12 +155,13 @@ def eval_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--cache-dir", default=_DEFAULTS["cache_dir"])
     p.add_argument("--quiet", action="store_true")
+    p.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     return p
 
 
 def eval_main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``crossing-eval``."""
-    a = eval_parser().parse_args(argv)
+    a = eval_parser().parse_args(_args(argv))
 
     def go() -> int:
         from .config import ConfigError
@@ -180,7 +191,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                   f"mean size {c['mean_size']:.2f} actions, empty {c['empty']:.3f}")
         return 0
 
-    return _run(go)
+    return _run(go, argv)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 from dataclasses import asdict, dataclass, fields
 
 from ..actions import VALID_SPACES
@@ -14,7 +15,7 @@ SELECT_ON = ("val", "holdout", "last")
 BALANCE = ("none", "weights", "sampler")
 
 
-class ConfigError(ValueError):
+class ConfigError(UserError):
     """An invalid training option (one line, names the option and the valid values)."""
 
 

@@ -20,6 +20,7 @@ Kinds
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -29,7 +30,7 @@ from ..actions import N_BINS
 HEAD_KINDS = ("spatial", "spatial_mlp", "thesis", "thesis_fc")
 
 
-class HeadError(ValueError):
+class HeadError(UserError):
     """Invalid head kind or argument."""
 
 

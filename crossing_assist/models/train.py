@@ -28,7 +28,7 @@ from tqdm import tqdm
 
 from ..actions import UNKNOWN, get_space
 from ..data_tools.manifest import Dataset, atomic_write_text, read_manifest
-from ..fileio import atomic_path
+from ..fileio import atomic_path, sweep_orphans
 from .backbones import create_backbone
 from .cache import FeatureSet, compute_features
 from .checkpoint import load_checkpoint, save_checkpoint
@@ -222,12 +222,14 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     torch.manual_seed(cfg.seed)     # head initialisation (the run's own generator state)
     out = Path(cfg.out)
     last_path, best_path = out / "weights" / "last.pt", out / "weights" / "best.pt"
+    for folder in (out, out / "weights"):  # temporary files of a killed run (SIGKILL runs no clean-up)
+        sweep_orphans(folder)
     state = None
     if resume:
         if not last_path.is_file():
             raise ConfigError(f"Invalid --resume: {last_path} not found (start without --resume)")
         state = load_checkpoint(last_path)
-        cfg = TrainConfig.from_dict({**state["train_config"], "progress": cfg.progress, "threads": cfg.threads})
+        cfg = _resumed(cfg, state, last_path)
     elif last_path.is_file():
         raise ConfigError(f"Invalid --out: {out} already holds a run; pass --resume or pick a new --out")
     ds = read_manifest(cfg.data)
@@ -285,13 +287,66 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
             best = list(_score(m_sel))
             save_checkpoint(best_path, policy, {"metrics": {"selection": _slim(m_sel), "val": _slim(m_val)},
                                                 "epoch": epoch, "train_config": cfg.to_dict()})
+        # results.csv before last.pt: a kill between them leaves a row past last.pt's epoch, which
+        # --resume drops and recomputes (the other order would lose the row for good)
+        _write_results(out / "results.csv", rows)
         save_checkpoint(last_path, policy, {"metrics": {"selection": _slim(m_sel), "val": _slim(m_val)},
                                             "epoch": epoch, "train_config": cfg.to_dict(),
                                             "optimizer": opt.state_dict(), "best_score": best})
-        _write_results(out / "results.csv", rows)
         bar.set_postfix(loss=row["train_loss"], acc=row["sel_accuracy"], mae=row["sel_bin_mae"])
     _plot_results(out)
     return out
+
+
+# Options a resumed run may change: how it runs, not what it computes (epochs may only grow).
+RESUME_FREE = ("progress", "threads", "cache_dir")
+
+
+def _same(key: str, a, b) -> bool:
+    if key == "data":
+        return Path(a).resolve() == Path(b).resolve()
+    if key == "extra_data":
+        return [Path(x).resolve() for x in a] == [Path(x).resolve() for x in b]
+    return a == b
+
+
+def _resumed(cfg: TrainConfig, state: dict, last_path: Path) -> TrainConfig:
+    """``cfg`` checked against the run being resumed: every option must match the saved one
+    except those in :data:`RESUME_FREE`, and ``epochs`` may grow (an explicit extension).
+    Raises ConfigError naming every difference."""
+    saved = TrainConfig.from_dict({**state["train_config"], "progress": cfg.progress})
+    mine, theirs = cfg.to_dict(), saved.to_dict()
+    diffs = [f"--{k.replace('_', '-')} {mine[k]!r} (run: {theirs[k]!r})" for k in mine
+             if k not in RESUME_FREE + ("epochs", "out") and not _same(k, mine[k], theirs[k])]
+    if diffs:
+        raise ConfigError(f"Invalid --resume: options differ from the run in {cfg.out}: {'; '.join(diffs)}; "
+                          "drop them or start a new --out")
+    done = int(state["epoch"])
+    if cfg.epochs < done:
+        raise ConfigError(f"Invalid --resume --epochs {cfg.epochs}: {last_path} has already trained {done} epochs; "
+                          f"pass --epochs >= {done}")
+    return TrainConfig.from_dict({**theirs, **{k: mine[k] for k in RESUME_FREE + ("epochs",)}})
+
+
+def resume_config(cfg: TrainConfig, given: set[str]) -> TrainConfig:
+    """The config of the run in ``cfg.out`` with only the options named in ``given`` (as typed
+    on the command line: ``four_three``, ``quiet`` map to ``input_size``, ``progress``) taken
+    from ``cfg``; :func:`train` then refuses any that changes what the run computes."""
+    last_path = Path(cfg.out) / "weights" / "last.pt"
+    if not last_path.is_file():
+        raise ConfigError(f"Invalid --resume: {last_path} not found (start without --resume)")
+    alias = {"four_three": "input_size", "quiet": "progress"}
+    names = {alias.get(g, g) for g in given}
+    saved = load_checkpoint(last_path)["train_config"]
+    mine = cfg.to_dict()
+    keep = names | {"out", "progress", "threads"}
+    return TrainConfig.from_dict({**saved, **{k: v for k, v in mine.items() if k in keep}})
+
+
+def trained_epochs(out: Path) -> int:
+    """Epochs the run in ``out`` has finished (from weights/last.pt), 0 when none."""
+    path = Path(out) / "weights" / "last.pt"
+    return int(load_checkpoint(path)["epoch"]) if path.is_file() else 0
 
 
 def _slim(m: dict | None) -> dict:

@@ -7,6 +7,7 @@ else: it copies prepared samples (no inference, allocation, locks or I/O).
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,7 @@ from crossing_assist.fileio import atomic_path
 from crossing_assist.runtime.beacon import CuePlayer
 
 
-class AudioDeviceError(RuntimeError):
+class AudioDeviceError(UserError, RuntimeError):
     """No usable audio output; the message is one line saying what to do."""
 
 

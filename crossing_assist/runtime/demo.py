@@ -11,6 +11,7 @@ Offline it writes ``beacon.wav`` (on the video's timeline), ``annotated.mp4``, `
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import argparse
 import json
 import sys
@@ -21,9 +22,11 @@ ASSETS = Path(__file__).resolve().parents[1] / "assets"
 DEFAULT_BUNDLE = ASSETS / "default_bundle"
 DEFAULT_CLIP = ASSETS / "sample_clip.mp4"
 DEFAULT_OUT = Path("crossing_demo_out")
+MAX_WATCHDOG_S = 2.0   # the stale-frame stop must fire: a longer silence is not a safety switch
+MAX_CAMERA = 63
 
 
-class DemoError(RuntimeError):
+class DemoError(UserError, RuntimeError):
     """A user-facing problem; printed as one ``error:`` line."""
 
 
@@ -60,7 +63,8 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
                     help="the camera's horizontal field of view in its present orientation, 20..170 "
                          "(default: the bundle's, per orientation: typical phone 67 landscape, 53 portrait)")
     ap.add_argument("--watchdog", type=float, default=0.5, help="seconds without a fresh decision before "
-                    "the beacon stops (default 0.5)")
+                    f"the beacon stops (default 0.5; 0 < w <= {MAX_WATCHDOG_S})")
+    ap.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     a = ap.parse_args(argv)
     if a.video is not None and a.camera is not None:
         raise DemoError("give a VIDEO or --camera N, not both")
@@ -73,8 +77,13 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
             check_fov(a.fov)
         except GeometryError as exc:
             raise DemoError(f"--fov: {exc}") from None
-    if not a.watchdog > 0:
-        raise DemoError(f"--watchdog {a.watchdog} invalid; valid: > 0 seconds")
+    if a.camera is not None and not 0 <= a.camera <= MAX_CAMERA:
+        raise DemoError(f"--camera {a.camera} invalid; valid: a camera index 0..{MAX_CAMERA} (0 = the first camera)")
+    if not 0 < a.watchdog <= MAX_WATCHDOG_S:
+        raise DemoError(f"--watchdog {a.watchdog} invalid; valid: 0 < seconds <= {MAX_WATCHDOG_S} "
+                        "(the beacon must stop soon after the frames stop)")
+    if a.max_seconds is not None and not 0 < a.max_seconds < 1e7:
+        raise DemoError(f"--max-seconds {a.max_seconds} invalid; valid: > 0 seconds")
     video, bundle = a.video, a.bundle
     missing = []
     if video is None and a.camera is None:
@@ -135,6 +144,8 @@ def run(cfg: DemoConfig) -> None:
 
     summary = run_offline(OfflineConfig(video=cfg.video, bundle=cfg.bundle, out_dir=cfg.out_dir,
                                         annotate=cfg.annotate, progress=cfg.progress, fov_deg=cfg.fov_deg))
+    for warning in summary.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
     print(f"crossing-demo: {cfg.video} with bundle {cfg.bundle}")
     for line in summary.lines():
         print("  " + line)
@@ -142,24 +153,10 @@ def run(cfg: DemoConfig) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Console entry point; returns the exit status (0 ok, 2 user error)."""
-    from crossing_assist.bundle import BundleError
-    from crossing_assist.runtime.audio import AudioDeviceError
-    from crossing_assist.runtime.sources import SourceError
+    """Console entry point; returns the exit status (0 ok, 2 user error, 130 Ctrl-C)."""
+    from crossing_assist.errors import run_cli
 
-    try:
-        run(parse_args(argv))
-    except (DemoError, BundleError, AudioDeviceError, SourceError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # e.g. an output folder that cannot be written
-        where = f" {exc.filename}" if exc.filename else ""
-        print(f"error: cannot write{where}: {exc.strerror or exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
-    return 0
+    return run_cli(lambda args: run(parse_args(args)) or 0, argv)
 
 
 if __name__ == "__main__":

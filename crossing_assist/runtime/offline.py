@@ -21,12 +21,16 @@ from typing import Iterable
 import cv2
 import numpy as np
 
+from crossing_assist.fileio import sweep_orphans, tmp_tag
 from crossing_assist.runtime.annotate import annotate
 from crossing_assist.runtime.audio import write_wav
 from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
 from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.pipeline import Pipeline, Step
 from crossing_assist.runtime.truth import compare, load_truth, truth_line
+
+
+STOP_TAIL_S = 1.0  # seconds of stop cue that end the WAV of a video that died mid-way
 
 
 @dataclass(frozen=True)
@@ -59,6 +63,7 @@ class Summary:
     truth: dict | None = None
     frame_size: tuple[int, int] | None = None      # (W, H) of the decoded frames
     fov_deg: tuple[float, ...] = ()                # the horizontal FOVs the headings assumed
+    warnings: tuple[str, ...] = ()
 
     def lines(self) -> list[str]:
         """Human-readable summary lines."""
@@ -108,7 +113,7 @@ def _mux(video: Path, wav: Path, out: Path) -> Path | None:
     ffmpeg = shutil.which("ffmpeg")
     if ffmpeg is None:
         return None
-    tmp = out.with_name(f".{out.stem}.tmp{out.suffix}")
+    tmp = out.with_name(f".{out.stem}.{tmp_tag()}{out.suffix}")
     base = [ffmpeg, "-loglevel", "error", "-y", "-i", str(video), "-i", str(wav)]
     for vcodec in (["-c:v", "libx264", "-pix_fmt", "yuv420p"], ["-c:v", "copy"]):  # H.264 plays everywhere
         cmd = base + vcodec + ["-c:a", "aac", "-shortest", str(tmp)]
@@ -140,8 +145,10 @@ class _Recorder:
         self.fovs: set[float] = set()
         self.frame_size: tuple[int, int] | None = None
         self.writer = None
-        self.tmp_video = self.out / ".annotated.tmp.mp4"
-        self.trace = tempfile.NamedTemporaryFile("w", dir=self.out, prefix=".trace.", suffix=".jsonl", delete=False)
+        sweep_orphans(self.out)  # what a killed run left (SIGKILL runs no clean-up)
+        self.tmp_video = self.out / f".annotated.{tmp_tag()}.mp4"
+        self.trace = tempfile.NamedTemporaryFile("w", dir=self.out, prefix=f".trace.{tmp_tag()}-", suffix=".jsonl",
+                                                 delete=False)
 
     def audio_until(self, t_end: float) -> None:
         """Play the current cue up to ``t_end`` seconds."""
@@ -182,10 +189,22 @@ class _Recorder:
         Path(self.trace.name).unlink(missing_ok=True)
         self.tmp_video.unlink(missing_ok=True)
 
-    def finish(self, n: int) -> dict:
-        """Write the final files atomically; returns name -> path (or a note)."""
+    def stop_tail(self, i: int, step: Step, tail_s: float = STOP_TAIL_S) -> float:
+        """End on a stop: the last cue plays until ``step.decision.t`` (the watchdog's moment),
+        then ``step`` (a stop) is recorded as trace line ``i`` and its cue plays for ``tail_s``.
+        Returns the end of the audio (s)."""
+        self.audio_until(step.decision.t)
+        self.player.set_loop(step.loop)
+        self.gates[step.decision.gate] += 1
+        self.reasons[step.decision.reason] += 1
+        self.trace.write(json.dumps(trace_record(i, step)) + "\n")
+        return step.decision.t + tail_s
+
+    def finish(self, n: int, end_s: float | None = None) -> dict:
+        """Write the final files atomically; returns name -> path (or a note). The audio runs to
+        ``end_s`` (default: the end of frame ``n - 1``)."""
         self.close()
-        self.audio_until(n / self.fps)
+        self.audio_until(n / self.fps if end_s is None else end_s)
         out = self.out
         outputs: dict = {"beacon": write_wav(out / "beacon.wav", np.concatenate(self.chunks),
                                              self.cfg.beacon.sample_rate)}
@@ -226,9 +245,19 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     if n == 0:
         rec.abort()
         raise SourceError(f"video {cfg.video} has no readable frames")
-    outputs = rec.finish(n)
+    warnings: list[str] = []
+    end_s = None
+    if source.frame_count > 0 and n < source.frame_count:
+        # The video died mid-way (truncated or corrupt): the frames stopped coming, so the
+        # watchdog stops the beacon; the trace and the WAV end on that stop, never on a direction.
+        watchdog_s = pipeline.decider.cfg.watchdog_s
+        t_stop = max(n / source.fps, (n - 1) / source.fps + watchdog_s * (1 + 1e-6))
+        end_s = rec.stop_tail(n, pipeline.step(None, t_stop))
+        warnings.append(f"video {cfg.video} ended after {n} of {source.frame_count} frames (truncated or corrupt); "
+                        "the trace and beacon.wav end with a stop")
+    outputs = rec.finish(n, end_s)
     truth = load_truth(cfg.video)
     return Summary(frames=n, video_s=n / source.fps, wall_s=time.perf_counter() - t0, gates=dict(rec.gates),
                    reasons=dict(rec.reasons), failed=rec.failed, outputs={k: str(v) for k, v in outputs.items()},
                    truth=compare(truth, rec.headings) if truth else None, frame_size=rec.frame_size,
-                   fov_deg=tuple(sorted(rec.fovs)))
+                   fov_deg=tuple(sorted(rec.fovs)), warnings=tuple(warnings))

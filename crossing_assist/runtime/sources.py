@@ -6,6 +6,7 @@ the video ends or the camera stops delivering. Tests substitute any iterable of 
 
 from __future__ import annotations
 
+from crossing_assist.errors import UserError
 import time
 from pathlib import Path
 from typing import Iterator
@@ -14,7 +15,7 @@ import cv2
 import numpy as np
 
 
-class SourceError(RuntimeError):
+class SourceError(UserError, RuntimeError):
     """A video or camera that cannot be opened; one line naming it."""
 
 
