@@ -106,14 +106,14 @@ def compute_features(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: 
     tmp.mkdir(parents=True)
     try:
         return _compute(backbone, frozen_blocks, ds, size, variants, fov_deg, Path(cache_dir), batch_size,
-                        progress, desc, key, tmp, path)
+                        progress, desc, key, tmp, path, fit, seed)
     finally:  # an error or Ctrl-C: no half-written entry stays behind (a finished one was moved)
         shutil.rmtree(tmp, ignore_errors=True)
 
 
 def _compute(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: tuple[int, int],
              variants: tuple[Variant, ...], fov_deg: float, cache_dir: Path, batch_size: int, progress: bool,
-             desc: str, key: str, tmp: Path, path: Path) -> FeatureSet:
+             desc: str, key: str, tmp: Path, path: Path, fit: str, seed: int) -> FeatureSet:
     backbone.eval()
     n = len(ds.rows) * len(variants)
     probe = backbone.forward_until(torch.zeros(1, 3, *size), frozen_blocks)
