@@ -29,7 +29,7 @@ from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest, write_manifest
 from crossing_assist.runtime.listen import Listener, summarise
 
-SCALES = tuple(float(v) for v in np.round(np.geomspace(0.25, 4.0, 17), 4))
+from crossing_assist.models.evaluate import GATE_SCALES as SCALES  # noqa: E402  (the same grid as crossing-eval)
 
 
 def _subset(ds, rows, out: Path) -> Path:
@@ -45,6 +45,9 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     from crossing_assist.export.exporter import ExportConfig, export_bundle
     from crossing_assist.runtime.engine import Engine
 
+    done = fold / "gate_curve.json"
+    if done.is_file():   # listened to already (the fold does not change once finished)
+        return json.loads(done.read_text())
     bundle = fold / "bundle"
     if not (bundle / "bundle.json").is_file():
         cal = _subset(ptl, [r for r in ptl.rows if r.split == "val" and r.source != source], fold / "calib_data")
@@ -61,8 +64,10 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
         for r in rows:
             lis.add(load_frame(ds.image_path(r), r.flags), r.label)
     t0 = engine.decision_config().threshold
-    return {"source": source, "threshold": t0, "frames": len(pos), "no_crossing_frames": len(negs),
-            "curve": [{"scale": m, **summarise(lis.heard(m * t0))} for m in SCALES]}
+    result = {"source": source, "threshold": t0, "frames": len(pos), "no_crossing_frames": len(negs),
+              "curve": [{"scale": m, **summarise(lis.heard(m * t0))} for m in SCALES]}
+    done.write_text(json.dumps(result, indent=1))
+    return result
 
 
 def pool(folds: list[dict]) -> list[dict]:
@@ -98,14 +103,24 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=200, help="held-out photos per fold (half as many negatives)")
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args(argv)
-    summary = json.loads((a.cv / "cv.json").read_text())
+    import yaml
+
+    from crossing_assist.models.crossval import _fold_metrics
+
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}   # same names: neg_half links neg's images
     folds = []
-    for f in summary["folds"]:
-        fold = a.cv / ("fold-" + "".join(ch if ch.isalnum() or ch in "_.-" else "_" for ch in f["source"]))
-        print(f"fold {f['source']}: export + listen", file=sys.stderr, flush=True)
-        folds.append(fold_curve(fold, f["source"], ptl, neg, used, a.frames, a.seed))
+    for fold in sorted(a.cv.glob("fold-*")):   # the finished folds (a CV still running: those done so far)
+        args = yaml.safe_load((fold / "args.yaml").read_text()) if (fold / "args.yaml").is_file() else None
+        if not args or _fold_metrics(fold, int(args["epochs"])) is None:
+            print(f"{fold.name}: not finished, left out", file=sys.stderr)
+            continue
+        source = args["holdout"][0]
+        print(f"fold {source}: export + listen", file=sys.stderr, flush=True)
+        folds.append(fold_curve(fold, source, ptl, neg, used, a.frames, a.seed))
+    if not folds:
+        print(f"error: no finished fold in {a.cv}", file=sys.stderr)
+        return 2
     curve = pool(folds)
     best, met = choose(curve)
     one = next(c for c in curve if c["scale"] == 1.0)

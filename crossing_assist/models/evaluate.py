@@ -154,6 +154,10 @@ def _bundle_conformal(bundle, probs: np.ndarray, labels: np.ndarray) -> dict:
     return bundle_conformal_report(bundle, probs, labels)
 
 
+#: Gate thresholds swept, as multiples of the bundle's (1 included; the same grid as scripts/choose_gate.py).
+GATE_SCALES = tuple(2.0 ** (j / 4) for j in range(-8, 9))
+
+
 def _views(cfg: EvalConfig, part: Dataset) -> dict[str, list[tuple[np.ndarray, float | None, int, bool]]]:
     """The frames a user's phone would give: each photo as taken (landscape) and, with
     ``cfg.portrait``, its portrait windows; no-crossing frames from ``cfg.negatives`` in both."""
@@ -207,7 +211,7 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
         result[name] = entry
     lis = listeners["landscape"]
     t0 = float(engine.decision_config().threshold)
-    grid = sorted({t0, *(t0 * np.geomspace(0.15, 4.0, 23))})
+    grid = [t0 * m for m in GATE_SCALES]
     curve = lis.risk_coverage(grid)
     result["risk_coverage"] = curve
     result["bundle_threshold"] = t0
