@@ -127,7 +127,6 @@ def test_onnx_matches_pytorch_on_portrait_frames(policy, spec):
             assert np.abs(whole - want).max() > 1e-3
 
 
-@pytest.mark.slow
 def test_exporter_parity_check_passes_on_portrait_frames(policy, spec):
     frames = np.random.default_rng(4).integers(0, 256, (2, 160, 90, 3), dtype=np.uint8)
     assert parity_check(policy, spec, frames) < 2e-4

@@ -5,7 +5,6 @@ import json
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 from geometry_toy import make_toy2_bundle
 from runtime_toy import bar_frame, toy_bundle  # noqa: F401  (fixture)
