@@ -52,6 +52,9 @@ def make_negatives(cfg: NegativesConfig) -> Path:
     out = Path(cfg.out)
     if out.resolve() == Path(cfg.dataset).resolve():
         raise ManifestError(f"--out {out} is the source dataset itself; choose another folder")
+    if not any(flag_value(r.flags, "far_y") is not None and r.label != UNKNOWN for r in ds.rows):
+        raise ManifestError(f"{cfg.dataset}: no row has a far_y flag and a known goal; nothing to crop "
+                            "(import PTL with crossing-data import-ptl to get far_y)")
     rows: list[Row] = []
     for r in tqdm(ds.rows, desc="negatives", unit="img", disable=not cfg.progress):
         far_y = flag_value(r.flags, "far_y")

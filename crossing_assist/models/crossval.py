@@ -78,13 +78,16 @@ def cross_validate(cfg: TrainConfig, *, resume: bool = False) -> dict:
 
 
 def format_cv(summary: dict) -> str:
-    """Lines a person reads: one per fold, then mean +- sd."""
+    """Lines a person reads: one per fold, then mean +- sd (``n/a`` where a figure is undefined,
+    e.g. bin MAE when every fold's is NaN)."""
+    def num(v, spec: str, width: int = 0) -> str:
+        return format("n/a" if v is None else format(v, spec), f">{width}")
+
     lines = [f"{'held out':<16} {'n':>5} {'accuracy':>9} {'bin MAE':>8} {'far-x err':>9} {'majority':>9}"]
     for f in summary["folds"]:
-        lines.append(f"{f['source']:<16} {f['n']:>5} {f['accuracy']:>9.3f} {f['bin_mae']:>8.3f} "
-                     f"{(f['far_x_error'] or float('nan')):>9.4f} {f['majority_accuracy']:>9.3f}")
-    ms = lambda k: f"{summary[k]['mean']:.3f} +- {summary[k]['sd'] or 0:.3f}"  # noqa: E731
+        lines.append(f"{f['source']:<16} {f['n']:>5} {num(f['accuracy'], '.3f', 9)} {num(f['bin_mae'], '.3f', 8)} "
+                     f"{num(f['far_x_error'], '.4f', 9)} {num(f['majority_accuracy'], '.3f', 9)}")
+    ms = lambda k, p=".3f": f"{num(summary[k]['mean'], p)} +- {num(summary[k]['sd'] or 0, p)}"  # noqa: E731
     lines.append(f"leave-one-source-out over {len(summary['folds'])} folds: accuracy {ms('accuracy')}, "
-                 f"bin MAE {ms('bin_mae')}, far-x error {summary['far_x_error']['mean'] or float('nan'):.4f} "
-                 f"+- {summary['far_x_error']['sd'] or 0:.4f}")
+                 f"bin MAE {ms('bin_mae')}, far-x error {ms('far_x_error', '.4f')}")
     return "\n".join(lines)

@@ -1,0 +1,148 @@
+"""Camera geometry (issue 12): orientation, FOV range, frame shapes, and the bundle's schema-2
+``geometry`` block: parsing, one-line errors, schema 1 read as stretch, Bundle.camera_fov, and
+an edited bundle.json caught against the graph."""
+
+import json
+
+import numpy as np
+import pytest
+from geometry_toy import LANDSCAPE_FOV, PORTRAIT_FOV, make_toy2_bundle, toy2_meta
+from runtime_toy import make_toy_bundle
+
+from crossing_assist.bundle import BundleError, parse_meta, read_bundle
+from crossing_assist.geometry import (
+    Geometry,
+    GeometryError,
+    check_fov,
+    check_frame_shape,
+    content_window,
+    letterbox,
+    letterbox_box,
+    orientation,
+    window_x,
+)
+
+
+def test_orientation_and_fov_per_orientation():
+    assert orientation(640, 480) == "landscape" and orientation(480, 640) == "portrait"
+    assert orientation(500, 500) == "landscape"
+    g = Geometry(camera_fov_deg=(67.0, 53.0))
+    assert g.camera_fov(640, 480) == 67.0 and g.camera_fov(480, 640) == 53.0
+    assert g.camera_fov(480, 640, override=70.0) == 70.0
+    for bad in (10, 19.9, 170.5, 200, "wide", None, float("nan")):
+        with pytest.raises(GeometryError) as e:
+            check_fov(bad) if bad is not None else g.camera_fov(480, 640, override=bad or "x")
+        assert "\n" not in str(e.value) and "20..170" in str(e.value)
+    assert check_fov(20) == 20.0 and check_fov(170) == 170.0
+
+
+def test_frame_shapes_refused():
+    check_frame_shape(480, 640)
+    check_frame_shape(8, 64)                       # 8:1 is the limit
+    for h, w in [(1, 100), (100, 1), (7, 40), (10, 100), (100, 10), (30, 241)]:
+        with pytest.raises(GeometryError) as e:
+            check_frame_shape(h, w)
+        assert "\n" not in str(e.value) and "Invalid frame" in str(e.value)
+
+
+def test_numpy_letterbox_matches_the_box_and_pads_with_pad_rgb():
+    rng = np.random.default_rng(0)
+    for h, w in [(120, 160), (160, 120), (90, 160), (160, 90), (50, 50), (16, 112)]:
+        img = rng.integers(0, 50, (h, w, 3), dtype=np.uint8)
+        out = letterbox(img, (48, 64), (124, 116, 104))
+        top, left, nh, nw = letterbox_box(h, w, (48, 64))
+        pad = np.all(out == np.array([124, 116, 104], np.uint8), axis=-1)
+        box = np.zeros((48, 64), bool)
+        box[top:top + nh, left:left + nw] = True
+        np.testing.assert_array_equal(~pad, box)
+        x0, x1 = content_window(h, w, (48, 64))
+        assert (x0, x1) == (left / 64, (left + nw) / 64)
+
+
+def test_window_x_moves_the_goal_and_clips_into_edge_strips():
+    assert window_x(0.5, 0.25, 0.5) == pytest.approx(0.5)
+    assert window_x(0.3, 0.25, 0.5) == pytest.approx(0.1)
+    assert 0 < window_x(0.1, 0.25, 0.5) < 1 / 12          # out of view to the left: strip 1
+    assert 11 / 12 < window_x(0.9, 0.25, 0.5) < 1         # to the right: strip 12
+
+
+# ----------------------------------------------------------------------------- bundle schema 2
+
+def _err(meta) -> str:
+    with pytest.raises(BundleError) as e:
+        parse_meta(meta, need_bytes=False)
+    msg = str(e.value)
+    assert "\n" not in msg
+    return msg
+
+
+def test_schema2_geometry_parses():
+    b = parse_meta(toy2_meta(), need_bytes=False)
+    assert b.schema_version == 2 and b.geometry.fit == "stretch"
+    assert b.geometry.camera_fov_deg == (LANDSCAPE_FOV, PORTRAIT_FOV) and b.geometry.train_fov_deg == 67.0
+    lb = toy2_meta()
+    lb["geometry"].update(fit="letterbox", pad_rgb=[1, 2, 3])
+    assert parse_meta(lb, need_bytes=False).geometry.pad_rgb == (1, 2, 3)
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda g: g.update(fit="crop"), "geometry.fit"),
+    (lambda g: g.pop("fit"), "fit"),
+    (lambda g: g.update(fit="letterbox"), "pad_rgb"),                         # letterbox needs pad_rgb
+    (lambda g: g.update(fit="letterbox", pad_rgb=[1, 2]), "pad_rgb"),
+    (lambda g: g.update(fit="letterbox", pad_rgb=[1, 2, 256]), "pad_rgb"),
+    (lambda g: g.update(fit="letterbox", pad_rgb=[1.5, 2, 3]), "pad_rgb"),
+    (lambda g: g.update(fit="letterbox", pad_rgb="grey"), "pad_rgb"),
+    (lambda g: g["camera_fov_deg"].update(portrait=10.0), "camera_fov_deg.portrait"),
+    (lambda g: g["camera_fov_deg"].update(landscape=175.0), "camera_fov_deg.landscape"),
+    (lambda g: g["camera_fov_deg"].pop("portrait"), "portrait"),
+    (lambda g: g.update(camera_fov_deg=67.0), "camera_fov_deg"),
+    (lambda g: g.update(strips="canvas"), "strips"),
+])
+def test_schema2_geometry_errors_are_one_line(edit, words):
+    meta = toy2_meta()
+    edit(meta["geometry"])
+    assert words in _err(meta)
+
+
+def test_schema2_without_geometry_is_refused_and_schema3_unsupported():
+    meta = toy2_meta()
+    del meta["geometry"]
+    assert "geometry" in _err(meta)
+    assert "unsupported" in _err(toy2_meta() | {"schema_version": 3})
+
+
+def test_schema1_reads_as_stretch_with_one_fov(tmp_path):
+    b = read_bundle(make_toy_bundle(tmp_path / "b1"))
+    assert b.schema_version == 1 and b.geometry.fit == "stretch"
+    assert b.geometry.camera_fov_deg == (90.0, 90.0)
+    assert b.camera_fov(640, 480) == 90.0 == b.camera_fov(480, 640)
+
+
+def test_bundle_camera_fov_by_orientation_and_override(tmp_path):
+    b = read_bundle(make_toy2_bundle(tmp_path / "b2"))
+    assert b.camera_fov(640, 480) == LANDSCAPE_FOV
+    assert b.camera_fov(480, 640) == PORTRAIT_FOV
+    assert b.camera_fov(480, 640, override=60.0) == 60.0 == b.camera_fov(640, 480, override=60)
+    with pytest.raises(GeometryError):
+        b.camera_fov(480, 640, override=10.0)
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda m: m.update(fov_deg=70.0), "fov_deg"),
+    (lambda m: m["geometry"]["camera_fov_deg"].update(portrait=60.0), "geometry"),
+    (lambda m: m["geometry"].update(fit="letterbox", pad_rgb=[0, 0, 0]), "geometry"),
+])
+def test_edited_geometry_in_bundle_json_is_caught_against_the_graph(tmp_path, edit, key):
+    from crossing_assist.runtime.engine import Engine
+
+    folder = make_toy2_bundle(tmp_path / "b")
+    Engine(folder)                                   # as written: fine
+    meta = json.loads((folder / "bundle.json").read_text())
+    edit(meta)
+    (folder / "bundle.json").write_text(json.dumps(meta))
+    read_bundle(folder)                              # still a valid bundle.json on its own
+    with pytest.raises(BundleError) as e:
+        Engine(folder)
+    msg = str(e.value)
+    assert "\n" not in msg and f"'{key}'" in msg and "re-export" in msg

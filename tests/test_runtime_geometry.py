@@ -1,0 +1,165 @@
+"""The runtime follows the camera (issue 12): the FOV of the frame's orientation (or the
+user's setting) turns strips into headings; a turn between portrait and landscape starts the
+belief afresh; frames the model cannot see give the stop cue; crossing-demo --fov."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from geometry_toy import LANDSCAPE_FOV, PORTRAIT_FOV, make_toy2_bundle
+from runtime_toy import bar_frame, toy_bundle  # noqa: F401  (fixture)
+
+from crossing_assist.actions import bin_center_x, get_space, heading_to_x, x_to_bin
+from crossing_assist.bundle import BundleError
+from crossing_assist.runtime.beacon import KIND_BEACON, KIND_STOP
+from crossing_assist.runtime.belief import belief_heading
+from crossing_assist.runtime.engine import Engine
+from crossing_assist.runtime.pipeline import Pipeline
+
+DEMO = [sys.executable, "-m", "crossing_assist.runtime.demo"]
+STRIP = 11                                      # near the edge: a wrong FOV moves the heading a strip or two
+
+
+@pytest.fixture(scope="module")
+def toy2(tmp_path_factory):
+    return make_toy2_bundle(tmp_path_factory.mktemp("toy2") / "bundle")
+
+
+def _landscape(x=bin_center_x(STRIP)):
+    return bar_frame(x, h=72, w=96)
+
+
+def _portrait(x=bin_center_x(STRIP)):
+    return bar_frame(x, h=128, w=96)
+
+
+def test_engine_reports_the_orientations_fov_and_headings_use_it(toy2):
+    eng = Engine(toy2)
+    space = eng.space
+    for frame, fov in ((_landscape(), LANDSCAPE_FOV), (_portrait(), PORTRAIT_FOV)):
+        p = eng.predict(frame)
+        assert p.ok and p.fov_deg == fov
+        assert space.action_bins(p.action) == (STRIP,)
+        assert p.heading_deg == pytest.approx(space.action_heading(p.action, fov))
+        assert x_to_bin(heading_to_x(p.heading_deg, fov)) == STRIP       # back to the bar's strip
+    # the two FOVs really give different headings for the same strip
+    assert abs(space.action_heading(STRIP, LANDSCAPE_FOV) - space.action_heading(STRIP, PORTRAIT_FOV)) > 5
+
+
+def test_engine_fov_override_applies_to_both_orientations_and_is_checked(toy2):
+    eng = Engine(toy2, fov_deg=60.0)
+    assert eng.predict(_landscape()).fov_deg == 60.0 == eng.predict(_portrait()).fov_deg
+    assert eng.decision_config().fov_deg == 60.0
+    assert Engine(toy2).decision_config().fov_deg == LANDSCAPE_FOV
+    for bad in (10.0, 171.0):
+        with pytest.raises(BundleError) as e:
+            Engine(toy2, fov_deg=bad)
+        assert "\n" not in str(e.value) and "20..170" in str(e.value)
+
+
+def test_schema1_bundle_uses_its_one_fov_in_both_orientations(toy_bundle):  # noqa: F811
+    eng = Engine(toy_bundle)
+    assert eng.predict(_landscape()).fov_deg == 90.0 == eng.predict(_portrait()).fov_deg
+
+
+def _run(pipe, frames, t0=0.0, fps=10.0):
+    return [pipe.step(f, t0 + i / fps) for i, f in enumerate(frames)]
+
+
+def test_pipeline_resets_the_belief_when_the_orientation_flips(toy2):
+    pipe = Pipeline(Engine(toy2))
+    steps = _run(pipe, [_landscape()] * 10)
+    assert pipe.decider.cfg.fov_deg == LANDSCAPE_FOV
+    assert int(np.argmax(steps[-1].decision.belief)) == STRIP and steps[-1].cue.kind == KIND_BEACON
+    # a landscape frame with no crossing keeps the belief (same camera geometry)
+    same = _run(pipe, [bar_frame(None, 72, 96)], t0=1.0)[0]
+    assert int(np.argmax(same.decision.belief)) == STRIP and max(same.decision.belief) > 0.5
+    # turned to portrait, also no crossing: the old strips mean other directions -> start afresh
+    flip = _run(pipe, [bar_frame(None, 128, 96)], t0=1.1)[0]
+    assert pipe.decider.cfg.fov_deg == PORTRAIT_FOV
+    assert max(flip.decision.belief) < 0.2 and flip.cue.kind == KIND_STOP
+    # portrait frames with the bar: a portrait heading, on the bar's strip
+    steps = _run(pipe, [_portrait()] * 10, t0=1.2)
+    d = steps[-1].decision
+    assert steps[-1].cue.kind == KIND_BEACON
+    assert x_to_bin(heading_to_x(d.heading_deg, PORTRAIT_FOV)) == STRIP
+
+
+@pytest.mark.parametrize("shape", [(1, 96), (96, 1), (20, 200), (200, 20)])
+def test_frames_the_model_cannot_see_give_not_ok_and_the_stop_cue(toy2, shape):
+    eng = Engine(toy2)
+    bad = np.full((*shape, 3), 128, np.uint8)
+    p = eng.predict(bad)
+    assert not p.ok and p.error and p.heading_deg is None
+    pipe = Pipeline(eng)
+    on = _run(pipe, [_landscape()] * 10)
+    assert on[-1].cue.kind == KIND_BEACON
+    off = _run(pipe, [bad] * 10, t0=1.0)
+    assert all(not s.prediction.ok for s in off)
+    assert off[-1].decision.stop and off[-1].cue.kind == KIND_STOP
+
+
+def test_demo_fov_out_of_range_is_one_error_line(tmp_path, toy2):
+    clip = tmp_path / "c.mp4"
+    clip.write_bytes(b"")
+    for fov in ("10", "171", "-67"):
+        r = subprocess.run([*DEMO, str(clip), "--bundle", str(toy2), "--out", str(tmp_path / "o"), "--fov", fov],
+                           capture_output=True, text=True)
+        assert r.returncode == 2, r.stderr
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error:"), r.stderr
+        assert "Traceback" not in r.stderr
+
+
+def _synth(tmp_path, name, size):
+    out = tmp_path / f"{name}.mp4"
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.data_tools.cli", "synth", "--video", "--size", size,
+                        "--seconds", "2", "--fps", "4", "--seed", "3", "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+@pytest.mark.parametrize("size, orient, fov, extra", [
+    ("240x320", "portrait", PORTRAIT_FOV, []),
+    ("320x240", "landscape", LANDSCAPE_FOV, []),
+    ("240x320", "portrait", 70.0, ["--fov", "70"]),
+])
+def test_demo_on_synth_video_uses_the_orientations_fov(tmp_path, toy2, size, orient, fov, extra):
+    clip = _synth(tmp_path, orient, size)
+    out = tmp_path / "out"
+    r = subprocess.run([*DEMO, str(clip), "--bundle", str(toy2), "--out", str(out), "--no-video", "--quiet", *extra],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    w, h = size.split("x")
+    assert f"frames {w}x{h} ({orient}); headings assume a horizontal field of view of {fov:g} deg" in r.stdout
+    trace = [json.loads(line) for line in (out / "trace.jsonl").read_text().splitlines()]
+    assert len(trace) == 8
+    space = get_space(13)
+    other = LANDSCAPE_FOV if fov != LANDSCAPE_FOV else PORTRAIT_FOV
+    checked = 0
+    for rec in trace:
+        if rec["learner_heading"] is None:
+            continue
+        b = np.asarray(rec["belief"])
+        assert rec["learner_heading"] == pytest.approx(belief_heading(b, space, fov)[1], abs=1e-3)
+        assert rec["learner_heading"] != pytest.approx(belief_heading(b, space, other)[1], abs=1e-3)
+        assert abs(rec["learner_heading"]) <= fov / 2 + 1e-6
+        checked += 1
+    assert checked > 0
+
+
+def test_demo_summary_names_the_fov_on_a_bar_clip(tmp_path, toy2):
+    from runtime_toy import write_clip
+
+    clip = write_clip(tmp_path / "bar.mp4", [bin_center_x(STRIP)] * 12, fps=10, h=128, w=96)
+    out = tmp_path / "o"
+    r = subprocess.run([*DEMO, str(clip), "--bundle", str(toy2), "--out", str(out), "--no-video", "--quiet"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert f"frames 96x128 (portrait); headings assume a horizontal field of view of {PORTRAIT_FOV:g} deg" in r.stdout
+    trace = [json.loads(line) for line in (out / "trace.jsonl").read_text().splitlines()]
+    on = [rec for rec in trace if rec["heading_deg"] is not None]
+    assert on and all(x_to_bin(heading_to_x(rec["heading_deg"], PORTRAIT_FOV)) == STRIP for rec in on[-3:])

@@ -1,0 +1,126 @@
+"""What the user hears (issue 13): summarise / choose_threshold on hand-made lists, a Listener
+over the toy bundles, and crossing-eval --bundle with listen numbers and risk_coverage.png."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+from geometry_toy import make_toy2_bundle
+from runtime_toy import bar_frame, toy_bundle  # noqa: F401  (fixture)
+
+from crossing_assist.actions import UNKNOWN, bin_center_x
+from crossing_assist.data_tools.images import save_rgb
+from crossing_assist.data_tools.manifest import Row, write_manifest
+from crossing_assist.runtime.engine import Engine
+from crossing_assist.runtime.listen import Heard, Listener, choose_threshold, summarise
+
+
+def test_summarise_rates_on_a_hand_made_list():
+    heard = [Heard(5, True, 5), Heard(5, True, 6), Heard(5, True, 8), Heard(3, False, 0),
+             Heard(UNKNOWN, False, 0), Heard(UNKNOWN, True, 4)]
+    s = summarise(heard)
+    assert s["frames_with_crossing"] == 4 and s["frames_without_crossing"] == 2
+    assert s["beacon_on"] == pytest.approx(3 / 4)
+    assert s["confidently_wrong"] == pytest.approx(1 / 4)      # only the one 3 strips off
+    assert s["accuracy_heard"] == pytest.approx(1 / 4)
+    assert s["strip_mae_on"] == pytest.approx(4 / 3)
+    assert s["silence_no_crossing"] == pytest.approx(1 / 2)
+    s = summarise([Heard(7, True, 9), Heard(7, True, 5)])       # exactly 2 strips off is wrong
+    assert s["confidently_wrong"] == 1.0 and s["silence_no_crossing"] is None
+    s = summarise([Heard(UNKNOWN, False, 0)])
+    assert s["beacon_on"] is None and s["strip_mae_on"] is None and s["silence_no_crossing"] == 1.0
+
+
+def _pt(t, on, wrong, silence):
+    return {"threshold": t, "beacon_on": on, "confidently_wrong": wrong, "silence_no_crossing": silence}
+
+
+def test_choose_threshold_takes_the_most_beacon_within_the_limits():
+    curve = [_pt(0.5, 0.2, 0.0, 1.0), _pt(1.0, 0.5, 0.004, 0.99), _pt(1.5, 0.7, 0.01, 0.99),
+             _pt(2.0, 0.8, 0.0, 0.9)]
+    assert choose_threshold(curve)["threshold"] == 1.0
+    assert choose_threshold(curve, max_wrong=0.02)["threshold"] == 1.5
+    assert choose_threshold(curve, max_wrong=0.02, min_silence=0.8)["threshold"] == 2.0
+    assert choose_threshold([_pt(1.0, 0.5, 0.1, 1.0)]) is None
+    assert choose_threshold([_pt(1.0, 0.5, 0.0, None)])["threshold"] == 1.0   # no negatives: no limit
+    tie = [_pt(2.0, 0.5, 0.0, 1.0), _pt(1.0, 0.5, 0.0, 1.0)]
+    assert choose_threshold(tie)["threshold"] == 1.0                           # the lower of equals
+
+
+def test_listener_puts_the_beacon_on_the_bars_strip_and_is_silent_on_flat(toy_bundle):  # noqa: F811
+    lis = Listener(Engine(toy_bundle), seconds=0.5)
+    for strip in (2, 6, 11):
+        lis.add(bar_frame(bin_center_x(strip)), strip)
+    lis.add(bar_frame(None), UNKNOWN)
+    lis.add(bar_frame(None, noise=0.3), UNKNOWN)
+    assert all(len(c) == 5 for c in lis.clips)
+    heard = lis.heard()
+    assert [(h.label, h.on, h.strip) for h in heard[:3]] == [(2, True, 2), (6, True, 6), (11, True, 11)]
+    assert [h.on for h in heard[3:]] == [False, False]
+    s = summarise(heard)
+    assert s["beacon_on"] == 1.0 and s["confidently_wrong"] == 0.0 and s["silence_no_crossing"] == 1.0
+    # the gate threshold decides: nothing passes a tiny one; the curve replays the same clips
+    assert not any(h.on for h in lis.heard(threshold=1e-6))
+    curve = lis.risk_coverage([1e-6, 1.0, 100.0])
+    assert [c["threshold"] for c in curve] == [1e-6, 1.0, 100.0]
+    assert curve[0]["beacon_on"] == 0.0 and curve[1]["beacon_on"] == 1.0
+    assert curve[2]["silence_no_crossing"] < 1.0       # everything passes a huge one: noise speaks too
+
+
+def test_listener_reads_strips_with_the_frames_fov(tmp_path):
+    lis = Listener(Engine(make_toy2_bundle(tmp_path / "b")), seconds=0.5)
+    for strip in (1, 3, 10, 12):
+        lis.add(bar_frame(bin_center_x(strip), h=128, w=96), strip)    # portrait frames
+        lis.add(bar_frame(bin_center_x(strip), h=72, w=96), strip)     # landscape frames
+    heard = lis.heard()
+    assert all(h.on and h.strip == h.label for h in heard), heard
+
+
+def _bar_dataset(root, n=6, unknown=False):
+    rows = []
+    for i in range(n):
+        strip = 1 + (i * 5) % 12
+        img = bar_frame(None if unknown else bin_center_x(strip), h=72, w=96)
+        save_rgb(root / "images" / f"f{i}.png", img)
+        rows.append(Row(f"images/f{i}.png", UNKNOWN if unknown else strip, None if unknown else bin_center_x(strip),
+                        f"src:{i % 2}", "val", {}, ()))
+    write_manifest(root, rows)
+    return root
+
+
+def test_crossing_eval_bundle_writes_listen_numbers_and_risk_coverage(tmp_path, toy_bundle):  # noqa: F811
+    data = _bar_dataset(tmp_path / "data")
+    neg = _bar_dataset(tmp_path / "neg", n=3, unknown=True)
+    out = tmp_path / "eval"
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(toy_bundle),
+                        "--data", str(data), "--split", "val", "--negatives", str(neg), "--portrait", "2",
+                        "--clip-seconds", "0.5", "--examples", "0", "--out", str(out), "--quiet"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "landscape (heard, 6 + 3 no-crossing frames)" in r.stdout
+    assert "portrait (heard, 12 + 6 no-crossing frames)" in r.stdout
+    m = json.loads((out / "metrics.json").read_text())
+    lis = m["listen"]
+    land, port = lis["landscape"], lis["portrait"]
+    assert land["frames_with_crossing"] == 6 and land["frames_without_crossing"] == 3
+    assert port["frames_with_crossing"] == 12 and port["frames_without_crossing"] == 6
+    assert land["accuracy"] == 1.0 and land["beacon_on"] == 1.0 and land["confidently_wrong"] == 0.0
+    assert land["silence_no_crossing"] == 1.0 and land["beacon_on_goal_in_view"] == 1.0
+    assert port["silence_no_crossing"] == 1.0 and 0 < port["beacon_on"] <= 1.0
+    assert port["beacon_on_goal_in_view"] == 1.0
+    thresholds = [c["threshold"] for c in lis["risk_coverage"]]
+    assert thresholds == sorted(thresholds) and lis["bundle_threshold"] in thresholds
+    assert lis["best_threshold_here"] is None or lis["best_threshold_here"]["threshold"] in thresholds
+    assert (out / "risk_coverage.png").stat().st_size > 0
+
+
+def test_crossing_eval_bad_listen_options_are_one_line(tmp_path, toy_bundle):  # noqa: F811
+    data = _bar_dataset(tmp_path / "data", n=2)
+    for args in (["--portrait", "13"], ["--clip-seconds", "0"]):
+        r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(toy_bundle),
+                            "--data", str(data), "--split", "val", "--out", str(tmp_path / "e"), *args],
+                           capture_output=True, text=True)
+        assert r.returncode != 0
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error:"), r.stderr
