@@ -68,6 +68,8 @@ def cross_validate(cfg: TrainConfig, *, resume: bool = False) -> dict:
         summary[k] = {"mean": float(vals.mean()) if len(vals) else None,
                       "sd": float(vals.std(ddof=1)) if len(vals) > 1 else None}
     out.mkdir(parents=True, exist_ok=True)
+    clean = lambda v: None if isinstance(v, float) and math.isnan(v) else v  # noqa: E731  (strict JSON: null, not NaN)
+    summary["folds"] = [{k: clean(v) for k, v in f.items()} for f in folds]
     atomic_write_text(out / "cv.json", json.dumps(summary, indent=1))
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=["source", "n", *CV_METRICS])

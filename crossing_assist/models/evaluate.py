@@ -155,7 +155,7 @@ def _bundle_conformal(bundle, probs: np.ndarray, labels: np.ndarray) -> dict:
 
 
 #: Gate thresholds swept, as multiples of the bundle's (1 included; the same grid as scripts/choose_gate.py).
-GATE_SCALES = tuple(2.0 ** (j / 4) for j in range(-8, 9))
+GATE_SCALES = tuple(2.0 ** (j / 8) for j in range(-16, 17))
 
 
 def _views(cfg: EvalConfig, part: Dataset) -> dict[str, list[tuple[np.ndarray, float | None, int, bool]]]:
@@ -236,6 +236,8 @@ def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
         probs, info, bundle = _eval_bundle(cfg, part)
         n_actions, majority = int(bundle.actions.n), bundle.training.get("majority_action")
         default_out = Path(cfg.bundle) / f"eval_{cfg.split}"
+    if majority == 0:   # runs from before the baseline excluded unknown: the eval labels' majority
+        majority = None
     grouped = cfg.actions is not None and cfg.actions != n_actions
     if grouped:  # a coarser action's probability is the sum over its strips
         if n_actions != 13:

@@ -253,7 +253,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
             n_extra += int(sum(r.source not in cfg.holdout for r in ex.rows))
     val = _to_split(fs(val_ds, make_variants(False), "val"), cfg.actions) if val_ds is not None else None
     sel = val if cfg.select_on == "val" else held
-    majority = int(np.bincount(tr.actions, minlength=cfg.actions).argmax())
+    # the majority-class baseline is the most frequent *direction* (unknown negatives would make a
+    # baseline that is right on no crossing photo); all-unknown training data keeps unknown
+    counts = np.bincount(tr.actions, minlength=cfg.actions)
+    majority = int(counts[1:].argmax()) + 1 if counts[1:].any() else 0
     policy.config["counts"] = {"train_split": int(len(train_ds)), "extra_train": n_extra,
                                "train_samples": int(len(tr.actions)), "val": int(len(val_ds or ())),
                                "holdout_frames": int(len(held.actions)) if held is not None else 0}
