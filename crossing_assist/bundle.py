@@ -394,9 +394,22 @@ def read_bundle(bundle_dir: str | os.PathLike, *, verify_hash: bool = True) -> B
     return bundle
 
 
+def _strict(value: Any) -> Any:
+    """NaN and infinities become null, recursively: bundle.json is strict JSON (the phone's
+    ``JSON.parse`` refuses ``NaN``)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, Mapping):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    return value
+
+
 def embedded_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
-    """The bundle.json dict without the fields that depend on the model bytes (for metadata_props)."""
-    return {k: v for k, v in meta.items() if k not in BYTE_FIELDS}
+    """The bundle.json dict without the fields that depend on the model bytes (for metadata_props),
+    as strict JSON (non-finite numbers become null)."""
+    return {k: _strict(v) for k, v in meta.items() if k not in BYTE_FIELDS}
 
 
 def check_replaceable(bundle_dir: str | os.PathLike, *, force: bool = False) -> None:
@@ -449,7 +462,7 @@ def write_bundle(bundle_dir: str | os.PathLike, onnx_bytes: bytes, meta: Mapping
             f.flush()
             os.fsync(f.fileno())
         with open(tmp / BUNDLE_JSON, "w", encoding="utf-8") as f:
-            json.dump(full, f, indent=2)
+            json.dump(full, f, indent=2, allow_nan=False)
             f.write("\n")
             f.flush()
             os.fsync(f.fileno())

@@ -555,13 +555,16 @@ def test_app_works_offline_after_first_load(run: dict) -> None:
 
 def test_portrait_real_bundle_outputs_match_onnxruntime(portrait: dict) -> None:
     """onnxruntime-web (package.json) and Python's onnxruntime run the real default graph (its
-    MC noise made constant) on the same portrait frames: probabilities within 1e-4. This is
-    the parity proof while the two versions differ."""
+    MC noise made constant) on the same portrait frames: probabilities within 1e-4 for an fp32
+    graph. This is the parity proof while the two versions differ. An int8 graph is held to 0.05:
+    the two runtimes' int8 kernels (x86 VNNI vs WASM) round the requantised activations
+    differently (measured: 0.020 on the default bundle), so exact agreement is not a property
+    int8 has."""
     worst = 0.0
     for entry, rgb in _app_steps(portrait, least=10):
         pred = portrait["engine"].predict(rgb)
         worst = max(worst, float(np.abs(np.asarray(entry["outputs"]["probs"]) - pred.probs).max()))
-    assert worst <= 1e-4, worst
+    assert worst <= (0.05 if portrait["engine"].bundle.precision == "int8" else 1e-4), worst
 
 
 def test_portrait_uses_the_portrait_fov_and_decides_as_python(portrait: dict) -> None:
@@ -569,7 +572,8 @@ def test_portrait_uses_the_portrait_fov_and_decides_as_python(portrait: dict) ->
     fovs = [e for e in trace if e["kind"] == "fov"]
     assert fovs and all(e["orientation"] == "portrait" and e["height"] > e["width"] for e in fovs), fovs
     assert {e["fov_deg"] for e in fovs} == {portrait["geometry"]["camera_fov_deg"]["portrait"]}
-    _assert_same_decisions(portrait["engine"], _app_steps(portrait, least=10), tol_deg=1e-3)
+    int8 = portrait["engine"].bundle.precision == "int8"   # see the parity test's tolerance
+    _assert_same_decisions(portrait["engine"], _app_steps(portrait, least=10), tol_deg=0.5 if int8 else 1e-3)
 
 
 def test_portrait_screen_control_fills_the_screen(portrait: dict) -> None:

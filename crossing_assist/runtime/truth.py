@@ -34,7 +34,11 @@ def compare(truth: dict, headings: Sequence[float | None]) -> dict | None:
     labels, az = truth["label"], truth["goal_azimuth_deg"]
     if len(labels) != len(headings):
         return None
-    visible = np.array([str(lab) != "unknown" for lab in labels])
+    far_x = truth.get("far_x")
+    if isinstance(far_x, list) and len(far_x) == len(labels):   # in view = the goal's x is in the frame
+        visible = np.array([x is not None for x in far_x])
+    else:
+        visible = np.array([str(lab) != "unknown" for lab in labels])
     guided = np.array([h is not None for h in headings])
     errs = [abs(h - a) for h, a, v in zip(headings, az, visible) if h is not None and v]
     return {
