@@ -12,11 +12,15 @@ mode (Mesa works, no X server).
 * Seeding: ``reset(seed=s)`` seeds the simulator's generator AND ``np.random`` (the
   simulator draws from both).
 * Reward: the thesis's Eq. 27 with ``c = 0`` (lane following, no obstacles):
-  ``R = |v|^2 dir(v) - 10 d`` inside the world, with ``v`` the robot's measured speed (m/s),
-  ``dir(v)`` the cosine between its heading and the lane (``dot_dir``) and ``d`` the distance
-  from the lane centre (m); 0 when the robot is on the road but in no lane. The simulator's own
-  reward (``speed constant * dot_dir - 10 d + 40 * proximity penalty``) is not used: its
-  proximity term charges the expert about -1950 per 512 steps on udem1 for passing houses.
+  ``R = |v|^2 dir(v) - 10 d`` inside the world, with ``dir(v)`` the cosine between the robot's
+  heading and the lane (``dot_dir``), ``d`` the distance from the lane centre (m) and ``v`` the
+  speed the simulator's own reward uses (its ``robot_speed``, 1.2: a constant, so the reward
+  does not depend on the velocity action, as in the thesis's simulator); 0 when the robot is on
+  the road but in no lane. With the measured speed (about 0.3 m/s at the expert's throttle)
+  ``|v|^2`` is about 0.09 and the expert's steps would be mostly penalties, which the thesis's
+  Table 3 (9 penalty units in 5120 expert steps) rules out. The simulator's proximity term
+  (``40 * proximity penalty``: about -1950 per 512 expert steps on udem1, for passing houses)
+  is not part of the reward.
 * Invalid pose (off the road or a collision; the simulator's ``done``): reward -1000,
   ``info["out_of_bounds"] = True``, terminated; the simulator's own step limit is disabled, so
   the horizon is the caller's alone.
@@ -113,7 +117,7 @@ class DuckietownLaneEnv(gym.Env):
             lp = s.get_lane_pos2(s.cur_pos, s.cur_angle)
         except Exception:  # noqa: BLE001 - NotInLane
             return {"proximity_unused": prox}
-        speed = float(s.speed)
+        speed = float(s.robot_speed)
         return {"speed": speed * speed * float(lp.dot_dir), "lateral": -10.0 * abs(float(lp.dist)),
                 "proximity_unused": prox}
 
