@@ -3,6 +3,7 @@ an EGL context are available - i.e. under .venv-duckietown/bin/python -m pytest 
 cleanly elsewhere (the project's .venv has numpy 2 and no simulator)."""
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -10,7 +11,12 @@ import pytest
 from crossing_assist.iil.envs.duckietown import duckietown_available
 
 OK, WHY = duckietown_available()
-pytestmark = pytest.mark.skipif(not OK, reason=f"Duckietown unavailable: {WHY}")
+REQUIRED = bool(os.environ.get("CROSSING_REQUIRE_DUCKIETOWN"))  # CI's smoke run: unavailable is a failure
+pytestmark = pytest.mark.skipif(not OK and not REQUIRED, reason=f"Duckietown unavailable: {WHY}")
+
+
+def test_duckietown_is_available():
+    assert OK, WHY
 
 
 @pytest.fixture(scope="module")
@@ -22,6 +28,8 @@ def env():
     try:
         e = DuckietownLaneEnv()
     except Exception as exc:  # noqa: BLE001 - no EGL display here
+        if REQUIRED:
+            raise
         pytest.skip(f"Duckietown could not start: {exc}")
     yield e
     e.close()
