@@ -189,3 +189,14 @@ def test_a_folder_with_another_config_is_refused(tmp_path):
     run(RunConfig(env="toy", algo="dagger", seed=1, episodes=1, horizon=4, learner=TINY), tmp_path)
     with pytest.raises(RunError, match="different horizon"):
         run(RunConfig(env="toy", algo="dagger", seed=1, episodes=1, horizon=6, learner=TINY), tmp_path)
+
+
+def test_baselines_are_the_same_in_both_configurations():
+    """Supervised, DAgger and AggreVaTe ignore the expert's uncertainty and every UPMS setting:
+    the report may show one set of their runs in both configurations' tables."""
+    for name in ("supervised", "dagger", "aggrevate"):
+        a, _ = _episodes(name, n=3, seed=2, config="thesis", binary_risk=0.5)
+        b, _ = _episodes(name, n=3, seed=2, config="code")
+        strip = lambda rows: [{k: v for k, v in r.items() if k not in ("trace", "mean_u_expert")  # noqa: E731
+                               and not k.startswith("seconds")} for r in rows]
+        assert strip(a) == strip(b), name

@@ -65,3 +65,14 @@ def test_write_report_files_and_errors(tmp_path):
     assert {p.name for p in paths[2:]} >= {"fig_toy_thesis_interventions.png", "fig_toy_code_training_reward.png"}
     with pytest.raises(ReportError, match="no run folders"):
         collect([tmp_path / "rep"])
+
+
+def test_config_free_baselines_serve_both_configurations(tmp_path):
+    _fake_run(tmp_path, "dagger", 1, [1, 2, 3], [10, 5, 5], [0, 0, 0], config="thesis")
+    _fake_run(tmp_path, "upms", 1, [5, 5, 5], [10, 1, 1], [0, 0, 0], config="thesis")
+    _fake_run(tmp_path, "upms", 1, [5, 5, 5], [10, 9, 9], [0, 0, 0], config="code")
+    md, rows = table(collect([tmp_path]))
+    code = md.split("configuration `code`")[1]
+    assert "| dagger ¹ | 1 | 30 |" in code and "dagger: the runs of configuration `thesis`" in code
+    assert "| upms: fewer interventions than DAgger | **did not hold** | 28.0 vs 20.0 |" in code
+    assert [r["config"] for r in rows].count("code") == 2

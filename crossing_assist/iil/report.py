@@ -31,6 +31,10 @@ METRICS = (("training_reward", "Figure 4.4: training reward per episode"),
 ORDER = ("supervised", "forward", "smile", "dagger", "aggrevate", "dropout-dagger", "upms", "upms-ne", "upms-sl",
          "upms-ne-sl", "ensemble-dagger", "hg-dagger", "thrifty-dagger")
 UPMS = ("upms", "upms-ne", "upms-sl", "upms-ne-sl")
+# Algorithms that neither configuration changes (they ignore the expert's uncertainty and use
+# no UPMS/DropoutDAgger setting): one set of runs serves both configurations' tables (tested:
+# identical episodes under both).
+CONFIG_FREE = ("supervised", "dagger", "aggrevate")
 
 # The thesis's Table 3 (Duckietown udem1, 3 iterations x 10 episodes x 512 steps; mean +- sd
 # over iterations): training reward, penalties, out of bounds, queries (= interventions).
@@ -61,6 +65,16 @@ class RunSeries:
     horizon: int
     rows: list
     config: str = "code"
+
+
+class _Shared:
+    """A run shown in another configuration's table (see :data:`CONFIG_FREE`)."""
+
+    def __init__(self, run: RunSeries, shared_from: str):
+        self._run, self.shared_from = run, shared_from
+
+    def __getattr__(self, name):
+        return getattr(self._run, name)
 
 
 def collect(dirs: list[Path]) -> list[RunSeries]:
@@ -94,9 +108,19 @@ def _value(row: dict, metric: str) -> float:
 
 
 def _groups(runs: list[RunSeries]) -> dict[tuple[str, str, str], list[RunSeries]]:
+    """Runs by (env, config, algorithm); a configuration without its own runs of a
+    :data:`CONFIG_FREE` algorithm borrows the other configuration's (marked ``shared_from``)."""
     groups: dict[tuple[str, str, str], list[RunSeries]] = {}
     for r in runs:
         groups.setdefault((r.env, r.config, r.algo), []).append(r)
+    for env, config in {(k[0], k[1]) for k in groups}:
+        for algo in CONFIG_FREE:
+            if (env, config, algo) in groups:
+                continue
+            donor = next((k for k in sorted(groups) if k[0] == env and k[2] == algo and k[1] != config
+                          and all(getattr(r, "shared_from", None) is None for r in groups[k])), None)
+            if donor:
+                groups[(env, config, algo)] = [_Shared(r, donor[1]) for r in groups[donor]]
     key = lambda k: (k[0], k[1], ORDER.index(k[2]) if k[2] in ORDER else 99, k[2])  # noqa: E731
     return {k: sorted(groups[k], key=lambda r: r.seed) for k in sorted(groups, key=key)}
 
@@ -155,8 +179,11 @@ def table(runs: list[RunSeries]) -> tuple[str, list[dict]]:
     """Table 3 per (environment, configuration): ours beside the thesis's, then the claims."""
     lines, rows = [], []
     sections: dict[tuple[str, str], dict[str, dict]] = {}
+    shared: dict[tuple[str, str], dict[str, str]] = {}
     for (env, config, algo), series in _groups(runs).items():
         sections.setdefault((env, config), {})[algo] = (_stats(series), len(series))
+        if getattr(series[0], "shared_from", None):
+            shared.setdefault((env, config), {})[algo] = series[0].shared_from
     for (env, config), algos in sections.items():
         any_stats = next(iter(algos.values()))[0]
         seeds = sorted({len_ for _, len_ in algos.values()})
@@ -187,7 +214,8 @@ def table(runs: list[RunSeries]) -> tuple[str, list[dict]]:
                             "interventions %: thesis": f"{100 * th[5] / THESIS_STEPS:.1f}",
                             "reward / step: thesis": f"{(th[0] - th[2]) / THESIS_STEPS:.3f}",
                             "late: thesis": f"{_thesis_late(algo):.1f}"})
-            cells = [algo, str(n_seeds), str(st["steps"]),
+            mark = " ¹" if algo in shared.get((env, config), {}) else ""
+            cells = [algo + mark, str(n_seeds), str(st["steps"]),
                      row["training reward: ours"], row.get("training reward: thesis", "-"),
                      row["penalties: ours"], row.get("penalties: thesis", "-"),
                      row["out of bounds (all iterations): ours"], row.get("out of bounds: thesis", "-"),
@@ -198,6 +226,9 @@ def table(runs: list[RunSeries]) -> tuple[str, list[dict]]:
                      row["interventions % horizon, ep ≥ 3: ours"], row.get("late: thesis", "-")]
             lines.append("| " + " | ".join(cells) + " |")
             rows.append(row)
+        if shared.get((env, config)):
+            lines += ["", "¹ " + ", ".join(f"{a}: the runs of configuration `{c}`" for a, c in shared[(env, config)].items())
+                      + " (neither configuration changes these algorithms: they ignore the expert's uncertainty)."]
         lines += ["", *claims({a: st for a, (st, _) in algos.items()}), ""]
     return "\n".join(lines) + "\n", rows
 
