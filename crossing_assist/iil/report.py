@@ -185,12 +185,11 @@ def table(runs: list[RunSeries]) -> tuple[str, list[dict]]:
         if getattr(series[0], "shared_from", None):
             shared.setdefault((env, config), {})[algo] = series[0].shared_from
     for (env, config), algos in sections.items():
-        any_stats = next(iter(algos.values()))[0]
-        seeds = sorted({len_ for _, len_ in algos.values()})
-        full = any_stats["steps"] == THESIS_STEPS and any_stats["h"] == THESIS_HORIZON and seeds == [3]
+        shapes = sorted({(k, st["n"], st["h"]) for st, k in algos.values()})
+        full = shapes == [(3, THESIS_STEPS // THESIS_HORIZON, THESIS_HORIZON)]
         lines += [f"## {env}, configuration `{config}`", ""]
-        scale = (f"{'/'.join(map(str, seeds))} iteration(s) x {any_stats['n']} episodes x {any_stats['h']} steps "
-                 f"= {any_stats['steps']} steps a run")
+        scale = " / ".join(f"{k} iteration(s) x {n} episodes x {h} steps" for k, n, h in shapes)
+        scale += " a run" if len(shapes) == 1 else " (differs by algorithm: unfinished runs; see each row)"
         lines.append(f"Scale: {scale}. The thesis: 3 iterations x 10 episodes x 512 steps = 5120 steps a run "
                      "(Duckietown udem1)." + ("" if full else " **Reduced scale: not the full protocol; compare the "
                                                             "rates (per step, %), not the totals.**"))
