@@ -44,6 +44,7 @@ def test_run_then_report(tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["run", "--env", "toy", "--algo", "nope", "--out", "x"], "unknown algorithm 'nope'"),
     (["run", "--env", "toy", "--algo", "dagger", "--episodes", "0", "--out", "x"], "--episodes=0"),
+    (["run", "--env", "toy", "--algo", "dagger", "--dagger-p", "1.5", "--out", "x"], "--dagger-p=1.5"),
     (["report", "does-not-exist"], "does-not-exist: no such folder"),
     (["run", "--env", "crossing", "--algo", "dagger", "--frame-size", "80", "60", "--out", "x"], "duckietown only"),
     (["run", "--env", "duckietown", "--algo", "dagger", "--expert", "human", "--out", "x"], "discrete actions"),
@@ -72,6 +73,10 @@ def test_cli_defaults_match_the_config_dataclasses():
     assert (a.lr, a.epochs, a.mc_samples, a.ensemble) == (learner.lr, learner.epochs, learner.mc_samples,
                                                           learner.ensemble)
     assert a.lr == 1e-3  # the thesis's AdaGrad learning rate
+    from crossing_assist.iil.algorithms import AlgoParams
+
+    assert a.dagger_p == AlgoParams().dagger_p and a.config == AlgoParams().config == "thesis"
+    assert learner.mc_samples == 16 and learner.max_samples is None and a.max_samples is None
 
 
 def test_human_expert_in_a_real_window(tmp_path, monkeypatch):

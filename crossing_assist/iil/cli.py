@@ -67,6 +67,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="train on the most recent N samples of D only (default: all of D, as the thesis)")
     r.add_argument("--expert-threshold", type=float, default=None, help="U_T where alpha = 1/2")
     r.add_argument("--learner-threshold", type=float, default=None, help="U_L where alpha = 1/2")
+    r.add_argument("--dagger-p", type=float, default=0.5,
+                   help="DAgger/AggreVaTe: the expert acts w.p. p^(i-1) in episode i (default 0.5)")
     r.add_argument("--binary-expert", type=float, default=None, metavar="RISK",
                    help="the thesis's 0/inf expert: U = 0 above this risk, inf below (default: 0.5 with "
                         "--config thesis; the continuous confidence with --config code)")
@@ -95,7 +97,10 @@ def _cmd_run(a: argparse.Namespace) -> int:
     algos = _algos(a.algo)
     learner = LearnerConfig(lr=a.lr, epochs=a.epochs, mc_samples=a.mc_samples, ensemble=a.ensemble,
                             max_samples=a.max_samples)
-    params = AlgoParams(config=a.config, expert_threshold=a.expert_threshold, learner_threshold=a.learner_threshold)
+    if not 0.0 <= a.dagger_p <= 1.0:
+        raise RunError(f"--dagger-p={a.dagger_p} must be in [0, 1]")
+    params = AlgoParams(config=a.config, expert_threshold=a.expert_threshold, learner_threshold=a.learner_threshold,
+                        dagger_p=a.dagger_p)
     configs = [RunConfig(env=a.env, algo=al, seed=s, episodes=a.episodes, horizon=a.horizon,
                          learner=learner, params=params, expert_binary_risk=a.binary_expert,
                          frame_size=tuple(a.frame_size) if a.frame_size else None, expert=a.expert)

@@ -121,7 +121,7 @@ def _groups(runs: list[RunSeries]) -> dict[tuple[str, str, str], list[RunSeries]
                           and all(getattr(r, "shared_from", None) is None for r in groups[k])), None)
             if donor:
                 groups[(env, config, algo)] = [_Shared(r, donor[1]) for r in groups[donor]]
-    key = lambda k: (k[0], k[1], ORDER.index(k[2]) if k[2] in ORDER else 99, k[2])  # noqa: E731
+    key = lambda k: (k[0], k[1] != "thesis", k[1], ORDER.index(k[2]) if k[2] in ORDER else 99, k[2])  # noqa: E731
     return {k: sorted(groups[k], key=lambda r: r.seed) for k in sorted(groups, key=key)}
 
 
