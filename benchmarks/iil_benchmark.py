@@ -1,13 +1,16 @@
-"""Reproduce docs/iil: the crossing benchmark (all 13 algorithms) and the Duckietown benchmark
-(the thesis's eight), then the reports. Resumable: re-running continues unfinished runs.
+"""Reproduce docs/iil: the Duckietown benchmark (the thesis's eight, Table 3) in both
+configurations, the crossing benchmarks, then the reports. Resumable: re-running continues
+unfinished runs. Seed by seed, so that a partial result holds complete iterations.
 
-    python benchmarks/iil_benchmark.py crossing            # .venv, ~12 min a seed on 2 busy cores
+    python benchmarks/iil_benchmark.py duckietown --config thesis             # the full protocol:
+    python benchmarks/iil_benchmark.py duckietown --config code               #   3 x 10 x 512 steps each
+    python benchmarks/iil_benchmark.py duckietown --config thesis --horizon 128   # as run for docs/iil (reduced)
+    python benchmarks/iil_benchmark.py report --horizon 128
+    python benchmarks/iil_benchmark.py duckietown-peers    # the five others (code configuration)
+    python benchmarks/iil_benchmark.py crossing            # .venv, all 13 algorithms (code configuration)
     python benchmarks/iil_benchmark.py crossing-binary     # the thesis's 0/inf expert
-    python benchmarks/iil_benchmark.py duckietown          # as run: 3 seeds x 10 x 512 steps, ~70 min
-    python benchmarks/iil_benchmark.py duckietown-peers    # as run: the five others, 3 seeds x 10 x 512
-    python benchmarks/iil_benchmark.py report
 
-Duckietown runs under .venv-duckietown (see docs/iil.md).
+Duckietown runs under .venv-duckietown (``scripts/setup_duckietown.sh``; see docs/iil.md).
 """
 
 from __future__ import annotations
@@ -34,15 +37,17 @@ def main() -> int:
     p.add_argument("what", choices=["crossing", "crossing-binary", "duckietown", "duckietown-peers", "report"])
     p.add_argument("--seeds", nargs="+", default=["1", "2", "3"])
     p.add_argument("--episodes", default="10")
-    p.add_argument("--horizon", default=None, help="crossing: 128, duckietown: 512 (as run for docs/iil)")
+    p.add_argument("--horizon", default=None, help="crossing: 128, duckietown: 512 (the thesis's)")
+    p.add_argument("--config", default="thesis", choices=["thesis", "code"], help="duckietown: the configuration")
     a = p.parse_args()
     if a.what == "crossing":
         for s in a.seeds:  # seed by seed, so that a partial result holds complete seeds
-            _cli(Path(sys.executable), "run", "--env", "crossing", "--algo", "all", "--episodes", a.episodes,
+            _cli(Path(sys.executable), "run", "--env", "crossing", "--algo", "all", "--config", "code", "--episodes", a.episodes,
                  "--horizon", a.horizon or "128", "--lr", "0.01", "--seeds", s, "--out", str(RUNS / "crossing"))
     elif a.what == "crossing-binary":  # the thesis's 0/inf expert, UPMS family against DAgger / HG-DAgger
         for s in a.seeds:
-            _cli(Path(sys.executable), "run", "--env", "crossing", "--algo", "dagger,upms,upms-ne,upms-sl,upms-ne-sl,hg-dagger",
+            _cli(Path(sys.executable), "run", "--env", "crossing", "--config", "code",
+                 "--algo", "dagger,upms,upms-ne,upms-sl,upms-ne-sl,hg-dagger",
                  "--episodes", a.episodes, "--horizon", a.horizon or "128", "--lr", "0.01", "--binary-expert", "0.5",
                  "--seeds", s, "--out", str(RUNS / "crossing-binary"))
     elif a.what == "duckietown":
@@ -51,16 +56,17 @@ def main() -> int:
             return 2
         h = a.horizon or "512"
         for s in a.seeds:
-            _cli(DT_PY, "run", "--env", "duckietown", "--algo", "thesis", "--episodes", a.episodes, "--horizon", h,
-                 "--epochs", "2", "--seeds", s, "--out", str(RUNS / f"duckietown-h{h}"))
+            _cli(DT_PY, "run", "--env", "duckietown", "--algo", "thesis", "--config", a.config, "--episodes", a.episodes,
+                 "--horizon", h, "--seeds", s, "--quiet", "--out", str(RUNS / f"duckietown-h{h}"))
     elif a.what == "duckietown-peers":  # Forward Training, SMILe and the three peers
         h = a.horizon or "512"
         for s in a.seeds:
             _cli(DT_PY, "run", "--env", "duckietown", "--algo", "forward,smile,ensemble-dagger,hg-dagger,thrifty-dagger",
-                 "--episodes", a.episodes, "--horizon", h, "--epochs", "2", "--seeds", s,
+                 "--config", "code", "--episodes", a.episodes, "--horizon", h, "--epochs", "2", "--seeds", s,
                  "--out", str(RUNS / f"duckietown-peers-h{h}"))
     else:
-        names = {"crossing": "crossing", "crossing-binary": "crossing-binary", "duckietown-h512": "duckietown",
+        h = a.horizon or "512"
+        names = {"crossing": "crossing", "crossing-binary": "crossing-binary", f"duckietown-h{h}": "duckietown",
                  "duckietown-peers-h512": "duckietown-peers"}
         for run_name, doc_name in names.items():
             if (RUNS / run_name).exists():

@@ -3,6 +3,7 @@ an EGL context are available - i.e. under .venv-duckietown/bin/python -m pytest 
 cleanly elsewhere (the project's .venv has numpy 2 and no simulator)."""
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -10,7 +11,12 @@ import pytest
 from crossing_assist.iil.envs.duckietown import duckietown_available
 
 OK, WHY = duckietown_available()
-pytestmark = pytest.mark.skipif(not OK, reason=f"Duckietown unavailable: {WHY}")
+REQUIRED = bool(os.environ.get("CROSSING_REQUIRE_DUCKIETOWN"))  # CI's smoke run: unavailable is a failure
+pytestmark = pytest.mark.skipif(not OK and not REQUIRED, reason=f"Duckietown unavailable: {WHY}")
+
+
+def test_duckietown_is_available():
+    assert OK, WHY
 
 
 @pytest.fixture(scope="module")
@@ -22,6 +28,8 @@ def env():
     try:
         e = DuckietownLaneEnv()
     except Exception as exc:  # noqa: BLE001 - no EGL display here
+        if REQUIRED:
+            raise
         pytest.skip(f"Duckietown could not start: {exc}")
     yield e
     e.close()
@@ -34,7 +42,7 @@ def test_seeding_expert_and_reward_terms(env):
     a, _ = env.reset(seed=7)
     pose = (env.sim.unwrapped.cur_pos.copy(), env.sim.unwrapped.cur_angle)
     b, _ = env.reset(seed=7)
-    assert a.shape == (60, 80, 3) and np.array_equal(a, b)  # np.random and the simulator both seeded
+    assert a.shape == (120, 160, 3) and np.array_equal(a, b)  # the thesis's 160 x 120  # np.random and the simulator both seeded
     assert np.array_equal(pose[0], env.sim.unwrapped.cur_pos) and pose[1] == env.sim.unwrapped.cur_angle
     env.reset(seed=8)
     assert not np.array_equal(pose[0], env.sim.unwrapped.cur_pos)
@@ -47,8 +55,12 @@ def test_seeding_expert_and_reward_terms(env):
         obs, r, term, trunc, info = env.step(action)
         assert not info["out_of_bounds"] and not trunc
         terms = info["reward_terms"]
-        assert {"speed", "lateral", "collision"} <= set(terms)
-        assert r == pytest.approx(sum(terms.values()), abs=1e-6)
+        assert {"speed", "lateral", "proximity_unused"} <= set(terms)
+        # Eq. 27 with c = 0: |v|^2 dir(v) - 10 d; the simulator's proximity term is not in it
+        assert r == pytest.approx(terms["speed"] + terms["lateral"], abs=1e-9)
+        s = env.sim.unwrapped
+        lp = s.get_lane_pos2(s.cur_pos, s.cur_angle)
+        assert terms["speed"] == pytest.approx(s.robot_speed ** 2 * lp.dot_dir) and terms["lateral"] == pytest.approx(-10 * abs(lp.dist))
     assert len({round(u, 6) for u in us if math.isfinite(u)}) > 5  # a continuous confidence
 
 
@@ -62,17 +74,19 @@ def test_invalid_pose_is_out_of_bounds_not_the_horizon(env):
     assert info["out_of_bounds"] and r == -1000.0 and term and info["reward_terms"] == {}
 
 
-def test_upms_runs_a_few_steps(env):
-    from crossing_assist.iil.algorithms import create
-    from crossing_assist.iil.data import Aggregate
-    from crossing_assist.iil.experts import OracleExpert
+def test_smoke_two_algorithms_two_episodes_32_steps(env, tmp_path):
+    """The CI smoke run: DAgger and UPMS, thesis configuration, 2 episodes x 32 steps, then the report."""
+    from crossing_assist.iil.algorithms import AlgoParams
     from crossing_assist.iil.learners import LearnerConfig
-    from crossing_assist.iil.loop import aggregate_and_learn, run_episode
+    from crossing_assist.iil.report import write_report
+    from crossing_assist.iil.runner import RunConfig, read_episodes, run
 
-    rng = np.random.default_rng(0)
-    setup = create("upms", env, horizon=6, episodes=2, seed=0, cfg=LearnerConfig(epochs=1, mc_samples=2))
-    data = Aggregate()
-    for i in (1, 2):
-        res = run_episode(env, OracleExpert(env), setup, i, 6, rng)
-        out = aggregate_and_learn(res, setup, data, i, rng)
-        assert res.metrics["steps"] == 6 and out["queries"] == res.metrics["expert_steps"]
+    for algo in ("dagger", "upms"):
+        cfg = RunConfig(env="duckietown", algo=algo, seed=1, episodes=2, horizon=32,
+                        learner=LearnerConfig(epochs=1), params=AlgoParams(config="thesis"))
+        rows = read_episodes(run(cfg, tmp_path / "runs", env=env) / "episodes.csv")
+        assert [r["steps"] for r in rows] == [32, 32] and rows[0]["interventions"] == 32
+        assert all(r["training_reward"] >= 0 and r["penalties"] >= 0 for r in rows)
+    paths = write_report([tmp_path / "runs"], tmp_path / "rep")
+    md = paths[0].read_text()
+    assert "| dagger | 1 | 64 |" in md and "| upms | 1 | 64 |" in md and "Reduced scale" in md

@@ -89,10 +89,58 @@ def test_crossing_with_real_ptl_photos(ptl_dir):
     env.y, env.s, env.phi = 0.0, 0.0, -h0            # facing so that the far end is where the photo has it
     straight = env._obs()
     assert straight.shape == (48, 64, 3) and straight[:, -4:].mean() > 10  # the photo itself, no border
-    env.phi = -h0 + 30.0                              # turned 30 degrees right: unseen (black) on the right
+    env.phi = -h0 + 30.0                              # turned 30 degrees right: the unseen right is filled
     turned = env._obs()
-    assert turned[:, -4:].mean() < 10 and turned[:, :4].mean() > 10
+    assert turned[:, -4:].mean() > 10 and not (turned == 0).all(axis=2).any()
     assert env.true_bin() < x_to_bin(env.photos[env.photo][1])  # the far end moved left
+
+
+def _fake_ptl(root, n=6, seed=0):
+    """A PTL-shaped folder of random-texture photos (no pixel is black)."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    (root / "images").mkdir(parents=True)
+    lines = ["image,split,far_x"]
+    for k in range(n):
+        img = rng.integers(30, 226, size=(96, 128, 3), dtype=np.uint8)
+        cv2.imwrite(str(root / "images" / f"p{k}.png"), img)
+        lines.append(f"images/p{k}.png,train,{rng.uniform(0.2, 0.8):.3f}")
+    (root / "labels.csv").write_text("\n".join(lines) + "\n")
+    return root
+
+
+def _nearest_neighbour_accuracy(x, y):
+    """1-NN trained on the even samples, scored on the odd ones; and the best constant's score
+    there (the majority class of the scored samples)."""
+    tr, te = slice(0, None, 2), slice(1, None, 2)
+    pred = y[tr][np.argmin(((x[te][:, None] - x[tr][None]) ** 2).sum(-1), axis=1)]
+    return float((pred == y[te]).mean()), float(np.bincount(y[te]).max() / len(y[te]))
+
+
+def test_the_border_of_a_turned_frame_does_not_tell_the_label(tmp_path):
+    """A classifier that sees only the mask of black (unfilled) pixels of the frames cannot beat
+    the majority class; with the old black border (``augment.yaw``) the same classifier could."""
+    from crossing_assist.actions import x_to_heading
+    from crossing_assist.data_tools.augment import yaw
+
+    env = CrossingEnv(CrossingConfig(photos=str(_fake_ptl(tmp_path / "ptl", n=2)), n_photos=2))
+    rng = np.random.default_rng(0)
+    masks_new, masks_old, labels = [], [], []
+    for k in range(300):
+        env.reset(seed=k)
+        env.phi += float(rng.uniform(-40, 40))  # spread the bearings over the view and beyond
+        labels.append(env.true_bin())
+        masks_new.append((env._obs() == 0).all(axis=2).mean(0))        # per-column black fraction
+        img, far_x = env.photos[env.photo]
+        psi = float(np.clip(x_to_heading(far_x) - env.bearing(), -80, 80))
+        old = yaw(img, far_x, 1, psi)[0]
+        masks_old.append((old == 0).all(axis=2).mean(0))
+    y = np.array(labels)
+    acc_new, major = _nearest_neighbour_accuracy(np.array(masks_new), y)
+    acc_old, _ = _nearest_neighbour_accuracy(np.array(masks_old), y)
+    assert acc_old > major + 0.1           # the test has power: the black border leaked the label
+    assert acc_new <= major + 1e-9         # filled: nothing to learn from the mask
 
 
 def test_binary_expert_is_certain_only_above_its_risk():

@@ -128,18 +128,75 @@ def test_action_distance():
     assert action_distance(None, 1) == math.inf
 
 
+def _v(t=0, u_expert=1.0, u_learner=0.5, i=2):
+    return StepView(i=i, t=t, u_expert=u_expert, u_learner=u_learner)
+
+
 def test_sampling_strategies():
     rng = np.random.default_rng(0)
-    assert FullHorizon().control(0, LEARNER, 0.3, 1.0, rng) == LEARNER
+    assert FullHorizon().control(_v(), LEARNER, 0.3, rng) == LEARNER
     sw = RandomSwitch()
     sw.begin_episode(1, 10, rng)
-    assert [sw.control(t, LEARNER, 1.0, 0.0, rng) for t in range(10)] == [EXPERT] * 10
+    assert [sw.control(_v(t), LEARNER, 1.0, rng) for t in range(10)] == [EXPERT] * 10
     sw.begin_episode(2, 10, rng)
     ts = sw.switch_time
-    got = [sw.control(t, LEARNER, 1.0, 0.0, rng) for t in range(10)]
+    got = [sw.control(_v(t), LEARNER, 1.0, rng) for t in range(10)]
     assert got == [LEARNER] * ts + [EXPLORER] + [EXPERT] * (9 - ts)
-    rs = RationalSampling(expert_threshold=1.0)
-    assert all(rs.control(0, LEARNER, 1.0, 5.0, rng) == LEARNER for _ in range(50))  # p_choice 1: kept
+    rs = RationalSampling("code", expert_threshold=1.0)
+    rs.begin_episode(2, 10, rng)
+    assert all(rs.control(_v(u_expert=5.0), LEARNER, 1.0, rng) == LEARNER for _ in range(50))  # p_choice 1: kept
     # p_choice 0: E' = expert w.p. alpha_T; alpha(inf) = 0 -> always the explorer
-    assert all(rs.control(0, LEARNER, 0.0, math.inf, rng) == EXPLORER for _ in range(50))
-    assert all(rs.control(0, LEARNER, 0.0, 0.0, rng) == EXPERT for _ in range(50))
+    assert all(rs.control(_v(u_expert=math.inf), LEARNER, 0.0, rng) == EXPLORER for _ in range(50))
+    assert all(rs.control(_v(u_expert=0.0), LEARNER, 0.0, rng) == EXPERT for _ in range(50))
+
+
+def test_code_sampling_never_explores_with_the_0_inf_expert():
+    """The departure the thesis configuration fixes: with U_T in {0, inf} the code variant's
+    explorer never acts (U_T = inf makes the learner's choice certain, U_T = 0 makes E' the expert)."""
+    rng = np.random.default_rng(0)
+    mix, rs = RationalMixing(1.0, 1.0), RationalSampling("code", expert_threshold=1.0)
+    rs.begin_episode(2, 10, rng)
+    for u_t in (0.0, math.inf):
+        for u_l in (0.0, 0.3, 3.0):
+            v = _v(u_expert=u_t, u_learner=u_l)
+            for _ in range(200):
+                chosen, p = mix.choose(v, rng)
+                assert rs.control(v, chosen, p, rng) != EXPLORER
+
+
+def test_thesis_rational_sampling_eq_19_to_21():
+    """pi_RS = a pi_i + (1 - a) E', a = tanh(30 U_L); E' = alpha_T expert + (1 - alpha_T) E."""
+    rng = np.random.default_rng(2)
+    rs = RationalSampling("thesis", scale=30.0)
+    rs.begin_episode(1, 10, rng)
+    assert all(rs.control(_v(u_expert=math.inf, u_learner=0.0, i=1), EXPERT, 1.0, rng) == EXPERT
+               for _ in range(50))  # episode 1: the demonstration
+    rs.begin_episode(2, 10, rng)
+    # a certain learner (U_L = 0): a = 0, always E'; the expert not intervening (inf): the explorer acts
+    assert all(rs.control(_v(u_expert=math.inf, u_learner=0.0), LEARNER, 1.0, rng) == EXPLORER for _ in range(50))
+    # ... the expert intervening (U_T = 0): alpha_T = 1, E' is the expert
+    assert all(rs.control(_v(u_expert=0.0, u_learner=0.0), LEARNER, 1.0, rng) == EXPERT for _ in range(50))
+    # a very uncertain learner: a = tanh(30 * 10) = 1, the mixture's choice is kept
+    assert all(rs.control(_v(u_expert=math.inf, u_learner=10.0), LEARNER, 0.5, rng) == LEARNER for _ in range(50))
+    # in between: the mixture's choice with probability tanh(30 U_L), whatever its own probability
+    u_l = 0.02
+    a = math.tanh(30 * u_l)
+    n = 4000
+    kept = sum(rs.control(_v(u_expert=math.inf, u_learner=u_l), LEARNER, 0.99, rng) == LEARNER for _ in range(n))
+    assert abs(kept / n - a) < 6 * math.sqrt(a * (1 - a) / n)
+    # UPMS-NE: E = the learner, so no random explorer ever acts
+    ne = RationalSampling("thesis", scale=30.0, explorer=LEARNER)
+    ne.begin_episode(2, 10, rng)
+    got = {ne.control(_v(u_expert=math.inf, u_learner=u_l), EXPERT, 1.0, rng) for _ in range(500)}
+    assert got == {EXPERT, LEARNER}
+    with pytest.raises(ValueError, match="scale"):
+        RationalSampling("thesis")
+
+
+def test_thesis_mixing_scales_the_uncertainty_by_30():
+    mix = RationalMixing(scale=30.0)
+    assert mix.c_expert == mix.c_learner == 30.0
+    # the 0/inf expert: intervening (0) vs a learner at sigma^2 = 0.1, where 1 - tanh(3) ~ 0.005
+    p = rational_mixing(0.0, 0.1, 30.0, 30.0)
+    assert p == pytest.approx(1.0 / (1.0 + 1.0 - math.tanh(3.0)))
+    assert rational_mixing(math.inf, 0.1, 30.0, 30.0) == 0.0  # not intervening: the learner acts

@@ -8,14 +8,26 @@ learner. ``create(name, env, ...) -> Setup``; ``list_algorithms()``.
 | smile | expert w.p. (1-a)^(i-1), else mixture of past policies | full horizon | this episode's labels (new policy) |
 | dagger | expert w.p. p^(i-1) | full horizon | expert labels at every step |
 | aggrevate | expert w.p. p^(i-1) until t_s | random switch, explore, expert | cost-to-go weighted expert labels |
-| dropout-dagger | learner iff MC-dropout U_L < threshold (and close to the expert) | full horizon | expert labels at every step |
-| upms | rational mixing | rational sampling (E') | expert labels where it acted |
-| upms-ne | rational mixing | full horizon | expert labels where it acted |
+| dropout-dagger | learner iff MC-dropout U_L < threshold (code: and close to the expert) | full horizon | expert labels at every step |
+| upms | rational mixing | rational sampling (E' with the random explorer E) | expert labels where it acted |
+| upms-ne | rational mixing | thesis: rational sampling with E = the learner; code: full horizon | expert labels where it acted |
 | upms-sl | rational mixing | rational sampling | + the learner's own labels |
-| upms-ne-sl | rational mixing | full horizon | + the learner's own labels |
+| upms-ne-sl | rational mixing | as upms-ne | + the learner's own labels |
 | ensemble-dagger | learner iff ensemble variance < threshold and close to the expert | full horizon | expert labels at every step |
 | hg-dagger | expert gates by its rule (U_T < threshold) | full horizon | expert labels where it acted |
 | thrifty-dagger | novelty/risk gate, thresholds refit per episode | full horizon | expert labels where it acted |
+
+Two configurations (``AlgoParams.config``) of the thesis's algorithms:
+
+* ``thesis`` - as chapter 4 writes them: UPMS's coefficient ``1 - tanh(30 U)`` for both agents
+  (``uncertainty_scale``), rational sampling by Eq. 19-21 (:class:`RationalSampling` ``"thesis"``),
+  UPMS-NE as ``E = pi_hat`` inside ``E'``, DropoutDAgger gated by ``sigma^2 < 0.1`` alone
+  (``dropout_threshold``); the runner pairs it with the 0/inf expert;
+* ``code`` - this project's earlier variant (after the author's public code): ``c =
+  atanh(1/2) / threshold`` per agent (thresholds from the environment's defaults), sampling that
+  keeps the mixing choice with its own probability, UPMS-NE without sampling, DropoutDAgger with
+  the extra action-distance gate ``max_discrepancy`` where the environment sets one; the runner
+  pairs it with the continuous expert confidence.
 """
 
 from __future__ import annotations
@@ -27,19 +39,26 @@ from .aggregation import CostToGo, ExpertLabels, SelfLabelling
 from .learner_variants import ForwardLearner, SmileLearner, ThriftyLearner
 from .learners import EnsembleLearner, LearnerConfig, NetLearner
 from .loop import Setup
+from .mixing import EXPLORER, LEARNER
 from .mixing import (BetaDecay, ExpertGate, ExpertOnly, GeometricMixture, LearnerThreshold, PerStepSchedule,
                      RationalMixing, ThriftyGate)
 from .sampling import FullHorizon, RandomSwitch, RationalSampling
 
+CONFIGS = ("thesis", "code")
 THESIS_ALGORITHMS = ("supervised", "dagger", "aggrevate", "dropout-dagger", "upms", "upms-ne", "upms-sl", "upms-ne-sl")
 
 
 @dataclass(frozen=True)
 class AlgoParams:
     """Hyper-parameters of the strategies. Uncertainty thresholds are in each agent's own
-    units (the value where UPMS's coefficient is 1/2); ``None`` means the environment's
-    default (``env.unwrapped.iil_defaults``)."""
+    units (the value where UPMS's coefficient is 1/2, ``code`` configuration); ``None`` means
+    the environment's default (``env.unwrapped.iil_defaults``). ``config`` picks the
+    configuration (module docstring); ``uncertainty_scale`` and ``dropout_threshold`` are the
+    thesis's (used by ``thesis`` only)."""
 
+    config: str = "thesis"
+    uncertainty_scale: float = 30.0
+    dropout_threshold: float = 0.1
     dagger_p: float = 0.5
     smile_alpha: float = 0.3
     expert_threshold: float | None = None
@@ -79,6 +98,8 @@ def create(name: str, env, *, horizon: int, episodes: int, seed: int,
     """Build algorithm ``name`` for ``env`` (its action space and defaults)."""
     if name not in _REGISTRY:
         raise ValueError(f"Unknown algorithm: {name!r}; valid: {', '.join(_REGISTRY)}")
+    if params.config not in CONFIGS:
+        raise ValueError(f"Unknown configuration: {params.config!r}; valid: {', '.join(CONFIGS)}")
     p = params.resolved(env)
     return _REGISTRY[name](env=env, horizon=horizon, episodes=episodes, seed=seed, p=p, cfg=cfg)
 
@@ -117,14 +138,20 @@ def _aggrevate(env, horizon, episodes, seed, p, cfg):
 
 @register("dropout-dagger")
 def _dropout_dagger(env, horizon, episodes, seed, p, cfg):
-    return Setup("dropout-dagger", LearnerThreshold(p.learner_threshold, p.max_discrepancy), FullHorizon(),
-                 ExpertLabels("all"), _net(env, cfg, seed))
+    gate = (LearnerThreshold(p.dropout_threshold) if p.config == "thesis"
+            else LearnerThreshold(p.learner_threshold, p.max_discrepancy))
+    return Setup("dropout-dagger", gate, FullHorizon(), ExpertLabels("all"), _net(env, cfg, seed))
 
 
 def _upms(name, env, seed, p, cfg, explore: bool, self_label: bool) -> Setup:
-    sampling = RationalSampling(p.expert_threshold) if explore else FullHorizon()
     agg = SelfLabelling(ExpertLabels("acting")) if self_label else ExpertLabels("acting")
-    return Setup(name, RationalMixing(p.expert_threshold, p.learner_threshold), sampling, agg, _net(env, cfg, seed))
+    if p.config == "thesis":  # Eq. 19-21; UPMS-NE: E = the learner inside E'
+        sampling = RationalSampling("thesis", scale=p.uncertainty_scale, explorer=EXPLORER if explore else LEARNER)
+        mixing = RationalMixing(scale=p.uncertainty_scale)
+    else:
+        sampling = RationalSampling("code", expert_threshold=p.expert_threshold) if explore else FullHorizon()
+        mixing = RationalMixing(p.expert_threshold, p.learner_threshold)
+    return Setup(name, mixing, sampling, agg, _net(env, cfg, seed))
 
 
 @register("upms")

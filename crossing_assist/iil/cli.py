@@ -1,10 +1,13 @@
 """``crossing-iil``: run interactive imitation learning benchmarks and report them.
 
     crossing-iil list
-    crossing-iil run --env crossing --algo dagger upms --episodes 10 --horizon 512 --seeds 1 2 3 --out runs/iil
+    crossing-iil run --env duckietown --algo thesis --config thesis --episodes 10 --horizon 512 --seeds 1 2 3 --out runs/iil
+    crossing-iil run --env crossing-synthetic --algo upms --expert human --episodes 3 --horizon 64 --out runs/me
     crossing-iil report runs/iil --out docs/iil
 
-``--algo`` takes names, ``thesis`` (the thesis's eight) or ``all``.
+``--algo`` takes names, ``thesis`` (the thesis's eight) or ``all``; ``--config`` is ``thesis``
+(chapter 4 as written: Eq. 19-21, the 0/inf expert, x30, sigma^2 = 0.1) or ``code`` (this
+project's earlier variant; see :mod:`crossing_assist.iil.algorithms`).
 """
 
 from __future__ import annotations
@@ -50,15 +53,27 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--horizon", type=int, default=512)
     r.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     r.add_argument("--out", type=Path, required=True)
+    r.add_argument("--config", choices=["thesis", "code"], default="thesis",
+                   help="thesis: chapter 4 as written; code: the earlier code variant (default: thesis)")
+    r.add_argument("--expert", choices=["oracle", "human"], default="oracle",
+                   help="oracle: the environment's scripted expert; human: you, in a window (keys; crossing/toy)")
+    r.add_argument("--fps", type=float, default=5.0, help="human expert: frames a second shown (the loop's pace)")
+    r.add_argument("--frame-size", type=int, nargs=2, metavar=("W", "H"), default=None,
+                   help="duckietown frame size (default: the thesis's 160 120)")
     d = LearnerConfig()
     r.add_argument("--lr", type=float, default=d.lr, help="AdaGrad learning rate")
     r.add_argument("--epochs", type=int, default=d.epochs, help="passes over D after each episode")
     r.add_argument("--mc-samples", type=int, default=d.mc_samples)
     r.add_argument("--ensemble", type=int, default=d.ensemble)
+    r.add_argument("--max-samples", type=int, default=d.max_samples,
+                   help="train on the most recent N samples of D only (default: all of D, as the thesis)")
     r.add_argument("--expert-threshold", type=float, default=None, help="U_T where alpha = 1/2")
     r.add_argument("--learner-threshold", type=float, default=None, help="U_L where alpha = 1/2")
+    r.add_argument("--dagger-p", type=float, default=0.5,
+                   help="DAgger/AggreVaTe: the expert acts w.p. p^(i-1) in episode i (default 0.5)")
     r.add_argument("--binary-expert", type=float, default=None, metavar="RISK",
-                   help="the thesis's expert: U = 0 above this risk, U = inf below it (no continuous confidence)")
+                   help="the thesis's 0/inf expert: U = 0 above this risk, inf below (default: 0.5 with "
+                        "--config thesis; the continuous confidence with --config code)")
     r.add_argument("--threads", type=int, default=1, help="torch CPU threads (1 is fastest for this small net)")
     r.add_argument("--quiet", action="store_true")
     rep = sub.add_parser("report", help="Table 3 (markdown/CSV) and Figures 4.4-4.7 from run folders")
@@ -94,24 +109,51 @@ def _cmd_run(a: argparse.Namespace) -> int:
     from .algorithms import AlgoParams  # noqa: PLC0415
     from .runner import RunConfig, run  # noqa: PLC0415
 
+    if a.frame_size is not None and (a.env != "duckietown" or min(a.frame_size) < 16):
+        raise RunError(f"--frame-size applies to duckietown only, each side >= 16 (got {a.env}, {a.frame_size})")
+    if a.max_samples is not None and a.max_samples < 1:
+        raise RunError(f"--max-samples={a.max_samples} must be >= 1")
     torch.set_num_threads(max(1, a.threads))
     algos = _algos(a.algo)
-    learner = LearnerConfig(lr=a.lr, epochs=a.epochs, mc_samples=a.mc_samples, ensemble=a.ensemble)
-    params = AlgoParams(expert_threshold=a.expert_threshold, learner_threshold=a.learner_threshold)
+    learner = LearnerConfig(lr=a.lr, epochs=a.epochs, mc_samples=a.mc_samples, ensemble=a.ensemble,
+                            max_samples=a.max_samples)
+    if not 0.0 <= a.dagger_p <= 1.0:
+        raise RunError(f"--dagger-p={a.dagger_p} must be in [0, 1]")
+    params = AlgoParams(config=a.config, expert_threshold=a.expert_threshold, learner_threshold=a.learner_threshold,
+                        dagger_p=a.dagger_p)
     configs = [RunConfig(env=a.env, algo=al, seed=s, episodes=a.episodes, horizon=a.horizon,
-                         learner=learner, params=params, expert_binary_risk=a.binary_expert)
+                         learner=learner, params=params, expert_binary_risk=a.binary_expert,
+                         frame_size=tuple(a.frame_size) if a.frame_size else None, expert=a.expert)
                for al in algos for s in a.seeds]
+    expert = _human(a) if a.expert == "human" else None
     bar = tqdm(total=len(configs) * a.episodes * a.horizon, unit="step", disable=a.quiet, file=sys.stderr)
     for cfg in configs:
         bar.set_description(f"{cfg.algo} seed {cfg.seed}")
 
         def show(row, cfg=cfg):
-            bar.set_postfix(ep=int(row["episode"]), reward=f"{row['reward']:.0f}", queries=int(row["queries"]),
+            bar.set_postfix(ep=int(row["episode"]), reward=f"{row['reward']:.0f}", interventions=int(row["interventions"]),
                             oob=int(row["out_of_bounds"]))
-        folder = run(cfg, a.out, progress=bar.update, on_episode=show)
+        folder = run(cfg, a.out, progress=bar.update, on_episode=show, expert=expert)
     bar.close()
     print(f"done: {len(configs)} run(s) in {a.out} (last: {folder})")
     return 0
+
+
+def _human(a: argparse.Namespace):
+    """A :class:`HumanExpert` in a real window, with the environment's keys."""
+    from .experts import HumanExpert, KeyMap, PygameWindow  # noqa: PLC0415
+
+    keymaps = {"crossing": KeyMap.crossing, "crossing-synthetic": KeyMap.crossing, "toy": KeyMap.toy}
+    if a.env not in keymaps:
+        raise RunError(f"--expert human drives discrete actions by keys: crossing, crossing-synthetic or toy "
+                       f"(not {a.env})")
+    if a.fps <= 0:
+        raise RunError(f"--fps={a.fps} must be > 0")
+    if not a.quiet:
+        keys = "1..9, 0, -, = steer to strips 1..12, space stops" if a.env != "toy" else "left/right steer, space stays"
+        print(f"you are the expert: hold a key while you want to act ({keys}); release to let the "
+              f"algorithm act; close the window to stop (the run resumes later)", file=sys.stderr)
+    return HumanExpert(PygameWindow(fps=a.fps), keymaps[a.env]())
 
 
 def _cmd_report(a: argparse.Namespace) -> int:

@@ -12,9 +12,9 @@ class LearnerConfig:
     lr: float = 1e-3
     epochs: int = 3
     batch_size: int = 32
-    mc_samples: int = 8
+    mc_samples: int = 16  # the thesis's T = 16, p = 0.5
     dropout: float = 0.5
     channels: int = 16
     hidden: int = 64
     ensemble: int = 5
-    max_samples: int = 4096  # most recent samples used per fit (bounds time on long runs)
+    max_samples: int | None = None  # None: train on all of D (the thesis); k: the k most recent only

@@ -58,10 +58,11 @@ class Aggregate:
         with np.load(path) as z:
             if "empty" in z.files:
                 return
-            for k in range(len(z["labels"])):
-                lab = z["labels"][k]
-                self.add(z["obs"][k], lab.item() if lab.ndim == 0 else lab, float(z["weights"][k]),
-                         int(z["episodes"][k]), int(z["steps"][k]), bool(z["self_labelled"][k]))
+            a = {k: z[k] for k in z.files}  # each z[k] decompresses the whole array: read each once
+        for k in range(len(a["labels"])):
+            lab = a["labels"][k]
+            self.add(a["obs"][k], lab.item() if lab.ndim == 0 else lab, float(a["weights"][k]),
+                     int(a["episodes"][k]), int(a["steps"][k]), bool(a["self_labelled"][k]))
 
 
 @dataclass

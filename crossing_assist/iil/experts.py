@@ -9,10 +9,10 @@ only says 0 or inf while answering.
   implement it: the crossing's true bin, Duckietown's pure-pursuit controller, the toy
   env's target) and reports its confidence from the environment's risk measure.
 * :class:`HumanExpert` - a person at a keyboard or gamepad; events arrive through an
-  :class:`EventSource` (real: a pygame/terminal reader; tests: :class:`ScriptedEvents`).
+  :class:`EventSource` (real: :class:`PygameWindow`, a window that shows the learner's frame
+  and reads the keys; tests: :class:`ScriptedEvents`, or the real window fed synthetic events).
 
-Query counting is the loop's job (see :mod:`crossing_assist.iil.loop`): a query is a step
-whose expert action was used, to act or as a training label.
+Counting interventions and labels is the loop's job (see :mod:`crossing_assist.iil.loop`).
 """
 
 from __future__ import annotations
@@ -91,6 +91,11 @@ class KeyMap:
         names = ["1", "2", "3", "4", "5", "6", "7", "8", "9", "0", "-", "="]
         return KeyMap({**{k: b + 1 for b, k in enumerate(names)}, "space": 0})
 
+    @staticmethod
+    def toy() -> "KeyMap":
+        """The toy lane: left / right arrows steer, space stays."""
+        return KeyMap({"left": 1, "right": 2, "space": 0})
+
 
 class HumanExpert:
     """A person steering with keys (discrete actions) or a gamepad axis (mapped by
@@ -105,7 +110,12 @@ class HumanExpert:
         self._axis = 0.0
 
     def act(self, obs: np.ndarray) -> tuple[object | None, float]:
+        show = getattr(self.events, "show", None)
+        if show is not None and obs is not None:
+            show(obs)  # a window: the person sees what the learner sees, then we read the keys
         for kind, value in self.events.poll():
+            if kind == "quit":
+                raise KeyboardInterrupt("the expert closed the window")
             if kind == "down" and value in self.keymap.keys and value not in self._held:
                 self._held.append(value)
             elif kind == "up" and value in self._held:
@@ -119,27 +129,53 @@ class HumanExpert:
         return None, math.inf
 
 
-class PygameEvents:
-    """Live keyboard/gamepad events through pygame (imported lazily; needs a display)."""
+class PygameWindow:
+    """A real window (pygame, imported lazily; ``pip install pygame`` or the ``human`` extra):
+    :meth:`show` draws the frame the learner sees, scaled up, at most ``fps`` frames a second
+    (the pace a person can follow); :meth:`poll` returns its keyboard/gamepad events (``quit``
+    when the window is closed). Without a display, SDL's ``dummy`` video driver gives a window
+    that receives posted events (how the tests drive it)."""
 
-    NAMES = {"space": "space", "minus": "-", "equals": "="}
+    NAMES = {"minus": "-", "equals": "="}
 
-    def __init__(self):
+    def __init__(self, scale: int = 6, fps: float = 5.0, caption: str = "crossing-iil: you are the expert"):
         try:
             import pygame  # noqa: PLC0415
-        except ImportError as exc:  # pragma: no cover - depends on the machine
-            raise RuntimeError("the human expert needs pygame: pip install pygame") from exc
-        self.pg = pygame
-        pygame.init()
+        except ImportError as exc:
+            raise RuntimeError("the human expert needs pygame: pip install pygame (or '.[human]')") from exc
+        self.pg, self.scale, self.fps = pygame, int(scale), float(fps)
+        pygame.display.init()
         pygame.joystick.init()
         self.sticks = [pygame.joystick.Joystick(k) for k in range(pygame.joystick.get_count())]
+        self.caption, self.screen, self.clock, self.frames = caption, None, pygame.time.Clock(), 0
 
-    def poll(self) -> list[tuple[str, object]]:  # pragma: no cover - needs a person
-        out = []
-        for ev in self.pg.event.get():
-            if ev.type in (self.pg.KEYDOWN, self.pg.KEYUP):
-                name = self.pg.key.name(ev.key)
-                out.append(("down" if ev.type == self.pg.KEYDOWN else "up", self.NAMES.get(name, name)))
-            elif ev.type == self.pg.JOYAXISMOTION and ev.axis == 0:
+    def show(self, frame: np.ndarray) -> None:
+        pg = self.pg
+        h, w = frame.shape[:2]
+        if self.screen is None:
+            self.screen = pg.display.set_mode((w * self.scale, h * self.scale))
+            pg.display.set_caption(self.caption)
+        surf = pg.surfarray.make_surface(np.ascontiguousarray(np.asarray(frame, np.uint8).transpose(1, 0, 2)))
+        self.screen.blit(pg.transform.scale(surf, self.screen.get_size()), (0, 0))
+        pg.display.flip()
+        self.frames += 1
+        if self.fps > 0:
+            self.clock.tick(self.fps)
+
+    def poll(self) -> list[tuple[str, object]]:
+        pg, out = self.pg, []
+        for ev in pg.event.get():
+            if ev.type == pg.QUIT:
+                out.append(("quit", None))
+            elif ev.type in (pg.KEYDOWN, pg.KEYUP):
+                name = pg.key.name(ev.key)
+                out.append(("down" if ev.type == pg.KEYDOWN else "up", self.NAMES.get(name, name)))
+            elif ev.type == pg.JOYAXISMOTION and ev.axis == 0:
                 out.append(("axis", float(ev.value)))
         return out
+
+    def close(self) -> None:
+        self.pg.display.quit()
+
+
+PygameEvents = PygameWindow  # the earlier name

@@ -104,7 +104,7 @@ class NetLearner:
         if not arrs:
             return {"loss": math.nan, "samples": 0}
         n = len(arrs["labels"])
-        keep = np.arange(max(0, n - self.cfg.max_samples), n)
+        keep = np.arange(0 if self.cfg.max_samples is None else max(0, n - self.cfg.max_samples), n)
         x_all, y_all = arrs["obs"][keep], self.codec.encode(arrs["labels"][keep])
         w_all = torch.as_tensor(arrs["weights"][keep])
         self.net.train()

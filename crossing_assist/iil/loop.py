@@ -9,10 +9,21 @@ For episode ``i = 1..N``:
 3. **aggregate** - the aggregation strategy picks the labels the episode adds to ``D``;
 4. **learn** - the learner is refit on ``D`` (online batch learning after the episode).
 
-Out of bounds does not end the episode: the event is counted, its reward (the simulator's
--1000) is left out of the episode's reward, the environment is reset, and the episode goes
-on until ``horizon`` steps were taken, so every episode has the same number of steps.
-A **query** is a step whose expert action was used, to act or as a label.
+The environment's ``done`` (out of bounds or a collision before the horizon) does not end the
+episode: the event is counted, its reward (the simulator's -1000) is left out, the environment
+is reset to the next pre-computed start point, and the episode goes on until ``horizon`` steps
+were taken. This matches the thesis's Table 3, where the expert-only run (Supervised) has 2
+out-of-bounds events and still 5120 = 10 x 512 queries.
+
+Randomness comes in separate streams (:class:`Streams`), all derived from the run's one seed
+(the thesis: one seed per iteration, the same for every algorithm): start points (a reset seed
+per episode and reset, pre-computed, so every algorithm starts from the same poses), mixing,
+sampling, exploration and training draws. The expert's demonstration (episode 1) is therefore
+the same trace for every algorithm of an iteration.
+
+Counts per episode: **interventions** are the steps the expert acted (in control; the thesis's
+"queries"); **expert labels** are the steps whose expert action went into ``D`` (DAgger's
+expert labels every step, while acting only when ``beta`` picks it).
 """
 
 from __future__ import annotations
@@ -63,33 +74,62 @@ def explore(space, rng: np.random.Generator):
     return rng.uniform(space.low, space.high).astype(np.float32)
 
 
-def _reset(env, rng):
-    obs, _ = env.reset(seed=int(rng.integers(0, 2**31 - 1)))
-    return obs
+STREAMS = ("mixing", "sampling", "explore", "train")
 
 
-def run_episode(env, expert, setup: Setup, i: int, horizon: int, rng: np.random.Generator,
+def start_seed(seed: int, episode: int, k: int) -> int:
+    """The pre-computed start point of reset ``k`` (0: the episode's start) of ``episode`` in
+    the iteration with ``seed``: a reset seed that depends on nothing else."""
+    return int(np.random.SeedSequence([int(seed), int(episode), int(k)]).generate_state(1)[0] & 0x7FFFFFFF)
+
+
+@dataclass
+class Streams:
+    """The run's random streams, one per concern (see the module docstring)."""
+
+    seed: int
+    mixing: np.random.Generator
+    sampling: np.random.Generator
+    explore: np.random.Generator
+    train: np.random.Generator
+
+    @classmethod
+    def from_seed(cls, seed: int) -> "Streams":
+        kids = np.random.SeedSequence(int(seed)).spawn(len(STREAMS))
+        return cls(int(seed), *(np.random.default_rng(k) for k in kids))
+
+    def state(self) -> dict:
+        return {name: getattr(self, name).bit_generator.state for name in STREAMS}
+
+    def set_state(self, state: dict) -> None:
+        for name in STREAMS:
+            getattr(self, name).bit_generator.state = state[name]
+
+
+def run_episode(env, expert, setup: Setup, i: int, horizon: int, streams: Streams,
                 progress: Callable[[int], None] | None = None) -> EpisodeResult:
     """Roll out episode ``i`` (1-based) for ``horizon`` steps and return its metrics and trace.
 
-    Metrics: ``reward`` (sum, out-of-bounds steps excluded), ``penalties`` (steps with negative
-    reward, out-of-bounds steps excluded), ``out_of_bounds`` (events), ``queries``,
-    ``expert_steps``, ``learner_steps``, ``explorer_steps``, mean uncertainties, and the sums
-    of the environment's ``info["reward_terms"]``.
+    Metrics: ``reward`` (sum, out-of-bounds steps excluded) = ``training_reward`` (sum of the
+    positive step rewards) - ``penalties`` (sum of the negative step rewards' magnitudes),
+    ``out_of_bounds`` (events), ``interventions`` (steps the expert acted), ``learner_steps``,
+    ``explorer_steps``, mean uncertainties, and the sums of ``info["reward_terms"]``.
     """
     setup.mixing.begin_episode(i)
-    setup.sampling.begin_episode(i, horizon, rng)
-    obs, trace, terms = _reset(env, rng), [], {}
+    setup.sampling.begin_episode(i, horizon, streams.sampling)
+    resets = 0
+    obs, _ = env.reset(seed=start_seed(streams.seed, i, resets))
+    trace, terms = [], {}
     t0 = time.perf_counter()
     for t in range(horizon):
         a_exp, u_exp = expert.act(obs)
         u_exp = math.inf if a_exp is None else float(u_exp)
-        a_lrn, u_lrn = setup.learner.act(obs, t, rng)
+        a_lrn, u_lrn = setup.learner.act(obs, t, streams.mixing)  # SMILe draws its policy here
         view = StepView(i=i, t=t, u_expert=u_exp, u_learner=float(u_lrn), expert_action=a_exp,
                         learner_action=a_lrn, novelty=float(u_lrn),
                         risk=setup.risk(obs) if setup.risk and a_lrn is not None else 0.0)
-        chosen, p_choice = setup.mixing.choose(view, rng)
-        actor = setup.sampling.control(t, chosen, p_choice, u_exp, rng)
+        chosen, p_choice = setup.mixing.choose(view, streams.mixing)
+        actor = setup.sampling.control(view, chosen, p_choice, streams.sampling)
         if actor == LEARNER and a_lrn is None:
             actor = EXPERT  # an untrained learner (Forward Training's future blocks) cannot act
         if actor == EXPERT:
@@ -97,14 +137,18 @@ def run_episode(env, expert, setup: Setup, i: int, horizon: int, rng: np.random.
         elif actor == LEARNER:
             action = a_lrn
         else:
-            action = explore(env.action_space, rng)
+            action = explore(env.action_space, streams.explore)
         nxt, reward, terminated, truncated, info = env.step(action)
         oob = bool(info.get("out_of_bounds", False))
         for k, v in info.get("reward_terms", {}).items():
             terms[k] = terms.get(k, 0.0) + float(v)
         trace.append(Step(t, obs, a_exp, u_exp, a_lrn, float(u_lrn), actor, action,
                           0.0 if oob else float(reward), oob, actor == EXPERT))
-        obs = _reset(env, rng) if (terminated or truncated) else nxt
+        if terminated or truncated:
+            resets += 1
+            obs, _ = env.reset(seed=start_seed(streams.seed, i, resets))
+        else:
+            obs = nxt
         if progress:
             progress(1)
     return EpisodeResult(_metrics(trace, terms, time.perf_counter() - t0), trace)
@@ -117,9 +161,11 @@ def _metrics(trace: list[Step], terms: dict, seconds: float) -> dict:
     return {
         "steps": len(trace),
         "reward": float(sum(s.reward for s in ok)),
-        "penalties": int(sum(1 for s in ok if s.reward < 0)),
+        "training_reward": float(sum(s.reward for s in ok if s.reward > 0)),
+        "penalties": float(-sum(s.reward for s in ok if s.reward < 0)),
+        "penalty_steps": int(sum(1 for s in ok if s.reward < 0)),
         "out_of_bounds": int(sum(s.out_of_bounds for s in trace)),
-        "expert_steps": int(sum(s.actor == EXPERT for s in trace)),
+        "interventions": int(sum(s.actor == EXPERT for s in trace)),
         "learner_steps": int(sum(s.actor == LEARNER for s in trace)),
         "explorer_steps": int(sum(s.actor == EXPLORER for s in trace)),
         "mean_u_learner": float(np.mean(u_l)) if u_l else math.nan,
@@ -131,8 +177,9 @@ def _metrics(trace: list[Step], terms: dict, seconds: float) -> dict:
 
 def aggregate_and_learn(result: EpisodeResult, setup: Setup, data: Aggregate, i: int,
                         rng: np.random.Generator) -> dict:
-    """Steps 3-4: add the episode's labels to ``data``, count queries, refit the learner.
-    Returns metrics to merge into the episode's: ``queries``, ``labels``, ``self_labels``,
+    """Steps 3-4: add the episode's labels to ``data``, refit the learner (``rng``: the training
+    stream). Returns metrics to merge into the episode's: ``expert_labels`` (steps whose expert
+    action went into ``D``), ``labels`` (all samples added), ``self_labels``, ``dataset``,
     ``loss``, ``seconds_fit`` (and the learner's extra fit statistics)."""
     trace = result.trace
     picked = setup.aggregation.select(trace, i, setup.sampling)
@@ -141,14 +188,12 @@ def aggregate_and_learn(result: EpisodeResult, setup: Setup, data: Aggregate, i:
         data.add(trace[k].obs, label, weight, i, trace[k].t, self_label)
         if not self_label:
             expert_labelled.add(k)
-    queries = sum(1 for k, s in enumerate(trace)
-                  if s.expert_action is not None and (s.actor == EXPERT or k in expert_labelled))
     setup.learner.observe_episode(trace)
     t0 = time.perf_counter()
     stats = setup.learner.fit(data, i, rng)
     if setup.after_fit:
         setup.after_fit()
-    out = {"queries": int(queries), "labels": len(picked), "self_labels": int(sum(r[3] for r in picked)),
+    out = {"expert_labels": len(expert_labelled), "labels": len(picked), "self_labels": int(sum(r[3] for r in picked)),
            "dataset": len(data), "seconds_fit": round(time.perf_counter() - t0, 3)}
     cost = getattr(setup.aggregation, "last_cost_to_go", None)
     if cost is not None:

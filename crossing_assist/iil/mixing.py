@@ -5,9 +5,16 @@ Each mixing strategy answers one question per step: *who should act now*, given 
 index ``i`` (1-based), the two uncertainties and an explicit ``rng``. It returns the chosen
 agent and the probability with which it was chosen (UPMS's sampling step needs it).
 
-UPMS (uncertainty-aware policy mixing) uses the coefficient ``alpha(U) = 1 - tanh(c U)``
-(``c = atanh(1/2) / threshold``, so ``alpha(threshold) = 1/2``; ``U = inf`` gives 0) and the
-rational law ``p_expert = alpha_T / (alpha_T + alpha_L)``. Its four laws, tested exactly:
+UPMS (uncertainty-aware policy mixing) uses the preferential coefficient
+``alpha(U) = 1 - tanh(c U)`` (``U = inf`` gives 0) and the rational law
+``p_expert = alpha_T / (alpha_T + alpha_L)``. Two ways to set ``c`` (the two configurations):
+
+* ``thesis``: ``c = 30`` for every agent (the thesis multiplies the uncertainty by 30, so that
+  ``1 - tanh(30 sigma^2)`` saturates near DropoutDAgger's threshold sigma^2 = 0.1);
+* ``code`` (this project's earlier variant): ``c = atanh(1/2) / threshold`` per agent, so
+  ``alpha(threshold) = 1/2``.
+
+Its four laws, tested exactly:
 
 * consistency: the two probabilities are in [0, 1] and sum to 1;
 * rationality: the less uncertain agent is never less likely to act;
@@ -43,6 +50,12 @@ def coefficient(uncertainty: float, c: float) -> float:
     if x > 700.0:  # exp overflows; the coefficient is below 1e-300
         return 0.0
     return 2.0 / (1.0 + math.exp(x))  # == 1 - tanh(c U), without cancelling to 0 for large U
+
+
+def non_preferential(uncertainty: float, c: float) -> float:
+    """``tanh(c U)`` in [0, 1] (= 1 - alpha): the thesis's weight on the mixture in rational
+    sampling, which grows with the learner's uncertainty; ``U = inf`` gives 1."""
+    return 1.0 - coefficient(uncertainty, c)
 
 
 def rational_mixing(u_expert: float, u_learner: float, c_expert: float, c_learner: float) -> float:
@@ -168,13 +181,20 @@ class LearnerThreshold(Mixing):
 
 class RationalMixing(Mixing):
     """UPMS: expert with probability ``alpha_T / (alpha_T + alpha_L)``; impossible -> expert.
-    Episode 1 is the expert's (the learner has seen nothing yet)."""
+    Episode 1 is the expert's (the learner has seen nothing yet). ``scale`` given: the thesis's
+    ``c = scale`` for both agents; otherwise ``c = atanh(1/2) / threshold`` per agent."""
 
     name = "rational"
 
-    def __init__(self, expert_threshold: float, learner_threshold: float):
-        self.c_expert = saturation(expert_threshold)
-        self.c_learner = saturation(learner_threshold)
+    def __init__(self, expert_threshold: float | None = None, learner_threshold: float | None = None,
+                 scale: float | None = None):
+        if scale is not None:
+            if not float(scale) > 0:
+                raise ValueError(f"Invalid uncertainty scale: {scale}; valid: > 0")
+            self.c_expert = self.c_learner = float(scale)
+        else:
+            self.c_expert = saturation(expert_threshold)
+            self.c_learner = saturation(learner_threshold)
 
     def choose(self, view, rng):
         if view.i == 1:

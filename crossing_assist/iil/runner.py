@@ -6,11 +6,15 @@ Folder ``OUT/<env>/<algo>/seed<k>/``:
   (frame source) and package versions;
 * ``episodes.csv`` - one row an episode (see :func:`crossing_assist.iil.loop.run_episode`);
 * ``data/ep<i>.npz`` - the samples episode ``i`` aggregated;
-* ``state.pt`` - learner weights, optimiser and the run's rng state after the last episode.
+* ``state.pt`` - learner weights, optimiser and the run's random streams after the last episode.
 
 Everything is written atomically; a run whose folder already holds ``k`` finished episodes
 with the same configuration continues at episode ``k + 1`` and gives the same numbers as an
-uninterrupted run (same rng streams).
+uninterrupted run (same random streams).
+
+The expert: the ``thesis`` configuration uses the thesis's 0/inf expert (``U = 0`` while it
+wants to act, i.e. above risk ``expert_binary_risk``, default 0.5; ``inf`` otherwise); the
+``code`` configuration a continuous confidence unless ``expert_binary_risk`` is set.
 """
 
 from __future__ import annotations
@@ -32,7 +36,9 @@ from .envs import make_env
 from .experts import OracleExpert
 from .learners import LearnerConfig
 from .files import RunError, _atomic_write, _write_csv, read_episodes  # noqa: F401 (re-exported)
-from .loop import aggregate_and_learn, run_episode
+from .loop import Streams, aggregate_and_learn, run_episode
+
+THESIS_BINARY_RISK = 0.5
 
 
 @dataclass(frozen=True)
@@ -45,10 +51,27 @@ class RunConfig:
     learner: LearnerConfig = field(default_factory=LearnerConfig)
     params: AlgoParams = field(default_factory=AlgoParams)
     expert_scale: float = 1.0
-    expert_binary_risk: float | None = None  # None: continuous confidence; r0: the thesis's 0/inf expert
+    expert_binary_risk: float | None = None  # r0: the 0/inf expert; None: thesis config 0.5, code config continuous
+    frame_size: tuple[int, int] | None = None  # (W, H) of Duckietown's frames; None: the env's (160 x 120)
+    expert: str = "oracle"  # "oracle" (scripted) or "human" (keyboard/gamepad window)
 
     def folder(self, out: Path) -> Path:
-        return Path(out) / self.env / self.algo / f"seed{self.seed}"
+        return Path(out) / self.env / self.params.config / self.algo / f"seed{self.seed}"
+
+    def binary_risk(self) -> float | None:
+        """The 0/inf expert's risk threshold, or None for the continuous confidence."""
+        if self.expert_binary_risk is not None:
+            return self.expert_binary_risk
+        return THESIS_BINARY_RISK if self.params.config == "thesis" else None
+
+
+def make_run_env(cfg: RunConfig):
+    """The run's environment (frame size applied where the environment takes one)."""
+    if cfg.frame_size is None:
+        return make_env(cfg.env)
+    if cfg.env != "duckietown":
+        raise RunError(f"--frame-size applies to duckietown only (not {cfg.env})")
+    return make_env(cfg.env, obs_size=tuple(int(v) for v in cfg.frame_size))
 
 
 def versions() -> dict:
@@ -69,10 +92,11 @@ def _config_json(cfg: RunConfig) -> dict:
 
 
 def run(cfg: RunConfig, out: Path, *, progress: Callable[[int], None] | None = None,
-        on_episode: Callable[[dict], None] | None = None, env=None) -> Path:
-    """Run (or continue) ``cfg`` under ``out``; returns the run folder."""
+        on_episode: Callable[[dict], None] | None = None, env=None, expert=None) -> Path:
+    """Run (or continue) ``cfg`` under ``out``; returns the run folder. ``expert``: an expert
+    object (the human's); default the environment's oracle as :meth:`RunConfig.binary_risk` says."""
     folder = cfg.folder(out)
-    env = env or make_env(cfg.env)
+    env = env or make_run_env(cfg)
     setup = create(cfg.algo, env, horizon=cfg.horizon, episodes=cfg.episodes, seed=cfg.seed,
                    params=cfg.params, cfg=cfg.learner)
     (folder / "data").mkdir(parents=True, exist_ok=True)
@@ -85,33 +109,37 @@ def run(cfg: RunConfig, out: Path, *, progress: Callable[[int], None] | None = N
             raise RunError(f"{folder}: holds a run with a different {diff[0]} ({have.get(diff[0])!r} vs "
                            f"{want[diff[0]]!r}); use another --out or delete the folder")
     meta = {"run": want, "params_resolved": asdict(cfg.params.resolved(env)), "strategies": setup.describe(),
+            "expert": {"kind": cfg.expert, "binary_risk": cfg.binary_risk(), "scale": cfg.expert_scale},
             "versions": versions(),
             "env": {"name": cfg.env, "source": getattr(env.unwrapped, "source", cfg.env)},
             "command": " ".join(sys.argv)}
     _atomic_write(meta_path, json.dumps(meta, indent=2, default=str))
-    rng = np.random.default_rng(cfg.seed)
+    streams = Streams.from_seed(cfg.seed)
     data, rows = Aggregate(), []
-    done = _resume(folder, setup, data, rng, rows)
-    expert = OracleExpert(env, cfg.expert_scale, cfg.expert_binary_risk)
+    done = _resume(folder, setup, data, streams, rows)
+    if expert is None:
+        if cfg.expert != "oracle":
+            raise RunError(f"expert {cfg.expert!r} needs an expert object (the CLI opens the window)")
+        expert = OracleExpert(env, cfg.expert_scale, cfg.binary_risk())
     for i in range(done + 1, cfg.episodes + 1):
-        res = run_episode(env, expert, setup, i, cfg.horizon, rng, progress)
-        row = {"episode": i, **res.metrics, **aggregate_and_learn(res, setup, data, i, rng)}
+        res = run_episode(env, expert, setup, i, cfg.horizon, streams, progress)
+        row = {"episode": i, **res.metrics, **aggregate_and_learn(res, setup, data, i, streams.train)}
         data.save_episode(folder / "data" / f"ep{i}.npz", i)
         rows.append(row)
-        _save_state(folder / "state.pt", setup, rng, i)
+        _save_state(folder / "state.pt", setup, streams, i)
         _write_csv(folder / "episodes.csv", rows)
         if on_episode:
             on_episode(row)
     return folder
 
 
-def _save_state(path: Path, setup, rng: np.random.Generator, episode: int) -> None:
+def _save_state(path: Path, setup, streams: Streams, episode: int) -> None:
     with atomic_path(path) as tmp:
         torch.save({"episode": episode, "learner": setup.learner.state_dict(),
-                    "rng": json.dumps(rng.bit_generator.state)}, tmp)
+                    "streams": json.dumps(streams.state())}, tmp)
 
 
-def _resume(folder: Path, setup, data: Aggregate, rng: np.random.Generator, rows: list[dict]) -> int:
+def _resume(folder: Path, setup, data: Aggregate, streams: Streams, rows: list[dict]) -> int:
     state_path, csv_path = folder / "state.pt", folder / "episodes.csv"
     if not (state_path.exists() and csv_path.exists()):
         return 0
@@ -126,5 +154,7 @@ def _resume(folder: Path, setup, data: Aggregate, rng: np.random.Generator, rows
     setup.learner.load_state_dict(state["learner"])
     if setup.after_fit:
         setup.after_fit()
-    rng.bit_generator.state = json.loads(state["rng"])
+    if "streams" not in state:
+        raise RunError(f"{state_path}: a run from before the per-concern random streams; delete the folder to start again")
+    streams.set_state(json.loads(state["streams"]))
     return done

@@ -4,30 +4,38 @@ A sampling strategy turns the mixing decision of a step into the agent that real
 
 * :class:`FullHorizon` - roll the mixed policy out for the whole horizon (DAgger & co.);
 * :class:`RandomSwitch` - AggreVaTe: the mixed policy until a random switch time ``t_s``
-  (drawn per episode from the rng), one exploration step at ``t_s``, then the expert to the
-  end (its rewards give the cost-to-go of the explored action);
-* :class:`RationalSampling` - UPMS: the mixing choice acts with its own probability
-  ``p_choice``; otherwise the exploration policy ``E'`` acts, which is the expert with
-  probability ``alpha_T`` and the explorer otherwise.
+  (drawn per episode from the sampling stream), one exploration step at ``t_s``, then the
+  expert to the end (its rewards give the cost-to-go of the explored action);
+* :class:`RationalSampling` - UPMS, two configurations:
+
+  - ``thesis`` (Eq. 18-21): ``pi_RS = a * pi_i + (1 - a) * E'`` with ``a = tanh(c U_L)`` (the
+    weight on the mixture ``pi_i`` grows with the learner's uncertainty: explore when it is
+    certain, exploit when it is not) and ``E' = alpha_T * expert + (1 - alpha_T) * E``, where
+    ``E`` is the random explorer (UPMS) or the learner itself (UPMS-NE: no random explorer);
+  - ``code`` (the author's public code and this project's earlier variant): keep the mixing
+    choice with its own probability ``p_choice``, else ``E'`` with ``E`` the random explorer.
+    With an expert whose uncertainty is only 0 or inf, ``p_choice`` is 1 whenever ``alpha_T``
+    is 0, so the explorer never acts.
+
+Every strategy gives episode 1 to the mixing choice (the expert's demonstration).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .mixing import EXPERT, EXPLORER, coefficient, saturation
+from .mixing import EXPERT, EXPLORER, LEARNER, StepView, coefficient, non_preferential, saturation
 
 
 class Sampling:
-    """Base class: ``control(t, chosen, p_choice, u_expert, rng) -> agent``."""
+    """Base class: ``control(view, chosen, p_choice, rng) -> agent``."""
 
     name = "sampling"
 
     def begin_episode(self, i: int, horizon: int, rng: np.random.Generator) -> None:
         """Hook called before episode ``i`` (1-based) with the horizon (steps)."""
 
-    def control(self, t: int, chosen: str, p_choice: float, u_expert: float,
-                rng: np.random.Generator) -> str:
+    def control(self, view: StepView, chosen: str, p_choice: float, rng: np.random.Generator) -> str:
         raise NotImplementedError
 
     def describe(self) -> dict:
@@ -39,7 +47,7 @@ class FullHorizon(Sampling):
 
     name = "full-horizon"
 
-    def control(self, t, chosen, p_choice, u_expert, rng):
+    def control(self, view, chosen, p_choice, rng):
         return chosen
 
 
@@ -57,25 +65,45 @@ class RandomSwitch(Sampling):
         self._first = i == 1
         self.switch_time = None if self._first else int(rng.integers(0, horizon))
 
-    def control(self, t, chosen, p_choice, u_expert, rng):
+    def control(self, view, chosen, p_choice, rng):
         if self._first:
             return EXPERT
-        if t < self.switch_time:
+        if view.t < self.switch_time:
             return chosen
-        return EXPLORER if t == self.switch_time else EXPERT
+        return EXPLORER if view.t == self.switch_time else EXPERT
 
 
 class RationalSampling(Sampling):
-    """UPMS: keep the mixing choice with probability ``p_choice``, else act with
-    ``E' = alpha_T * expert + (1 - alpha_T) * explorer``. Needs a continuous expert
-    confidence: with ``U_T`` only 0 or inf, ``p_choice`` is 1 whenever the expert answers."""
+    """UPMS's rational sampling (see the module docstring). ``mode="thesis"``: Eq. 19-21 with
+    ``c = scale`` for both agents and ``explorer`` = :data:`EXPLORER` (UPMS) or :data:`LEARNER`
+    (UPMS-NE, ``E = pi_hat``). ``mode="code"``: the author's code, ``c_T = atanh(1/2) /
+    expert_threshold``."""
 
     name = "rational-sampling"
 
-    def __init__(self, expert_threshold: float):
-        self.c_expert = saturation(expert_threshold)
+    def __init__(self, mode: str = "thesis", *, scale: float | None = None, expert_threshold: float | None = None,
+                 explorer: str = EXPLORER):
+        if mode not in ("thesis", "code"):
+            raise ValueError(f"Unknown rational sampling mode: {mode!r}; valid: thesis, code")
+        if explorer not in (EXPLORER, LEARNER):
+            raise ValueError(f"Invalid explorer: {explorer!r}; valid: {EXPLORER}, {LEARNER}")
+        if mode == "thesis" and not (scale is not None and float(scale) > 0):
+            raise ValueError(f"Invalid uncertainty scale: {scale}; valid: > 0")
+        self.mode, self.explorer = mode, explorer
+        self.c_expert = float(scale) if mode == "thesis" else saturation(expert_threshold)
+        self.c_learner = float(scale) if mode == "thesis" else None
+        self._first = True
 
-    def control(self, t, chosen, p_choice, u_expert, rng):
-        if rng.random() < p_choice:
+    def begin_episode(self, i, horizon, rng):
+        self._first = i == 1
+
+    def _e_prime(self, view: StepView, rng) -> str:
+        return EXPERT if rng.random() < coefficient(view.u_expert, self.c_expert) else self.explorer
+
+    def control(self, view, chosen, p_choice, rng):
+        if self._first:
             return chosen
-        return EXPERT if rng.random() < coefficient(u_expert, self.c_expert) else EXPLORER
+        keep = non_preferential(view.u_learner, self.c_learner) if self.mode == "thesis" else p_choice
+        if rng.random() < keep:
+            return chosen
+        return self._e_prime(view, rng)

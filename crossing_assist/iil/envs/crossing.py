@@ -8,10 +8,12 @@ sees the frame the phone camera would show for the walker's heading and answers 
 A bin turns the walker by ``turn_gain`` times that strip's heading and it walks ``step_m``;
 ``unknown`` makes it stop and scan (no progress, no turn).
 
-Frames: real PTL photos re-rendered by a yaw homography (``data_tools.augment.yaw``) so that
-the far end appears at the walker's current bearing; or, without the photos, a simple
-synthetic zebra crossing drawn for that bearing. Lateral offset changes only the bearing
-(no parallax is rendered).
+Frames: real PTL photos re-rendered by a yaw homography (the rotation of
+``data_tools.augment.yaw``) so that the far end appears at the walker's current bearing; or,
+without the photos, a simple synthetic zebra crossing drawn for that bearing. Lateral offset
+changes only the bearing (no parallax is rendered). The part of the turned view that the photo
+does not cover is filled by reflecting the photo at its edges (:func:`yaw_reflect`), never left
+black: a black border's side and width would tell the learner the label.
 
 Reward per step: ``progress - |y| / half_width`` (progress = metres gained towards the far
 kerb / step_m); leaving the corridor (``|y| > half_width``) is out of bounds (-1000,
@@ -156,13 +158,49 @@ class CrossingEnv(gym.Env):
         return synthetic_frame(h, self.cfg.width, self.cfg.height, self.cfg.fov_deg, seed=self.photo)
 
     def _photo_frame(self, h: float) -> np.ndarray:
-        from crossing_assist.data_tools.augment import yaw  # noqa: PLC0415
-
         img, far_x = self.photos[self.photo]
         h0 = x_to_heading(far_x, self.cfg.fov_deg)
         psi = float(np.clip(h0 - h, -80.0, 80.0))  # turning right by psi moves the goal to h0 - psi
-        warped = yaw(img, far_x, x_to_bin(far_x), psi, self.cfg.fov_deg)[0]
+        warped = yaw_reflect(img, psi, self.cfg.fov_deg)
         return cv2.resize(warped, (self.cfg.width, self.cfg.height), interpolation=cv2.INTER_AREA)
+
+
+def _reflect(coord: np.ndarray, size: int) -> np.ndarray:
+    """Pixel coordinates folded back into ``[0, size - 1]`` by mirroring at the edges."""
+    r = np.mod(coord + 0.5, 2.0 * size)
+    r = np.where(r >= size, 2.0 * size - r, r) - 0.5
+    return np.clip(r, 0.0, size - 1.0)
+
+
+def yaw_reflect(image: np.ndarray, psi_deg: float, fov_deg: float = DEFAULT_FOV_DEG) -> np.ndarray:
+    """The view of ``image`` turned right by ``psi_deg`` (the homography of
+    ``data_tools.augment.yaw``), with every pixel filled: rays that miss the photo take the
+    photo mirrored at its edges, rays from behind the photo's camera take the nearest column
+    that is in front. Same shape and dtype as ``image``."""
+    from crossing_assist.data_tools.augment import intrinsics  # noqa: PLC0415
+
+    h, w = image.shape[:2]
+    k = intrinsics(w, h, fov_deg)
+    f, cx, cy = k[0, 0], k[0, 2], k[1, 2]
+    c, s = math.cos(math.radians(psi_deg)), math.sin(math.radians(psi_deg))
+    xn = (np.arange(w, dtype=np.float64) - cx) / f
+    z = c - s * xn
+    ahead = z > 0.05
+    if not ahead.any():
+        ahead = z >= z.max()
+    idx = np.arange(w)
+    good = idx[ahead]
+    nearest = good[np.clip(np.searchsorted(good, idx), 0, len(good) - 1)]
+    left = good[np.clip(np.searchsorted(good, idx) - 1, 0, len(good) - 1)]
+    nearest = np.where(np.abs(left - idx) < np.abs(nearest - idx), left, nearest)
+    xn, z = xn[nearest], z[nearest]
+    sx = f * (c * xn + s) / z + cx
+    yn = (np.arange(h, dtype=np.float64) - cy) / f
+    sy = f * yn[:, None] / z[None, :] + cy
+    map_x = np.broadcast_to(_reflect(sx, w)[None, :], (h, w)).astype(np.float32)
+    map_y = _reflect(sy, h).astype(np.float32)
+    return cv2.remap(np.ascontiguousarray(image), map_x, map_y, interpolation=cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REFLECT)
 
 
 def synthetic_frame(heading_deg: float, width: int, height: int, fov_deg: float = DEFAULT_FOV_DEG,

@@ -5,16 +5,28 @@ dynamics build a ragged array), so it lives in its own virtualenv (``.venv-ducki
 docs/iil.md), never in the project's ``.venv``. Rendering uses pyglet's headless EGL
 mode (Mesa works, no X server).
 
-* Observation: the 160 x 120 camera frame, resized to ``obs_size`` (default 80 x 60) uint8 RGB.
+* Observation: the 160 x 120 camera frame (the thesis's size; ``obs_size`` resizes it) uint8 RGB.
 * Action: ``Box([0, -1], [1, 1])`` = (velocity, steering) in the pure-pursuit teacher's
   units; the steering is multiplied by ``steer_gain`` (10, as gym-duckietown's own imitation
   example does) before it reaches ``DuckietownEnv``.
 * Seeding: ``reset(seed=s)`` seeds the simulator's generator AND ``np.random`` (the
   simulator draws from both).
-* Invalid pose (off the road): reward -1000, ``info["out_of_bounds"] = True``, terminated;
-  the simulator's own step limit is disabled, so the horizon is the caller's alone.
-* ``info["reward_terms"]``: the simulator's reward split as the thesis reports it:
-  ``speed = v * dot_dir``, ``lateral = -10 |d|``, ``collision = 40 * proximity penalty``.
+* Reward: the thesis's Eq. 27 with ``c = 0`` (lane following, no obstacles):
+  ``R = |v|^2 dir(v) - 10 d`` inside the world, with ``dir(v)`` the cosine between the robot's
+  heading and the lane (``dot_dir``), ``d`` the distance from the lane centre (m) and ``v`` the
+  speed the simulator's own reward uses (its ``robot_speed``, 1.2: a constant, so the reward
+  does not depend on the velocity action, as in the thesis's simulator); 0 when the robot is on
+  the road but in no lane. With the measured speed (about 0.3 m/s at the expert's throttle)
+  ``|v|^2`` is about 0.09 and the expert's steps would be mostly penalties, which the thesis's
+  Table 3 (9 penalty units in 5120 expert steps) rules out. The simulator's proximity term
+  (``40 * proximity penalty``: about -1950 per 512 expert steps on udem1, for passing houses)
+  is not part of the reward.
+* Invalid pose (off the road or a collision; the simulator's ``done``): reward -1000,
+  ``info["out_of_bounds"] = True``, terminated; the simulator's own step limit is disabled, so
+  the horizon is the caller's alone.
+* ``info["reward_terms"]``: ``speed`` (``|v|^2 dir``) and ``lateral`` (``-10 d``), which sum to
+  the reward, and ``proximity_unused`` (the simulator's ``40 * proximity penalty``, reported
+  for reference only, not part of the reward).
 """
 
 from __future__ import annotations
@@ -59,7 +71,7 @@ class DuckietownLaneEnv(gym.Env):
                     "hg_threshold": 0.5, "max_discrepancy": 0.3}
     source = "duckietown udem1"
 
-    def __init__(self, map_name: str = "udem1", obs_size: tuple[int, int] = (80, 60), steer_gain: float = 10.0,
+    def __init__(self, map_name: str = "udem1", obs_size: tuple[int, int] = (160, 120), steer_gain: float = 10.0,
                  ref_velocity: float = 0.7, following_distance: float = 0.24):
         ok, why = duckietown_available()
         if not ok:
@@ -77,6 +89,8 @@ class DuckietownLaneEnv(gym.Env):
 
     def _obs(self, frame: np.ndarray) -> np.ndarray:
         import cv2  # noqa: PLC0415
+        if frame.shape[1::-1] == self.obs_size:
+            return np.ascontiguousarray(frame)
         return cv2.resize(np.ascontiguousarray(frame), self.obs_size, interpolation=cv2.INTER_AREA)
 
     def reset(self, *, seed=None, options=None):
@@ -89,19 +103,23 @@ class DuckietownLaneEnv(gym.Env):
     def step(self, action):
         v, steer = (float(a) for a in np.asarray(action, dtype=float).reshape(2))
         v, steer = min(max(v, 0.0), 1.0), min(max(steer, -1.0), 1.0)
-        frame, reward, done, info = self.sim.step(np.array([v, steer * self.steer_gain]))
-        oob = bool(reward <= -1000.0)
+        frame, sim_reward, done, info = self.sim.step(np.array([v, steer * self.steer_gain]))
+        oob = bool(sim_reward <= -1000.0)
         terms = {} if oob else self._terms()
+        reward = -1000.0 if oob else terms.get("speed", 0.0) + terms.get("lateral", 0.0)
         return self._obs(frame), float(reward), bool(done), False, {"out_of_bounds": oob, "reward_terms": terms}
 
     def _terms(self) -> dict:
+        """Eq. 27's terms (c = 0) and, for reference, the simulator's proximity term."""
         s = self.sim.unwrapped
-        col = 40.0 * float(s.proximity_penalty2(s.cur_pos, s.cur_angle))
+        prox = 40.0 * float(s.proximity_penalty2(s.cur_pos, s.cur_angle))
         try:
             lp = s.get_lane_pos2(s.cur_pos, s.cur_angle)
         except Exception:  # noqa: BLE001 - NotInLane
-            return {"collision": col}
-        return {"speed": float(s.robot_speed * lp.dot_dir), "lateral": -10.0 * abs(float(lp.dist)), "collision": col}
+            return {"proximity_unused": prox}
+        speed = float(s.robot_speed)
+        return {"speed": speed * speed * float(lp.dot_dir), "lateral": -10.0 * abs(float(lp.dist)),
+                "proximity_unused": prox}
 
     # -- the scripted expert -------------------------------------------------------------------
     def _curve_point(self, lookup: float):
