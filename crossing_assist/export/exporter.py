@@ -284,7 +284,7 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     policy, ckpt = _load_policy(cfg.run)
     n = policy.n_actions
     p = float(policy.config.get("p", 0.5)) if cfg.p is None else cfg.p
-    majority = policy.config.get("majority_action")
+    majority = policy.config.get("majority_action") or None   # 0 (unknown): runs whose baseline counted negatives
     data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress) if cfg.calib_data else None
     calib, metrics, notes = cal.uncalibrated(n, cfg.measure), {}, []
     if data is not None:
