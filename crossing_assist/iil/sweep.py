@@ -71,7 +71,8 @@ def sweep(configs: list, out: Path, *, address: str | None = None, cpus: int | N
         return {"ran": [], "skipped": skipped}
     started = not ray.is_initialized()
     if started:
-        kw = {"address": address} if address else {"num_cpus": cpus, "include_dashboard": False}
+        # "local": a new Ray for this sweep, even where another local cluster runs (or left its address file)
+        kw = {"address": address} if address else {"address": "local", "num_cpus": cpus, "include_dashboard": False}
         ray.init(**kw, log_to_driver=False)
     try:
         task = ray.remote(num_cpus=1)(_one)
