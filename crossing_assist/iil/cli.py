@@ -81,6 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--out", type=Path, default=None, help="default: DIRS[0]/report")
     for parser in (p, r, rep):
         parser.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
+    from .sweep import add_sweep_parser  # noqa: PLC0415 - `sweep`: run's options as Ray tasks
+
+    add_sweep_parser(sub, r)
     return p
 
 
@@ -180,6 +183,10 @@ def _main(argv: list[str]) -> int:
         print("thesis:", ", ".join(THESIS_ALGORITHMS))
         return 0
     try:
+        if a.cmd == "sweep":
+            from .sweep import cmd_sweep  # noqa: PLC0415
+
+            return cmd_sweep(a)
         return _cmd_run(a) if a.cmd == "run" else _cmd_report(a)
     except (RunError, ReportError, ImportError, RuntimeError) as exc:
         # bad options, a missing optional package or simulator: the user's to fix. (RunError and

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from dataclasses import fields
 from typing import Callable, Sequence
 
-from .config import TrainConfig
+from .config import ConfigError, TrainConfig
 
 _DEFAULTS = {f.name: f.default for f in fields(TrainConfig) if f.name not in ("data", "out")}
 
@@ -77,7 +78,8 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--optimizer", default=d["optimizer"], help="rmsprop | adamw")
     p.add_argument("--lr", type=float, default=d["lr"])
     p.add_argument("--weight-decay", type=float, default=d["weight_decay"])
-    p.add_argument("--p", type=float, default=d["p"], help="MC dropout probability of the head")
+    p.add_argument("--p", "--dropout", dest="p", type=float, default=d["p"],
+                   help="MC dropout probability of the head (--dropout under torchrun, whose --print-completion takes --p)")
     p.add_argument("--no-mirror", dest="mirror", action="store_false", help="do not add mirrored frames")
     p.add_argument("--yaw", type=_floats, default=d["yaw"], help="fixed yaw angles in degrees, e.g. 8,16 (each +-)")
     p.add_argument("--field", type=int, default=d["field"],
@@ -110,6 +112,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     a = train_parser().parse_args(_args(argv))
 
     def go() -> int:
+        from . import distributed
         from .train import resume_config, train, trained_epochs
 
         cfg = TrainConfig(
@@ -123,14 +126,21 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         if a.cv:
             from .crossval import cross_validate, format_cv
 
+            if distributed.requested():
+                raise ConfigError("Invalid --cv under torchrun: folds run one after another; run --cv in one process")
+
             summary = cross_validate(cfg, resume=a.resume)
             print(format_cv(summary))
             return 0
         if a.resume:
             cfg = resume_config(cfg, _given(train_parser(), _args(argv)))
-        out = train(cfg, resume=a.resume)
+        try:
+            out = train(cfg, resume=a.resume)
+        finally:
+            distributed.teardown()
         best = out / "weights" / "best.pt"
-        print(f"trained {trained_epochs(out)} epochs -> {best} ({best.stat().st_size / 1e6:.1f} MB)")
+        if os.environ.get("RANK", "0") == "0":  # one line per run, not per torchrun rank
+            print(f"trained {trained_epochs(out)} epochs -> {best} ({best.stat().st_size / 1e6:.1f} MB)")
         return 0
 
     return _run(go, argv, interrupted=_resume_hint(a.out))

@@ -9,6 +9,10 @@ part. Frozen batch-norm statistics stay fixed (eval mode). Run folder::
 ``last.pt`` (written atomically at the end of every epoch) carries the optimizer state and
 the best score so far, so ``--resume`` after a kill continues at the next epoch and the run
 ends with the same number of epochs as an uninterrupted one.
+
+Under ``torchrun`` (WORLD_SIZE > 1) the loop is DistributedDataParallel (:mod:`.distributed`):
+each global batch is split across the ranks, rank 0 builds the feature cache and alone writes
+the run folder.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from .backbones import create_backbone
 from .cache import FeatureSet, compute_features
 from .checkpoint import load_checkpoint, save_checkpoint
 from .config import ConfigError, TrainConfig
+from . import distributed
 from .data import make_variants
 from .heads import create_head
 from .metrics import compute_metrics
@@ -220,9 +225,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     ManifestError / CheckpointError / BackboneError with one clear line on bad input."""
     torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)     # head initialisation (the run's own generator state)
+    ctx = distributed.setup()       # rank 0 of 1 unless launched by torchrun
     out = Path(cfg.out)
     last_path, best_path = out / "weights" / "last.pt", out / "weights" / "best.pt"
-    for folder in (out, out / "weights"):  # temporary files of a killed run (SIGKILL runs no clean-up)
+    for folder in (out, out / "weights") if ctx.main else ():  # temporary files of a killed run
         sweep_orphans(folder)
     state = None
     if resume:
@@ -241,17 +247,18 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     fs = lambda d, v, name: compute_features(policy.backbone, start, d, size, v, cfg.fov_deg, cache,  # noqa: E731
                                              progress=cfg.progress, desc=f"features {name}",
                                              fit=cfg.fit, seed=cfg.seed)
-    train_fs = fs(train_ds, variants, "train")
-    tr, held = _hold_out(_to_split(train_fs, cfg.actions), train_fs, train_ds, cfg.holdout)
-    n_extra = 0
-    for extra in cfg.extra_data:  # cached per folder, so adding data never recomputes the main set
-        ex = read_manifest(extra).split("train")
-        if len(ex):
-            ex_fs = fs(ex, variants, f"train {Path(extra).name}")
-            ex_split, _ = _hold_out(_to_split(ex_fs, cfg.actions), ex_fs, ex, cfg.holdout)  # held-out sources stay out
-            tr = _concat(tr, ex_split)
-            n_extra += int(sum(r.source not in cfg.holdout for r in ex.rows))
-    val = _to_split(fs(val_ds, make_variants(False), "val"), cfg.actions) if val_ds is not None else None
+    with distributed.main_first(ctx):  # rank 0 builds the cache, the other ranks then read it
+        train_fs = fs(train_ds, variants, "train")
+        tr, held = _hold_out(_to_split(train_fs, cfg.actions), train_fs, train_ds, cfg.holdout)
+        n_extra = 0
+        for extra in cfg.extra_data:  # cached per folder, so adding data never recomputes the main set
+            ex = read_manifest(extra).split("train")
+            if len(ex):
+                ex_fs = fs(ex, variants, f"train {Path(extra).name}")
+                ex_split, _ = _hold_out(_to_split(ex_fs, cfg.actions), ex_fs, ex, cfg.holdout)  # held-out sources stay out
+                tr = _concat(tr, ex_split)
+                n_extra += int(sum(r.source not in cfg.holdout for r in ex.rows))
+        val = _to_split(fs(val_ds, make_variants(False), "val"), cfg.actions) if val_ds is not None else None
     sel = val if cfg.select_on == "val" else held
     # the majority-class baseline is the most frequent *direction* (unknown negatives would make a
     # baseline that is right on no crossing photo); all-unknown training data keeps unknown
@@ -269,15 +276,19 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
         opt.load_state_dict(state["optimizer"])
         first_epoch = int(state["epoch"]) + 1
         best = state.get("best_score")
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "args.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+    if ctx.main:
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(out / "args.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
     rows = _read_results(out / "results.csv", first_epoch - 1)
     weights = _class_weights(tr.actions, cfg.actions) if cfg.balance == "weights" else None
-    bar = tqdm(range(first_epoch, cfg.epochs + 1), desc="train", disable=not cfg.progress,
+    fwd = distributed.wrap(policy, start, ctx)
+    bar = tqdm(range(first_epoch, cfg.epochs + 1), desc="train", disable=not (cfg.progress and ctx.main),
                initial=first_epoch - 1, total=cfg.epochs, unit="epoch")
     for epoch in bar:
         t0 = time.time()
-        loss = _run_epoch(policy, opt, tr, start, cfg, epoch, weights)
+        loss = _run_epoch(policy, opt, tr, start, cfg, epoch, weights, fwd, ctx)
+        if not ctx.main:  # only rank 0 evaluates and writes; the others go on to the next epoch
+            continue
         m_sel = _metrics_or_none(policy, sel, start, cfg.actions, majority)
         m_val = m_sel if sel is val else _metrics_or_none(policy, val, start, cfg.actions, majority)
         row = {"epoch": epoch, "train_loss": f"{loss:.5f}", "seconds": f"{time.time() - t0:.2f}"}
@@ -297,7 +308,9 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
                                             "epoch": epoch, "train_config": cfg.to_dict(),
                                             "optimizer": opt.state_dict(), "best_score": best})
         bar.set_postfix(loss=row["train_loss"], acc=row["sel_accuracy"], mae=row["sel_bin_mae"])
-    _plot_results(out)
+    if ctx.main:
+        _plot_results(out)
+    distributed.barrier(ctx)  # every rank returns once the run folder is complete
     return out
 
 
@@ -359,11 +372,14 @@ def _slim(m: dict | None) -> dict:
 
 
 def _run_epoch(policy: Policy, opt: torch.optim.Optimizer, tr: Split, start: int, cfg: TrainConfig,
-               epoch: int, weights: torch.Tensor | None) -> float:
+               epoch: int, weights: torch.Tensor | None, fwd: torch.nn.Module | None = None,
+               ctx: distributed.Context = distributed.Context()) -> float:
     """One pass over the cached training samples; returns the mean loss."""
     _train_mode(policy, start)
-    torch.manual_seed(cfg.seed * 100003 + epoch)      # dropout masks, reproducible on resume
+    torch.manual_seed(cfg.seed * 100003 + epoch + 7919 * ctx.rank)  # dropout masks, reproducible on resume
     order = _epoch_order(tr, cfg, epoch)
+    if ctx.active:
+        return _run_epoch_ddp(opt, tr, cfg, weights, fwd, ctx, order)
     total, count = 0.0, 0
     steps = range(0, len(order), cfg.batch_size)
     for i in tqdm(steps, desc=f"epoch {epoch}", leave=False, disable=not cfg.progress):
@@ -384,6 +400,32 @@ def _run_epoch(policy: Policy, opt: torch.optim.Optimizer, tr: Split, start: int
         total += float(loss.detach()) * len(idx)
         count += len(idx)
     return total / max(count, 1)
+
+
+def _run_epoch_ddp(opt: torch.optim.Optimizer, tr: Split, cfg: TrainConfig, weights: torch.Tensor | None,
+                   fwd: torch.nn.Module, ctx: distributed.Context, order: np.ndarray) -> float:
+    """:func:`_run_epoch` on this rank's part of every global batch. Each rank's loss is its share
+    of the global batch's loss (sums over its samples divided by the global counts), times the
+    world size because DDP averages the gradients: the step equals the one-process step."""
+    total = 0.0
+    for i in range(0, len(order), cfg.batch_size):
+        batch = order[i:i + cfg.batch_size]
+        part, keep_np = distributed.rank_slice(batch, ctx)
+        idx, keep = torch.from_numpy(part), torch.from_numpy(keep_np)
+        logits = fwd(tr.feats[idx].float(), tr.window[idx])
+        target = _targets(torch.from_numpy(tr.actions[part]), cfg.actions, cfg.smoothing)
+        logp = logits.log_softmax(-1)
+        per = -(target * (logp if weights is None else logp * weights)).sum(-1)
+        loss = (per * keep).sum() / len(batch)
+        if cfg.aux_x > 0:
+            fx = torch.from_numpy(np.where(keep_np > 0, tr.far_x[part], np.nan)).float()
+            mine, known = int((~torch.isnan(fx)).sum()), int((~np.isnan(tr.far_x[batch])).sum())
+            loss = loss + cfg.aux_x * far_x_loss(logits, fx, cfg.actions) * (mine / max(known, 1))
+        opt.zero_grad(set_to_none=True)
+        (loss * ctx.world).backward()
+        opt.step()
+        total += float(loss.detach()) * len(batch)
+    return distributed.all_sum(ctx, total) / max(len(order), 1)
 
 
 def _plot_results(out: Path) -> None:
