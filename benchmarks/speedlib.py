@@ -141,14 +141,14 @@ class Frames:
 def load_split(data_dir: str, split: str, n_actions: int) -> Frames:
     """A dataset split (``manifest.csv``): raw RGB frames, action labels, sources (no torch)."""
     from crossing_assist.actions import get_space
-    from crossing_assist.data_tools.images import load_rgb
+    from crossing_assist.data_tools.images import load_frame
     from crossing_assist.data_tools.manifest import read_manifest
 
     try:
         ds = read_manifest(data_dir).split(split)
         if len(ds.rows) < 2:
             raise ValueError(f"{data_dir}: split {split!r} has {len(ds.rows)} frames; need >= 2")
-        images = [load_rgb(ds.image_path(r)) for r in ds.rows]
+        images = [load_frame(ds.image_path(r), r.flags) for r in ds.rows]
     except (OSError, ValueError) as exc:  # ManifestError is a ValueError
         raise SystemExit(f"error: {exc}") from None
     labels = get_space(n_actions).bins_to_actions(ds.labels())

@@ -18,7 +18,6 @@ orientation (:func:`camera_fov`), never a constant.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -133,12 +132,3 @@ def window_x(far_x: float, x0: float, width: float) -> float:
     when out of view (``x' = (x - x0) / width``; out-of-view goals are inferable, so edge strip)."""
     x = (far_x - x0) / width
     return min(max(x, 1e-6), 1 - 1e-6)
-
-
-def heading_fov_ok(fov_deg: float) -> bool:
-    """True when ``fov_deg`` is a usable field of view (for callers that must not raise)."""
-    try:
-        check_fov(fov_deg)
-        return math.isfinite(float(fov_deg))
-    except GeometryError:
-        return False

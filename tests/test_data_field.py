@@ -175,7 +175,7 @@ def _kerb_dataset(root, with_far_y=True):
         img[:int(0.7 * H)] = (200, 30, 30)
         img[int(0.7 * H):] = (30, 200, 30)
         save_rgb(root / "images" / f"p{i}.png", img)
-        flags = (f"far_y=0.7000",) if with_far_y else ()
+        flags = ("far_y=0.7000",) if with_far_y else ()
         label, fx = (UNKNOWN, None) if i == 5 else (i + 3, bin_center_x(i + 3))
         rows.append(Row(f"images/p{i}.png", label, fx, f"src:{i % 2}", "train" if i < 4 else "val", {}, flags))
     write_manifest(root, rows)

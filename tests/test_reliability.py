@@ -7,7 +7,6 @@ they are fast; the rest call the library or the entry points directly.
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import subprocess
@@ -20,7 +19,6 @@ import pytest
 import soundfile as sf
 from runtime_toy import make_toy_bundle, toy_bundle, toy_meta, toy_graph_bytes, bar_frame  # noqa: F401
 
-from crossing_assist import errors
 from crossing_assist.bundle import BundleError, read_bundle, write_bundle
 from crossing_assist.data_tools.cli import main as data_main
 from crossing_assist.data_tools.images import save_rgb

@@ -33,6 +33,8 @@ from crossing_assist.actions import (
     parse_label, x_to_bin, x_to_heading,
 )
 
+from crossing_assist.geometry import window_x
+
 OUT_OF_FRAME_MODES = ("unknown", "edge")
 
 
@@ -214,7 +216,7 @@ def crop_window(image: np.ndarray, far_x: float | None, label: int, aspect: floa
         out = image[:, x0:x0 + cw]
         if far_x is None or label == UNKNOWN:
             return np.ascontiguousarray(out), None, label
-        x = min(max((far_x * w - x0) / cw, 1e-6), 1 - 1e-6)
+        x = window_x(far_x, x0 / w, cw / w)
         return np.ascontiguousarray(out), x, x_to_bin(x)
     ch = max(1, int(round(w / aspect)))
     y0 = (h - ch) // 2

@@ -57,6 +57,7 @@ def _cmd_negatives(args: argparse.Namespace) -> int:
 
 
 def _cmd_photo_clip(args: argparse.Namespace) -> int:
+    from crossing_assist.data_tools.manifest import ManifestError
     from crossing_assist.data_tools.photo_clip import PhotoClipConfig, make_photo_clip
 
     try:

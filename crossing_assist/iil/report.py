@@ -255,7 +255,7 @@ def claims(stats: dict[str, dict]) -> list[str]:
         if v not in stats:
             continue
         s = stats[v]
-        d, a = stats.get("dagger"), stats.get("aggrevate")
+        d = stats.get("dagger")
         i_v, i_d = _mean(s["interventions"]), _mean(d["interventions"]) if d else math.nan
         row(f"{v}: fewer interventions than DAgger", (i_v < i_d) if d else None,
             f"{i_v:.1f} vs {i_d:.1f}" if d else "no DAgger run", th[v][5] < th["dagger"][5],
