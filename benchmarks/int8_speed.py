@@ -38,8 +38,8 @@ import numpy as np  # noqa: E402
 import onnx  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from speedlib import (Frames, int8_split, interleaved, load_split, predict, print_profiles, profile_by_op,  # noqa: E402
-                      ratio, session, synthetic_frames)
+from speedlib import (Frames, int8_split, interleaved, load_split, parse_size, predict, print_profiles,  # noqa: E402
+                      profile_by_op, ratio, session, synthetic_frames)
 
 from crossing_assist.bundle import BundleError, read_bundle  # noqa: E402
 from crossing_assist.export.calibrate import conformal_threshold  # noqa: E402
@@ -47,16 +47,6 @@ from crossing_assist.export.graph import model_bytes  # noqa: E402
 from crossing_assist.export.quantize import INT8_MODES, quantize_convs  # noqa: E402
 
 DEFAULT_BUNDLE = Path(__file__).resolve().parents[1] / "crossing_assist" / "assets" / "default_bundle"
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}; expected WIDTHxHEIGHT, e.g. 640x480") from None
-    if not (16 <= w <= 4096 and 16 <= h <= 4096):
-        raise argparse.ArgumentTypeError(f"{text!r}; each side 16..4096")
-    return w, h
 
 
 def build_parser() -> argparse.ArgumentParser:

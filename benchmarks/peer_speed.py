@@ -39,7 +39,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from speedlib import int8_split, interleaved, load_split, ratio, session, synthetic_frames  # noqa: E402
+from speedlib import int8_split, interleaved, load_split, parse_size, ratio, session, synthetic_frames  # noqa: E402
 
 from crossing_assist.bundle import BundleError, read_bundle  # noqa: E402
 
@@ -82,16 +82,6 @@ def export_proxy(version: int, path: Path) -> None:
                                     output_names=["light", "direction"], dynamo=True, external_data=False,
                                     opset_version=18, verbose=False, optimize=True)
     program.save(str(path))
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}; expected WIDTHxHEIGHT, e.g. 640x480") from None
-    if not (16 <= w <= 4096 and 16 <= h <= 4096):
-        raise argparse.ArgumentTypeError(f"{text!r}; each side 16..4096")
-    return w, h
 
 
 def build_parser() -> argparse.ArgumentParser:

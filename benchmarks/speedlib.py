@@ -11,6 +11,7 @@ medians of per-round ratios, so models compared share each round's conditions.
 
 from __future__ import annotations
 
+import argparse
 import collections
 import json
 import os
@@ -171,3 +172,14 @@ def predict(sess: ort.InferenceSession, images: Sequence[np.ndarray]) -> dict[st
 
 def describe(sess: Any) -> str:
     return ", ".join(f"{i.name} {i.type} {i.shape}" for i in sess.get_inputs())
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``640x480`` -> (640, 480) for ``--frame`` options (argparse type)."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}; expected WIDTHxHEIGHT, e.g. 640x480") from None
+    if not (16 <= w <= 4096 and 16 <= h <= 4096):
+        raise argparse.ArgumentTypeError(f"{text!r}; each side 16..4096")
+    return w, h
