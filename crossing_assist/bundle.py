@@ -99,10 +99,20 @@ class ConformalSpec:
 @dataclass(frozen=True)
 class UncertaintySpec:
     """The gate's learner uncertainty: output ``measure``; ``threshold`` is its value where the
-    gate's coefficient should be about one half."""
+    gate's coefficient should be about one half, for landscape frames; ``portrait_threshold``
+    the same for portrait frames (optional; absent = ``threshold``). A portrait strip is narrower
+    (0.56 of a landscape one with a 3:4 frame on a 4:3 canvas), so the same doubt in degrees
+    spreads over more strips and reads as a higher entropy."""
 
     measure: str
     threshold: float
+    portrait_threshold: float | None = None
+
+    def threshold_for(self, orientation: str) -> float:
+        """The threshold for frames of this orientation (``landscape`` or ``portrait``)."""
+        if orientation == "portrait" and self.portrait_threshold is not None:
+            return self.portrait_threshold
+        return self.threshold
 
 
 @dataclass(frozen=True)
@@ -254,6 +264,8 @@ def _parse_calibration(d: Any) -> Calibration:
                         UNCERTAINTY_MEASURES),
         threshold=_num(_get(u, "threshold", "calibration.uncertainty"), "calibration.uncertainty.threshold",
                        0.0, 1e6, lo_open=True),
+        portrait_threshold=None if u.get("portrait_threshold") is None else
+        _num(u["portrait_threshold"], "calibration.uncertainty.portrait_threshold", 0.0, 1e6, lo_open=True),
     )
     return Calibration(temperature=temp, conformal=conformal, uncertainty=unc)
 

@@ -31,9 +31,9 @@ if [ ! -f "$DATA/manifest.csv" ]; then
     "$PY" -m crossing_assist.data_tools.cli import-ptl "$PTL" --out "$DATA" --images reference --quiet
 fi
 
-# The gate threshold: the fitted one times the scale chosen on held-out photographers
-# (scripts/choose_gate.py over the leave-one-photographer-out folds in $RUN/cv), never on
-# photographers the model trained on.
+# The gate thresholds, one per orientation: the fitted one times the scales chosen on held-out
+# photographers (scripts/choose_gate.py over the leave-one-photographer-out folds in $RUN/cv),
+# never on photographers the model trained on.
 CV_DIR=${CV_DIR:-$RUN/cv}
 if [ -z "${GATE_SCALE:-}" ]; then
     if [ -f "$CV_DIR/gate.json" ]; then
@@ -43,7 +43,12 @@ if [ -z "${GATE_SCALE:-}" ]; then
         echo "no $CV_DIR/gate.json (run scripts/choose_gate.py $CV_DIR): gate threshold as fitted" >&2
     fi
 fi
-echo "gate threshold scale $GATE_SCALE" >&2
+if [ -z "${GATE_SCALE_PORTRAIT:-}" ] && [ -f "$CV_DIR/gate.json" ]; then
+    GATE_SCALE_PORTRAIT=$("$PY" -c "import json,sys; print(json.load(open(sys.argv[1])).get('portrait', {}).get('scale', ''))" "$CV_DIR/gate.json")
+fi
+PORTRAIT_ARGS=()
+if [ -n "${GATE_SCALE_PORTRAIT:-}" ]; then PORTRAIT_ARGS=(--gate-scale-portrait "$GATE_SCALE_PORTRAIT"); fi
+echo "gate threshold scale: landscape $GATE_SCALE, portrait ${GATE_SCALE_PORTRAIT:-the same}" >&2
 
 TMP=$(mktemp -d "${TMPDIR:-/tmp}/default_bundle.XXXXXX")
 trap 'rm -rf "$TMP"' EXIT
@@ -54,7 +59,7 @@ trap 'rm -rf "$TMP"' EXIT
 SRC=""
 for MODE in static weights; do
     "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/$MODE" --samples "$SAMPLES" \
-        --calib-data "$DATA" --calib-split val --int8 --int8-mode "$MODE" --gate-scale "$GATE_SCALE" --quiet
+        --calib-data "$DATA" --calib-split val --int8 --int8-mode "$MODE" --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" --quiet
     KEEP=$("$PY" - "$TMP/$MODE/bundle.json" "$MAX_INT8_DROP" "$MAX_INT8_SLOWDOWN" <<'PYEOF'
 import json, sys
 m = json.load(open(sys.argv[1]))["metrics"]["int8_vs_fp32"]
@@ -71,7 +76,7 @@ done
 if [ -z "$SRC" ]; then
     echo "shipping fp32" >&2
     "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/fp32" --samples "$SAMPLES" \
-        --calib-data "$DATA" --calib-split val --gate-scale "$GATE_SCALE" --quiet
+        --calib-data "$DATA" --calib-split val --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" --quiet
     SRC="$TMP/fp32"
 fi
 
@@ -93,9 +98,11 @@ if (cv / "cv.json").is_file():
         **{k: c[k] for k in ("accuracy", "bin_mae", "far_x_error", "majority_accuracy")}}
 if (cv / "gate.json").is_file():
     g = json.loads((cv / "gate.json").read_text())
-    meta["metrics"]["gate_held_out"] = {k: g[k] for k in ("scale", "targets_met", "folds")} | {
-        "at_scale": {k: v for k, v in g["at_scale"].items() if k != "per_fold"},
-        "at_fitted_threshold": {k: v for k, v in g["at_fitted_threshold"].items() if k != "per_fold"}}
+    def summary(g):
+        return {k: g[k] for k in ("scale", "targets_met", "folds")} | {
+            "at_scale": {k: v for k, v in g["at_scale"].items() if k != "per_fold"},
+            "at_fitted_threshold": {k: v for k, v in g["at_fitted_threshold"].items() if k != "per_fold"}}
+    meta["metrics"]["gate_held_out"] = summary(g) | ({"portrait": summary(g["portrait"])} if "portrait" in g else {})
 model = onnx.load_model_from_string(b.model_path.read_bytes())
 set_metadata(model, meta)
 write_bundle(out, model_bytes(model), meta)

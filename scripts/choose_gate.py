@@ -1,18 +1,22 @@
-"""Choose the default bundle's gate threshold on photographers the model never trained on.
+"""Choose the default bundle's gate thresholds, one per orientation, on photographers the model never trained on.
 
 For each fold of a leave-one-photographer-out run (``crossing-train --cv source``, folder
 ``CV/fold-<source>``): export the fold's model as a bundle, calibrated on PTL val *without* the
 held-out photographer; play the held-out photographer's unseen photos (their train-split
 photos, which the fold never saw) and unseen no-crossing views (the ``negatives`` rows that no
-model trained on) through the runtime (:mod:`crossing_assist.runtime.listen`); sweep the gate
-threshold as a multiple ``m`` of the bundle's own fitted threshold. The folds' rates are pooled
-per ``m``, and ``m*`` is the largest beacon-on rate with confidently wrong <= 0.5 % and silence on
-no-crossing frames >= 98 % (else the point nearest those targets). Writes ``CV/gate.json`` and
+model trained on) through the runtime (:mod:`crossing_assist.runtime.listen`), as taken
+(landscape) and as 3:4 portrait windows cut from them (``--portrait`` windows a photo; a goal
+outside the window lies in the edge strip); sweep the gate threshold as a multiple ``m`` of the
+bundle's own fitted threshold. Per orientation the folds' rates are pooled per ``m``, and ``m*``
+is the largest beacon-on rate with confidently wrong <= 0.5 % and silence on no-crossing frames
+>= 98 % (else the point nearest those targets). A portrait strip is 0.56 of a landscape one, so
+the same angular doubt spreads over more strips and one landscape-fitted threshold silences
+portrait frames: hence a scale per orientation. Writes ``CV/gate.json`` and
 ``CV/gate_risk_coverage.png``; ``scripts/build_default_bundle.sh`` exports with
-``--gate-scale m*``.
+``--gate-scale m*_landscape --gate-scale-portrait m*_portrait``.
 
     .venv/bin/python scripts/choose_gate.py runs/default/cv --ptl runs/data/ptl --neg runs/data/neg \
-        --used-neg runs/data/neg_half --frames 200
+        --used-neg runs/data/neg_half --frames 200 --portrait 3
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from crossing_assist.data_tools.augment import portrait_views
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest, write_manifest
 from crossing_assist.runtime.listen import Listener, summarise
@@ -41,13 +46,12 @@ def _subset(ds, rows, out: Path) -> Path:
     return out
 
 
-def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int) -> dict:
+def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, portrait: int) -> dict:
+    """The fold's held-out curves: ``{"landscape": {...}, "portrait": {...}}`` (portrait only
+    with ``portrait`` > 0 windows a photo); each cached in the fold folder once listened to."""
     from crossing_assist.export.exporter import ExportConfig, export_bundle
     from crossing_assist.runtime.engine import Engine
 
-    done = fold / "gate_curve.json"
-    if done.is_file():   # listened to already (the fold does not change once finished)
-        return json.loads(done.read_text())
     bundle = fold / "bundle"
     if not (bundle / "bundle.json").is_file():
         cal = _subset(ptl, [r for r in ptl.rows if r.split == "val" and r.source != source], fold / "calib_data")
@@ -58,16 +62,31 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     negs = [r for r in neg.rows if r.source == source and r.image not in used]
     pos = [pos[i] for i in sorted(rng.choice(len(pos), min(n_frames, len(pos)), replace=False))]
     negs = [negs[i] for i in sorted(rng.choice(len(negs), min(n_frames // 2, len(negs)), replace=False))]
-    engine = Engine(bundle, threads=1)
-    lis = Listener(engine)
-    for ds, rows in ((ptl, pos), (neg, negs)):
-        for r in rows:
-            lis.add(load_frame(ds.image_path(r), r.flags), r.label)
-    t0 = engine.decision_config().threshold
-    result = {"source": source, "threshold": t0, "frames": len(pos), "no_crossing_frames": len(negs),
-              "curve": [{"scale": m, **summarise(lis.heard(m * t0))} for m in SCALES]}
-    done.write_text(json.dumps(result, indent=1))
-    return result
+    engine = None
+    out = {}
+    for view, cache in (("landscape", "gate_curve.json"), ("portrait", f"gate_curve_portrait{portrait}.json")):
+        done = fold / cache
+        if view == "portrait" and not portrait:
+            continue
+        if done.is_file():   # listened to already (the fold does not change once finished)
+            out[view] = json.loads(done.read_text())
+            continue
+        engine = engine or Engine(bundle, threads=1)
+        lis = Listener(engine)
+        for ds, rows in ((ptl, pos), (neg, negs)):
+            for r in rows:
+                img = load_frame(ds.image_path(r), r.flags)
+                for win, _, lab, _ in (portrait_views(img, r.far_x, r.label, portrait) if view == "portrait"
+                                       else [(img, r.far_x, r.label, True)]):
+                    lis.add(win, lab)
+        t0 = engine.decision_config().threshold
+        n_pos = sum(lab != 0 for lab in lis.labels)
+        result = {"source": source, "view": view, "threshold": t0, "frames": n_pos,
+                  "no_crossing_frames": len(lis.labels) - n_pos,
+                  "curve": [{"scale": m, **summarise(lis.heard(m * t0))} for m in SCALES]}
+        done.write_text(json.dumps(result, indent=1))
+        out[view] = result
+    return out
 
 
 def pool(folds: list[dict]) -> list[dict]:
@@ -101,11 +120,13 @@ def main(argv=None) -> int:
     ap.add_argument("--neg", default="runs/data/neg")
     ap.add_argument("--used-neg", default="runs/data/neg_half", help="negatives the models trained on (excluded)")
     ap.add_argument("--frames", type=int, default=200, help="held-out photos per fold (half as many negatives)")
+    ap.add_argument("--portrait", type=int, default=3, help="3:4 portrait windows a photo (0: landscape only)")
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args(argv)
     import yaml
 
     from crossing_assist.models.crossval import _fold_metrics
+    from crossing_assist.models.plots import plot_risk_coverage
 
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}   # same names: neg_half links neg's images
@@ -117,24 +138,27 @@ def main(argv=None) -> int:
             continue
         source = args["holdout"][0]
         print(f"fold {source}: export + listen", file=sys.stderr, flush=True)
-        folds.append(fold_curve(fold, source, ptl, neg, used, a.frames, a.seed))
+        folds.append(fold_curve(fold, source, ptl, neg, used, a.frames, a.seed, a.portrait))
     if not folds:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
-    curve = pool(folds)
-    best, met = choose(curve)
-    one = next(c for c in curve if c["scale"] == 1.0)
-    result = {"scale": best["scale"], "targets_met": met, "at_scale": best, "at_fitted_threshold": one,
-              "curve": curve, "folds": [{k: v for k, v in f.items() if k != "curve"} for f in folds]}
-    (a.cv / "gate.json").write_text(json.dumps(result, indent=1))
-    from crossing_assist.models.plots import plot_risk_coverage
-
-    plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"], a.cv / "gate_risk_coverage.png",
-                       "held-out photographers: gate threshold x scale")
     fmt = lambda c: (f"beacon on {c['beacon_on']:.3f}, confidently wrong {100 * c['confidently_wrong']:.2f} %, "  # noqa: E731
                      f"silence off-crossing {c['silence_no_crossing'] if c['silence_no_crossing'] is None else round(c['silence_no_crossing'], 3)}")
-    print(f"fitted threshold (scale 1): {fmt(one)}")
-    print(f"chosen scale {best['scale']:g} ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
+    result: dict = {}
+    for view in folds[0]:
+        curve = pool([f[view] for f in folds])
+        best, met = choose(curve)
+        one = next(c for c in curve if c["scale"] == 1.0)
+        result[view] = {"scale": best["scale"], "targets_met": met, "at_scale": best, "at_fitted_threshold": one,
+                        "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
+        suffix = "" if view == "landscape" else f"_{view}"
+        plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
+                           a.cv / f"gate_risk_coverage{suffix}.png", f"held-out photographers, {view}: gate threshold x scale")
+        print(f"{view}: fitted threshold (scale 1): {fmt(one)}")
+        print(f"{view}: chosen scale {best['scale']:g} ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
+    # landscape stays at the top level (what build_default_bundle.sh and older readers take)
+    (a.cv / "gate.json").write_text(json.dumps({**result["landscape"], **({"portrait": result["portrait"]} if "portrait" in result else {})},
+                                               indent=1))
     return 0
 
 

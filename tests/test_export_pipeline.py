@@ -160,7 +160,25 @@ def test_truncated_and_missing_model(work):
         open_session(d)
 
 
+def test_gate_scales_per_orientation(work, tmp_path):
+    """--gate-scale and --gate-scale-portrait multiply the one fitted threshold into a landscape
+    and a portrait threshold; without the portrait scale the bundle has no portrait threshold
+    and portrait frames use the landscape one."""
+    root, _ = work
+    fitted = read_bundle(root / "bundle").calibration.uncertainty
+    assert fitted.portrait_threshold is None and fitted.threshold_for("portrait") == fitted.threshold
+    cfg = ExportConfig(run=str(root / "run"), out=str(tmp_path / "b"), samples=8, calib_data=str(root / "data"),
+                       batch=8, parity_frames=4, progress=False, gate_scale=0.5, gate_scale_portrait=1.5)
+    export_bundle(cfg, log=lambda m: None)
+    u = read_bundle(tmp_path / "b").calibration.uncertainty
+    assert u.threshold == pytest.approx(0.5 * fitted.threshold, rel=1e-6)
+    assert u.portrait_threshold == pytest.approx(1.5 * fitted.threshold, rel=1e-6)
+    assert u.threshold_for("portrait") == u.portrait_threshold and u.threshold_for("landscape") == u.threshold
+
+
 def test_config_rejects_bad_options():
+    with pytest.raises(ExportError, match="--gate-scale-portrait 0.0"):
+        ExportConfig(run="r", out="o", gate_scale_portrait=0.0)
     with pytest.raises(ExportError, match="--int8 needs --calib-data"):
         ExportConfig(run="r", out="o", int8=True)
     with pytest.raises(ExportError, match="--p 1.0"):

@@ -2,6 +2,7 @@
 finished runs are skipped; without Ray, one error line."""
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -17,8 +18,10 @@ ARGS = ["--env", "crossing", "--algo", "dagger", "upms", "--seeds", "1", "2", "-
 
 
 def _numbers(folder):
-    """episodes.csv without the wall-clock columns, and the learner's final weights."""
-    rows = [{k: v for k, v in r.items() if not k.startswith("seconds")} for r in read_episodes(folder / "episodes.csv")]
+    """episodes.csv without the wall-clock columns (NaN, e.g. the mean of no finite expert
+    uncertainty, written as "nan" so that equal runs compare equal), and the learner's final weights."""
+    nan = lambda v: "nan" if isinstance(v, float) and math.isnan(v) else v  # noqa: E731
+    rows = [{k: nan(v) for k, v in r.items() if not k.startswith("seconds")} for r in read_episodes(folder / "episodes.csv")]
     return rows, torch.load(folder / "state.pt", weights_only=True)["learner"]
 
 

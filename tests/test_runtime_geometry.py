@@ -163,3 +163,51 @@ def test_demo_summary_names_the_fov_on_a_bar_clip(tmp_path, toy2):
     trace = [json.loads(line) for line in (out / "trace.jsonl").read_text().splitlines()]
     on = [rec for rec in trace if rec["heading_deg"] is not None]
     assert on and all(x_to_bin(heading_to_x(rec["heading_deg"], PORTRAIT_FOV)) == STRIP for rec in on[-3:])
+
+
+def _two_thresholds(folder, landscape: float, portrait: float):
+    from geometry_toy import toy2_meta
+    from runtime_toy import toy_graph_bytes
+
+    from crossing_assist.bundle import write_bundle
+
+    meta = toy2_meta()
+    meta["calibration"]["uncertainty"].update(threshold=landscape, portrait_threshold=portrait)
+    return write_bundle(folder, toy_graph_bytes(meta), meta)
+
+
+def test_each_orientation_gets_its_own_gate_threshold(tmp_path, toy2):
+    """A bundle whose landscape threshold silences every frame and whose portrait threshold
+    does not: landscape frames stop, portrait frames guide, and turning the phone switches
+    the threshold (with a fresh belief) both ways."""
+    base = Engine(toy2).decision_config().threshold
+    eng = Engine(_two_thresholds(tmp_path / "b", landscape=1e-3, portrait=base))
+    assert eng.decision_config().threshold == 1e-3 and eng.decision_config("portrait").threshold == base
+    pipe = Pipeline(eng)
+    land = _run(pipe, [_landscape()] * 10)
+    assert pipe.decider.cfg.threshold == 1e-3 and all(s.cue.kind == KIND_STOP for s in land)
+    port = _run(pipe, [_portrait()] * 10, t0=1.0)
+    assert pipe.decider.cfg.threshold == base and pipe.decider.cfg.fov_deg == PORTRAIT_FOV
+    assert port[-1].cue.kind == KIND_BEACON
+    assert x_to_bin(heading_to_x(port[-1].decision.heading_deg, PORTRAIT_FOV)) == STRIP
+    back = _run(pipe, [_landscape()] * 3, t0=2.0)
+    assert pipe.decider.cfg.threshold == 1e-3 and back[0].cue.kind == KIND_STOP   # no portrait heading carried over
+    # without portrait_threshold both orientations use threshold
+    plain = Engine(toy2)
+    assert plain.decision_config("portrait").threshold == plain.decision_config("landscape").threshold == base
+
+
+@pytest.mark.parametrize("bad", [-1.0, 0.0, "1.2", float("inf")])
+def test_a_bad_portrait_threshold_is_one_line(tmp_path, bad):
+    from geometry_toy import toy2_meta
+    from runtime_toy import toy_graph_bytes
+
+    from crossing_assist.bundle import read_bundle, write_bundle
+
+    meta = toy2_meta()
+    folder = write_bundle(tmp_path / "b", toy_graph_bytes(meta), meta)
+    raw = json.loads((folder / "bundle.json").read_text())
+    raw["calibration"]["uncertainty"]["portrait_threshold"] = bad
+    (folder / "bundle.json").write_text(json.dumps(raw).replace("Infinity", "1e999"))
+    with pytest.raises(BundleError, match="calibration.uncertainty.portrait_threshold"):
+        read_bundle(folder)

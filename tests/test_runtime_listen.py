@@ -109,10 +109,11 @@ def test_crossing_eval_bundle_writes_listen_numbers_and_risk_coverage(tmp_path, 
     assert land["silence_no_crossing"] == 1.0 and land["beacon_on_goal_in_view"] == 1.0
     assert port["silence_no_crossing"] == 1.0 and 0 < port["beacon_on"] <= 1.0
     assert port["beacon_on_goal_in_view"] == 1.0
-    thresholds = [c["threshold"] for c in lis["risk_coverage"]]
-    assert thresholds == sorted(thresholds) and lis["bundle_threshold"] in thresholds
-    assert lis["best_threshold_here"] is None or lis["best_threshold_here"]["threshold"] in thresholds
-    assert (out / "risk_coverage.png").stat().st_size > 0
+    for view in (land, port):   # each view's curve around its own (orientation's) threshold
+        thresholds = [c["threshold"] for c in view["risk_coverage"]]
+        assert thresholds == sorted(thresholds) and view["bundle_threshold"] in thresholds
+        assert view["best_threshold_here"] is None or view["best_threshold_here"]["threshold"] in thresholds
+    assert (out / "risk_coverage.png").stat().st_size > 0 and (out / "risk_coverage_portrait.png").stat().st_size > 0
 
 
 def test_crossing_eval_bad_listen_options_are_one_line(tmp_path, toy_bundle):  # noqa: F811

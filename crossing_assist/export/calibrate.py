@@ -188,11 +188,15 @@ class CalibrationResult:
     n_frames: int
     measure: str
     uncertainty_threshold: float
+    portrait_uncertainty_threshold: float | None = None   # None: portrait frames use uncertainty_threshold
 
     def to_json(self) -> dict:
+        unc = {"measure": self.measure, "threshold": self.uncertainty_threshold}
+        if self.portrait_uncertainty_threshold is not None:
+            unc["portrait_threshold"] = self.portrait_uncertainty_threshold
         return {"temperature": self.temperature,
                 "conformal": {"coverage": self.coverage, "threshold": self.threshold, "n_frames": self.n_frames},
-                "uncertainty": {"measure": self.measure, "threshold": self.uncertainty_threshold}}
+                "uncertainty": unc}
 
 
 def uncalibrated(n_actions: int, measure: str = "entropy") -> CalibrationResult:

@@ -63,6 +63,7 @@ class ExportConfig:
     coverage: float = 0.9
     measure: str = "entropy"
     gate_scale: float = 1.0         # multiplies the fitted gate threshold (chosen on held-out sources)
+    gate_scale_portrait: float | None = None   # the same for portrait frames (None: portrait uses gate_scale's)
     int8: bool = False
     int8_mode: str = "static"       # static: weights + activations; weights: int8 weights only
     int8_frames: int = 128
@@ -81,6 +82,8 @@ class ExportConfig:
             (0.0 < self.coverage < 1.0, f"--coverage {self.coverage}; valid: 0 < coverage < 1"),
             (self.calib_folds >= 2, f"--calib-folds {self.calib_folds}; valid: >= 2"),
             (0.05 <= self.gate_scale <= 20, f"--gate-scale {self.gate_scale}; valid: 0.05..20"),
+            (self.gate_scale_portrait is None or 0.05 <= self.gate_scale_portrait <= 20,
+             f"--gate-scale-portrait {self.gate_scale_portrait}; valid: 0.05..20"),
             (self.measure in ("entropy", "mutual_info"), f"--measure {self.measure!r}; valid: entropy, mutual_info"),
             (self.int8_mode in INT8_MODES, f"--int8-mode {self.int8_mode!r}; valid: {', '.join(INT8_MODES)}"),
             (not self.int8 or self.calib_data, "--int8 needs --calib-data (real frames to calibrate the int8 ranges)"),
@@ -266,11 +269,12 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
         bundle = read_bundle(write_bundle(Path(tmp) / "bundle", model_bytes(model), meta))
         got = predict_bundle(bundle, data.images, batch=cfg.batch, progress=cfg.progress)
     correct = got["probs"].argmax(1) == data.actions
+    fitted = cal.uncertainty_threshold(got[cfg.measure], correct)
     calib = cal.CalibrationResult(
         temperature=temperature, coverage=cfg.coverage,
         threshold=cal.conformal_threshold(got["probs"], data.actions, cfg.coverage),
-        n_frames=len(data.actions), measure=cfg.measure,
-        uncertainty_threshold=cfg.gate_scale * cal.uncertainty_threshold(got[cfg.measure], correct))
+        n_frames=len(data.actions), measure=cfg.measure, uncertainty_threshold=cfg.gate_scale * fitted,
+        portrait_uncertainty_threshold=None if cfg.gate_scale_portrait is None else cfg.gate_scale_portrait * fitted)
     full = _measure(got, data, calib.threshold, meta["actions"]["n"], majority)
     log(f"{cfg.calib_split} through onnxruntime (T={meta['mc']['samples']}): accuracy {full['accuracy']:.4f} "
         f"on {full['n']} frames")

@@ -181,7 +181,7 @@ def _views(cfg: EvalConfig, part: Dataset) -> dict[str, list[tuple[np.ndarray, f
 def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
     """What the user hears, per view (landscape / portrait): the runtime's decisions on every
     frame played as a still clip, the model's own accuracy on the same frames, and the
-    risk-coverage curve of the gate threshold (landscape + no-crossing frames)."""
+    risk-coverage curve of the view's gate threshold (its frames + no-crossing frames)."""
     from tqdm import tqdm
 
     from ..runtime.engine import Engine
@@ -192,12 +192,10 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
     engine = Engine(cfg.bundle, threads=cfg.threads)
     space = engine.space
     result: dict = {"clip_seconds": cfg.clip_seconds, "fps": 10.0}
-    listeners = {}
     for name, frames in _views(cfg, _split(cfg)).items():
         lis = Listener(engine, cfg.clip_seconds, 10.0)
         for img, _, lab, _ in tqdm(frames, desc=f"listen {name}", disable=not cfg.progress, unit="frame"):
             lis.add(img, lab)
-        listeners[name] = lis
         known = np.asarray([lab != 0 for _, _, lab, _ in frames])
         probs = np.stack([c[0].probs if c[0].ok else np.full(space.n, 1 / space.n) for c in lis.clips])
         labels = space.bins_to_actions(np.asarray([lab for _, _, lab, _ in frames]))
@@ -208,16 +206,12 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
         entry.update(summarise(heard))
         inside = [h for h, (_, _, _, ins) in zip(heard, frames) if ins]
         entry["beacon_on_goal_in_view"] = float(np.mean([h.on for h in inside])) if inside else None
+        t0 = float(engine.decision_config(name).threshold)   # the view's (orientation's) gate threshold
+        curve = lis.risk_coverage([t0 * m for m in GATE_SCALES])
+        entry.update(bundle_threshold=t0, risk_coverage=curve, best_threshold_here=choose_threshold(curve))
+        plot_risk_coverage(curve, t0, out / ("risk_coverage.png" if name == "landscape" else f"risk_coverage_{name}.png"),
+                           f"{cfg.split}, {name}: what the user hears ({len(lis.clips)} frames)")
         result[name] = entry
-    lis = listeners["landscape"]
-    t0 = float(engine.decision_config().threshold)
-    grid = [t0 * m for m in GATE_SCALES]
-    curve = lis.risk_coverage(grid)
-    result["risk_coverage"] = curve
-    result["bundle_threshold"] = t0
-    result["best_threshold_here"] = choose_threshold(curve)
-    plot_risk_coverage(curve, t0, out / "risk_coverage.png",
-                       f"{cfg.split}: what the user hears ({len(lis.clips)} frames)")
     return result
 
 

@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from crossing_assist.bundle import INPUT_NAME, OUTPUT_NAMES, Bundle, BundleError, check_session, read_bundle
-from crossing_assist.geometry import GeometryError, check_fov, check_frame_shape
+from crossing_assist.geometry import ORIENTATIONS, GeometryError, check_fov, check_frame_shape, orientation
 from crossing_assist.runtime.decide import DecisionConfig, Observation
 
 
@@ -28,7 +28,8 @@ class Prediction:
     ``probs`` (A,) mean class probabilities; ``entropy`` (nats) and ``mutual_info`` (nats, >= 0);
     ``variance`` (A,) and ``votes`` (A,); ``conformal_set`` the actions with ``probs >=`` the
     bundle's conformal threshold; ``action`` the argmax (0 = unknown); ``heading_deg`` its
-    heading (None for unknown); ``uncertainty`` the gate's measure; ``latency_s`` inference time.
+    heading (None for unknown) with ``fov_deg``, the camera FOV of the frame's ``orientation``
+    (``landscape`` / ``portrait``); ``uncertainty`` the gate's measure; ``latency_s`` inference time.
     ``ok=False`` (with ``error``) when inference failed; the arrays are then None.
     """
 
@@ -42,6 +43,7 @@ class Prediction:
     action: int = 0
     heading_deg: float | None = None
     fov_deg: float | None = None
+    orientation: str | None = None
     uncertainty: float = math.inf
     latency_s: float = 0.0
     error: str = ""
@@ -98,12 +100,13 @@ class Engine:
         bundle's default for the frame's orientation."""
         return self.bundle.camera_fov(width, height, self.fov_override)
 
-    def decision_config(self, **overrides) -> DecisionConfig:
-        """The decision logic's config for this bundle (actions, FOV, measure, threshold). The
-        FOV is the landscape one until a frame says otherwise (:class:`Pipeline` follows it)."""
+    def decision_config(self, orientation: str = "landscape", **overrides) -> DecisionConfig:
+        """The decision logic's config for this bundle and frames of ``orientation``: actions,
+        measure, that orientation's gate threshold and FOV (the override, else the bundle's).
+        :class:`Pipeline` follows the frames' orientation."""
         unc = self.bundle.calibration.uncertainty
-        kw = {"fov_deg": self.fov_override or self.bundle.geometry.camera_fov_deg[0], "measure": unc.measure,
-              "threshold": unc.threshold, **overrides}
+        fov = self.fov_override or self.bundle.geometry.camera_fov_deg[ORIENTATIONS.index(orientation)]
+        kw = {"fov_deg": fov, "measure": unc.measure, "threshold": unc.threshold_for(orientation), **overrides}
         return DecisionConfig(n_actions=self.bundle.actions.n, **kw)
 
     def _check_frame(self, frame: np.ndarray) -> np.ndarray:
@@ -135,6 +138,7 @@ class Engine:
                 conformal_set=tuple(int(a) for a in np.flatnonzero(probs >= self.conformal_threshold)),
                 action=action,
                 heading_deg=None if action == 0 else self.space.action_heading(action, fov), fov_deg=fov,
+                orientation=orientation(frame_rgb.shape[1], frame_rgb.shape[0]),
                 uncertainty=unc, latency_s=self._clock() - t0,
             )
         except Exception as exc:  # never raise into the audio path

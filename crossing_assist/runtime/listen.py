@@ -21,6 +21,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from crossing_assist.actions import UNKNOWN, heading_to_x, x_to_bin
+from crossing_assist.geometry import ORIENTATIONS
 from crossing_assist.runtime.decide import Decider, DecisionConfig
 from crossing_assist.runtime.engine import Engine, Prediction
 
@@ -93,11 +94,14 @@ class Listener:
         self.labels.append(int(label))
 
     def heard(self, threshold: float | None = None, idx: Sequence[int] | None = None) -> list[Heard]:
-        """The last decisions at the bundle's gate threshold (or ``threshold``)."""
-        cfg = self.engine.decision_config(**({} if threshold is None else {"threshold": float(threshold)}))
+        """The last decisions at the bundle's gate threshold for each clip's orientation (or
+        ``threshold`` for all)."""
+        over = {} if threshold is None else {"threshold": float(threshold)}
+        cfgs = {o: self.engine.decision_config(o, **over) for o in ORIENTATIONS}
         out = []
         for i in range(len(self.clips)) if idx is None else idx:
-            h = decide_still(self.clips[i], cfg, self.fps)
+            o = next((p.orientation for p in self.clips[i] if p.ok), "landscape")
+            h = decide_still(self.clips[i], cfgs[o], self.fps)
             out.append(Heard(self.labels[i], h.on, h.strip))
         return out
 

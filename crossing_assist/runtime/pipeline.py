@@ -37,9 +37,10 @@ class Pipeline:
     """Engine + decision logic + beacon synthesis for one stream of frames.
 
     Headings follow the camera: each successful frame's field of view (its orientation's, or
-    the user's setting) becomes the decision logic's; when it changes (the phone turned
-    between portrait and landscape) the belief starts afresh, since old strips no longer mean
-    the same directions."""
+    the user's setting) and its orientation's gate threshold become the decision logic's; when
+    either changes (the phone turned between portrait and landscape) the belief starts afresh,
+    since old strips no longer mean the same directions. ``decision_cfg``'s other fields
+    (watchdog, filter, gate, pulse rates) are kept."""
 
     def __init__(self, engine: Engine, decision_cfg: DecisionConfig | None = None,
                  beacon_cfg: BeaconConfig | None = None) -> None:
@@ -51,9 +52,11 @@ class Pipeline:
         """Process a frame taken at ``t`` seconds (None = no new frame, a watchdog tick)."""
         pred = self.engine.predict(frame_rgb) if frame_rgb is not None else Prediction(ok=False, error="no frame")
         obs = pred.observation() if frame_rgb is not None else None
-        if pred.ok and pred.fov_deg is not None and pred.fov_deg != self.decider.cfg.fov_deg:
-            self.decider.cfg = replace(self.decider.cfg, fov_deg=pred.fov_deg)
-            self.decider.reset()
+        if pred.ok and pred.fov_deg is not None:
+            threshold = self.engine.bundle.calibration.uncertainty.threshold_for(pred.orientation)
+            cfg = self.decider.cfg
+            if (pred.fov_deg, threshold) != (cfg.fov_deg, cfg.threshold):
+                self.decider = Decider(replace(cfg, fov_deg=pred.fov_deg, threshold=threshold))
         decision = self.decider.step(t, obs, yaw_rate_dps)
         cue = cue_for(decision)
         return Step(pred, decision, cue, cached_loop(cue, self.beacon_cfg))

@@ -22,6 +22,10 @@ Version 2 adds what the live loop decides around the Decider, so the app and Pyt
   outside 20..170 degrees; schema 1 reads as one FOV for both orientations), and scenarios
   whose frames are portrait and landscape of several aspects: each step's FOV comes from
   its frame, and a change of FOV (the phone turned) starts a fresh Decider with it.
+
+Version 3: each geometry scenario also carries the bundle's ``calibration.uncertainty``
+(``threshold``, optional ``portrait_threshold``); each step's gate threshold is its frame's
+orientation's (:func:`gate_threshold`), and a change of FOV *or* threshold starts a fresh Decider.
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from crossing_assist.actions import get_space, heading_to_pan
+from crossing_assist.bundle import UncertaintySpec
 from crossing_assist.fileio import atomic_write_text
 from crossing_assist.geometry import FOV_RANGE_DEG, Geometry, orientation
 from crossing_assist.runtime.beacon import BeaconConfig, itd_seconds, pan_gains
@@ -46,7 +51,7 @@ from crossing_assist.runtime.live import is_fresh, same_frame
 from crossing_assist.runtime.watchdog import Watchdog
 
 FPS = 30.0
-VERSION = 2
+VERSION = 3
 
 # ----------------------------------------------------------------------------- camera geometry
 # The reference of the geometry contract's FOV choice (issue 12) for the vectors; the bundle
@@ -72,6 +77,14 @@ def camera_fov(geometry: dict, width: int, height: int, override: float | None =
     stop cue)."""
     cam = geometry["camera_fov_deg"]
     return Geometry(camera_fov_deg=(cam["landscape"], cam["portrait"])).camera_fov(width, height, override)
+
+
+def gate_threshold(uncertainty: dict, width: int, height: int) -> float:
+    """The gate threshold for a ``width x height`` frame: a bundle's ``calibration.uncertainty``
+    ``portrait_threshold`` for portrait frames when it has one, else its ``threshold``."""
+    spec = UncertaintySpec(uncertainty.get("measure", "entropy"), uncertainty["threshold"],
+                           uncertainty.get("portrait_threshold"))
+    return spec.threshold_for(orientation(width, height))
 
 
 # ----------------------------------------------------------------------------- status sentences
@@ -195,35 +208,46 @@ GEOMETRY_V2 = {"fit": "letterbox", "pad_rgb": [124, 116, 104], "strips": "frame"
                "camera_fov_deg": {"landscape": 67.0, "portrait": 53.0}, "train_fov_deg": 67.0}
 
 
-def _geometry_scenarios(rng: np.random.Generator) -> list[dict]:
-    """Decision scenarios whose frames have sizes: (name, geometry, overrides, steps) with steps
-    (t, yaw, raw outputs, (width, height))."""
+def _geometry_scenarios(rng: np.random.Generator) -> list[tuple]:
+    """Decision scenarios whose frames have sizes: (name, geometry, overrides, uncertainty,
+    steps) with steps (t, yaw, raw outputs, (width, height))."""
     out = []
+    one = {"measure": "entropy", "threshold": DecisionConfig().threshold}   # one threshold for both
     for w, h in FRAME_SIZES[:6]:
         steps = [(i / FPS, 0.0, _frame(13, 10 if i < 25 else 3, 0.9, rng), (w, h)) for i in range(40)]
-        out.append((f"frames_{w}x{h}", GEOMETRY_V2, {}, steps))
+        out.append((f"frames_{w}x{h}", GEOMETRY_V2, {}, one, steps))
     turn = []
     for i in range(90):
         w, h = FRAME_SIZES[(i // 30) % 2]  # landscape, portrait, landscape: the phone turned twice
         turn.append((i / FPS, 0.0, _frame(13, 9, 0.9, rng), (w, h)))
-    out.append(("phone_turned_landscape_portrait_landscape", GEOMETRY_V2, {}, turn))
+    out.append(("phone_turned_landscape_portrait_landscape", GEOMETRY_V2, {}, one, turn))
     steps = [(i / FPS, 10.0, _frame(13, 11, 0.9, rng), FRAME_SIZES[i // 20 % 2]) for i in range(40)]
-    out.append(("user_fov_portrait_60", GEOMETRY_V2, {"portrait": 60.0}, steps))
+    out.append(("user_fov_portrait_60", GEOMETRY_V2, {"portrait": 60.0}, one, steps))
     schema1 = geometry_of({"schema_version": 1, "fov_deg": 90.0})
     steps = [(i / FPS, 0.0, _frame(13, 2, 0.9, rng), FRAME_SIZES[3]) for i in range(30)]
-    out.append(("schema1_portrait", schema1, {}, steps))
+    out.append(("schema1_portrait", schema1, {}, one, steps))
+    # Version 3: a portrait threshold above the landscape one. Frames whose entropy (~1.4 nats)
+    # lies between the two: silent while landscape, guided while portrait (own generator, so
+    # the vectors above are those of version 2).
+    own = np.random.default_rng(3)
+    two = {"measure": "entropy", "threshold": 0.8, "portrait_threshold": 1.6}
+    steps = [(i / FPS, 0.0, _frame(13, 4, 0.7, own), FRAME_SIZES[(i // 30) % 2]) for i in range(90)]
+    out.append(("portrait_threshold_phone_turned", GEOMETRY_V2, {}, two, steps))
     return out
 
 
-def _run_geometry_scenario(geometry: dict, overrides: dict, steps: list, base: DecisionConfig) -> list[dict]:
-    """The app's rule: each step's FOV is camera_fov(frame); a new FOV starts a fresh Decider."""
-    rows, decider, fov_now = [], None, None
+def _run_geometry_scenario(geometry: dict, overrides: dict, uncertainty: dict, steps: list,
+                           base: DecisionConfig) -> list[dict]:
+    """The app's rule: each step's FOV is camera_fov(frame) and its gate threshold
+    gate_threshold(frame); a new FOV or threshold starts a fresh Decider."""
+    rows, decider, now = [], None, None
     for t, yaw, raw, (w, h) in steps:
         fov = camera_fov(geometry, w, h, overrides.get(orientation(w, h)))
-        if fov != fov_now:
-            decider, fov_now = Decider(dataclasses.replace(base, fov_deg=fov)), fov
+        threshold = gate_threshold(uncertainty, w, h)
+        if (fov, threshold) != now:
+            decider, now = Decider(dataclasses.replace(base, fov_deg=fov, threshold=threshold)), (fov, threshold)
         dec = decider.step(t, raw.observation(base.measure), yaw)
-        rows.append({"t": t, "yaw_rate_dps": yaw, "frame": [w, h], "fov_deg": fov,
+        rows.append({"t": t, "yaw_rate_dps": yaw, "frame": [w, h], "fov_deg": fov, "threshold": threshold,
                      "obs": _obs_json(raw, base.measure), "expect": dec.to_json()})
     return rows
 
@@ -313,9 +337,9 @@ def build_vectors(seed: int = 20240601) -> dict:
             rows.append({"t": t, "yaw_rate_dps": yaw, "obs": _obs_json(raw, cfg.measure), "expect": dec.to_json()})
         scenarios.append({"name": name, "config": _config_json(cfg), "steps": rows})
     base = DecisionConfig()
-    for name, geom, overrides, steps in _geometry_scenarios(rng):
+    for name, geom, overrides, unc, steps in _geometry_scenarios(rng):
         scenarios.append({"name": name, "config": _config_json(base), "geometry": geom, "fov_override": overrides,
-                          "steps": _run_geometry_scenario(geom, overrides, steps, base)})
+                          "uncertainty": unc, "steps": _run_geometry_scenario(geom, overrides, unc, steps, base)})
     bcfg = BeaconConfig()
     pans = [-1.0, -0.5, -0.1, 0.0, 0.3, 0.77, 1.0]
     headings = [-80.0, -45.0, -12.5, 0.0, 7.5, 30.0, 60.0]

@@ -26,7 +26,7 @@
 
 import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
-import { cameraFov, FovError, orientation, zoomedFov } from './geometry.js';
+import { cameraFov, FovError, gateThreshold, orientation, zoomedFov } from './geometry.js';
 import { Haptics } from './haptics.js';
 import { isFresh, sameFrame, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
 import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs } from './logic.js';
@@ -210,11 +210,14 @@ async function step(frame, captured, dt) {
     appStop('fov');
     return;
   }
-  if (cam.fov !== app.fov) {
-    // The phone turned (or the setting changed): strips mean other headings; start afresh.
-    app.decider = new Decider(configFromBundle(app.meta, { fov_deg: cam.fov }));
+  const threshold = gateThreshold(app.meta.calibration.uncertainty, frame.width, frame.height);
+  if (cam.fov !== app.fov || threshold !== app.decider?.cfg.threshold) {
+    // The phone turned (or the setting changed): strips mean other headings, and the
+    // orientation has its own gate threshold; start afresh.
+    app.decider = new Decider(configFromBundle(app.meta, { fov_deg: cam.fov, threshold }));
     app.fov = cam.fov;
-    record({ kind: 'fov', t: captured, fov_deg: cam.fov, orientation: cam.orientation, width: frame.width, height: frame.height });
+    record({ kind: 'fov', t: captured, fov_deg: cam.fov, orientation: cam.orientation, threshold,
+      width: frame.width, height: frame.height });
   }
   view.camera(`${cam.orientation} ${frame.width}×${frame.height}, field of view ${cam.fov.toFixed(1)}° (${cam.source})`);
   let outputs = null;

@@ -99,6 +99,9 @@ function parseCalibration(d) {
     uncertainty: {
       measure,
       threshold: num(get(u, 'threshold', 'calibration.uncertainty'), 'calibration.uncertainty.threshold', 0, 1e6, { loOpen: true }),
+      // optional: portrait frames' threshold (absent or null: portrait uses `threshold`)
+      portrait_threshold: u.portrait_threshold == null ? null
+        : num(u.portrait_threshold, 'calibration.uncertainty.portrait_threshold', 0, 1e6, { loOpen: true }),
     },
   };
 }

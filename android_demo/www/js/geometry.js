@@ -7,7 +7,11 @@
 // * FOV = the override for that orientation (the user's setting, or what the camera reports)
 //   if there is one, else the bundle's geometry.camera_fov_deg[orientation];
 // * a FOV outside 20..170 degrees is refused (FovError): the app then plays the stop cue;
-// * a schema-1 bundle has one fov_deg for both orientations (parseGeometry in bundle.js).
+// * a schema-1 bundle has one fov_deg for both orientations (parseGeometry in bundle.js);
+// * the gate threshold is the orientation's too: calibration.uncertainty.portrait_threshold for
+//   portrait frames when the bundle has one, else calibration.uncertainty.threshold (portrait
+//   strips are narrower, so the same doubt in degrees reads as a higher entropy);
+// * a new FOV or threshold (the phone turned) starts a fresh Decider.
 //
 // The model fits the frame onto its canvas inside the ONNX graph (letterbox or stretch), and
 // the strips are strips of the frame (the camera's view): the app hands over raw frames.
@@ -43,6 +47,15 @@ export function checkFov(fov) {
 export function cameraFov(geometry, width, height, override = null) {
   const fov = override ?? geometry.camera_fov_deg[orientation(width, height)];
   return checkFov(fov);
+}
+
+/**
+ * The gate threshold for a width x height frame (Python: runtime/vectors.py gate_threshold):
+ * `uncertainty` is the bundle's calibration.uncertainty.
+ */
+export function gateThreshold(uncertainty, width, height) {
+  const portrait = uncertainty.portrait_threshold;
+  return orientation(width, height) === 'portrait' && portrait != null ? portrait : uncertainty.threshold;
 }
 
 /**

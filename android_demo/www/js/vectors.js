@@ -7,12 +7,12 @@
 // max(1, |expected|); the belief element by element.
 
 import { headingToPan, spaceGroups } from './actions.js';
-import { cameraFov, FovError, orientation } from './geometry.js';
+import { cameraFov, FovError, gateThreshold, orientation } from './geometry.js';
 import { isFresh, sameFrame, Watchdog } from './live.js';
 import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains } from './logic.js';
 import { statusMessage } from './view.js';
 
-const SUPPORTED_VERSIONS = [1, 2];
+const SUPPORTED_VERSIONS = [1, 2, 3];
 
 function close(a, b, tol) {
   return Math.abs(a - b) <= tol * Math.max(1, Math.abs(b));
@@ -67,17 +67,24 @@ export function replayVectors(vectors) {
   for (const sc of vectors.scenarios) {
     let decider = new Decider(sc.config);
     let fovNow = null;
+    let thresholdNow = null;
     const { measure } = decisionConfig(sc.config);
     sc.steps.forEach((row, i) => {
       if (row.frame) {
-        // The app's rule: the FOV of this frame's orientation; a new FOV starts a fresh Decider.
+        // The app's rule: the FOV and gate threshold of this frame's orientation; a new FOV or
+        // threshold starts a fresh Decider (version 2 vectors: one threshold, the config's).
         const [w, h] = row.frame;
         const fov = cameraFov(sc.geometry, w, h, sc.fov_override?.[orientation(w, h)] ?? null);
-        checks += 1;
+        const threshold = gateThreshold(sc.uncertainty ?? { threshold: decisionConfig(sc.config).threshold }, w, h);
+        checks += 2;
         if (!close(fov, row.fov_deg, tol)) fail({ scenario: sc.name, step: i, field: 'fov_deg', got: fov, expected: row.fov_deg });
-        if (fov !== fovNow) {
-          decider = new Decider({ ...sc.config, fov_deg: fov });
+        if (row.threshold !== undefined && !close(threshold, row.threshold, tol)) {
+          fail({ scenario: sc.name, step: i, field: 'threshold', got: threshold, expected: row.threshold });
+        }
+        if (fov !== fovNow || threshold !== thresholdNow) {
+          decider = new Decider({ ...sc.config, fov_deg: fov, threshold });
           fovNow = fov;
+          thresholdNow = threshold;
         }
       }
       const obs = obsFromJson(row.obs, measure);
