@@ -33,7 +33,6 @@ import base64
 import json
 import math
 import re
-from dataclasses import replace
 import shutil
 import subprocess
 import sys
@@ -42,6 +41,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from crossing_assist.geometry import orientation
 from crossing_assist.runtime.decide import Decider, Observation
 from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.vectors import STATUS_STOP, status_message
@@ -169,12 +169,12 @@ def _app_steps(run: dict, least: int = 60) -> list[tuple[dict, np.ndarray]]:
 
 def _python_decisions(engine: Engine, steps, predict=None):
     """The Python Decider on the app's frames at the app's times, a fresh one with the app's FOV
-    wherever the app started one: yields (app entry, python decision json)."""
-    base = engine.decision_config()
+    and the frame orientation's gate threshold wherever the app started one: yields (app entry,
+    python decision json)."""
     py = None
     for entry, rgb in steps:
         if entry["new_decider"] or py is None:
-            py = Decider(replace(base, fov_deg=entry["fov_deg"]))
+            py = Decider(engine.decision_config(orientation(rgb.shape[1], rgb.shape[0]), fov_deg=entry["fov_deg"]))
         pred = (predict or engine.predict)(rgb)
         yield entry, py.step(entry["t"], pred.observation(), entry["yaw_rate_dps"]).to_json()
 
@@ -572,6 +572,8 @@ def test_portrait_uses_the_portrait_fov_and_decides_as_python(portrait: dict) ->
     fovs = [e for e in trace if e["kind"] == "fov"]
     assert fovs and all(e["orientation"] == "portrait" and e["height"] > e["width"] for e in fovs), fovs
     assert {e["fov_deg"] for e in fovs} == {portrait["geometry"]["camera_fov_deg"]["portrait"]}
+    unc = portrait["engine"].bundle.calibration.uncertainty   # the portrait gate threshold, when the bundle has one
+    assert {e["threshold"] for e in fovs} == {unc.threshold_for("portrait")}
     int8 = portrait["engine"].bundle.precision == "int8"   # see the parity test's tolerance
     _assert_same_decisions(portrait["engine"], _app_steps(portrait, least=10), tol_deg=0.5 if int8 else 1e-3)
 
