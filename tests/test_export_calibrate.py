@@ -19,7 +19,7 @@ from crossing_assist.export.calibrate import (
     uncalibrated,
     uncertainty_threshold,
 )
-from crossing_assist.export.evaluate import conformal_report, conformal_sets
+from crossing_assist.conformal import conformal_report, conformal_sets
 
 
 def mc_logits(rng, t=4, n=3000, a=6, spread=3.0):
@@ -165,7 +165,7 @@ def test_uncalibrated_defaults_are_safe():
 
 
 @pytest.mark.parametrize("module", ["crossing_assist.export", "crossing_assist.export.calibrate",
-                                    "crossing_assist.export.evaluate"])
+                                    "crossing_assist.conformal", "crossing_assist.inference"])
 def test_torch_free_export_modules(module):
     import subprocess
     import sys

@@ -13,7 +13,8 @@ import torch
 from crossing_assist.bundle import BundleError, embedded_meta, read_bundle
 from crossing_assist.data_tools.images import save_rgb
 from crossing_assist.data_tools.manifest import Row, write_manifest
-from crossing_assist.export.evaluate import bundle_conformal_report, open_session, predict_bundle
+from crossing_assist.conformal import bundle_conformal_report
+from crossing_assist.inference import open_session, predict, predict_bundle
 from crossing_assist.export.exporter import ExportConfig, ExportError, export_bundle
 from crossing_assist.models.backbones import create_backbone
 from crossing_assist.models.checkpoint import save_checkpoint
@@ -94,8 +95,8 @@ def test_predict_bundle_is_random_and_well_formed(work):
     images = [rng.integers(0, 256, (40, 48, 3), dtype=np.uint8) for _ in range(3)] + \
              [rng.integers(0, 256, (64, 30, 3), dtype=np.uint8)]
     bundle, sess = open_session(root / "bundle")
-    a = predict_bundle(bundle, images, session=sess)
-    b = predict_bundle(bundle, images, session=sess)
+    a = predict(sess, bundle.actions.n, images)
+    b = predict(sess, bundle.actions.n, images)
     assert a["probs"].shape == (4, N_ACTIONS) and a["votes"].shape == (4, N_ACTIONS) and a["entropy"].shape == (4,)
     np.testing.assert_allclose(a["probs"].sum(1), 1, atol=1e-5)
     assert np.abs(a["probs"] - b["probs"]).max() > 1e-5 and (a["variance"] > 0).any()

@@ -31,15 +31,15 @@ class _Pre(BundleGraph):
         return self.preprocess(frames)
 
 
-@pytest.fixture(scope="module")
-def policy():
+@pytest.fixture(scope="module", params=["spatial", "spatial_fine"])
+def policy(request):
     torch.manual_seed(0)
     backbone = create_backbone("mobilenet_v3_small", weights="none")
-    head = create_head("spatial", backbone.num_features, 13, p=0.5)
+    head = create_head(request.param, backbone.num_features, 13, p=0.5)
     with torch.no_grad():
         for prm in head.parameters():
             prm.mul_(6.0)  # spread the logits of a random init
-    return Policy(backbone, head, policy_config(backbone, "spatial", 13, input_size=CANVAS, fit="letterbox")).eval()
+    return Policy(backbone, head, policy_config(backbone, request.param, 13, input_size=CANVAS, fit="letterbox")).eval()
 
 
 @pytest.fixture(scope="module")

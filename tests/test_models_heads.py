@@ -89,3 +89,16 @@ def test_spatial_head_is_translation_aware_and_groups_strips():
                        {k: v for k, v in h4.state_dict().items() if k.startswith("unknown")})
     strips = head.strip_scores(head.trunk(feats))
     assert torch.allclose(h4(feats, mc=False)[0][:, 1], torch.logsumexp(strips[:, 0:4], -1), atol=1e-5)
+
+
+
+def test_fine_spatial_head_scores_twice_the_columns_and_reads_the_window():
+    """spatial_fine: the trunk has 2w columns (so its scores can peak between two feature
+    columns); a narrower window (a portrait frame on a landscape canvas) reads other strips."""
+    torch.manual_seed(0)
+    head = create_head("spatial_fine", 8, 13, p=0.0).eval()
+    feats = torch.rand(2, 8, 3, 7)
+    assert head.trunk(feats).shape == (2, 128, 14)
+    whole = head.tail(head.trunk(feats), mc=False)
+    portrait = head.tail(head.trunk(feats), mc=False, window=torch.tensor([[0.21875, 0.78125]] * 2))
+    assert whole.shape == portrait.shape == (2, 13) and not torch.allclose(whole, portrait)

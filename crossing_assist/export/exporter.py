@@ -9,8 +9,8 @@ Steps (:func:`export_bundle`):
    and conformal threshold fitted on the other folds), then fit the shipped temperature on all;
 3. export the MC graph with that temperature (and, with ``int8``, quantise its convolutions
    on calibration frames);
-4. run the shipped graph through onnxruntime on every frame to fit the conformal and gate
-   thresholds and record its metrics;
+4. run the shipped graph (in memory, :mod:`crossing_assist.inference`) through onnxruntime on
+   every frame to fit the conformal and gate thresholds and record its metrics;
 5. parity: a deterministic (T=1, p=0) export must match PyTorch to ``parity_tol``;
 6. write ``model.onnx`` + ``bundle.json`` atomically, with the same facts in the graph's
    metadata.
@@ -35,9 +35,10 @@ import torch
 
 import crossing_assist
 from crossing_assist.actions import get_space
-from crossing_assist.bundle import SCHEMA_VERSION, check_replaceable, read_bundle, write_bundle
+from crossing_assist.bundle import (INPUT_NAME, SCHEMA_VERSION, check_replaceable, check_session, parse_meta,
+                                    read_bundle, write_bundle)
+from crossing_assist.conformal import conformal_report
 from crossing_assist.export import calibrate as cal
-from crossing_assist.export.evaluate import conformal_report, predict_bundle
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
 from crossing_assist.export.quantize import INT8_MODES, quantize_convs
 from crossing_assist.geometry import PAD_RGB, TRAIN_FOV_DEG, Geometry
@@ -189,7 +190,7 @@ def parity_check(policy, spec: GraphSpec, frames: np.ndarray) -> float:
 
     det = dataclasses.replace(spec, samples=1, p=0.0, temperature=1.0)
     sess = ort.InferenceSession(model_bytes(export_graph(policy, det)))
-    got = sess.run(["probs"], {"frames": frames})[0]
+    got = sess.run(["probs"], {INPUT_NAME: frames})[0]
     with torch.no_grad():
         want = BundleGraph(policy, det)(torch.from_numpy(frames))[0].numpy()
     return float(np.abs(got - want).max())
@@ -258,16 +259,15 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
                      majority: int | None, log: Callable[[str], None]) -> tuple[cal.CalibrationResult, dict]:
     """Fit the conformal and gate thresholds on the shipped graph's onnxruntime outputs for
     every labelled frame and record the graph's metrics there (coverage there is in-sample:
-    the held-out figure is ``cross_fit``)."""
-    import tempfile
+    the held-out figure is ``cross_fit``). In memory: the graph with ``meta`` embedded, checked
+    against ``meta`` as a written bundle would be."""
+    from crossing_assist import inference
 
-    from crossing_assist.fileio import sweep_orphans, tmp_tag
-
-    sweep_orphans(tempfile.gettempdir(), prefix=".crossing-export.")  # what killed exports left there
-    with tempfile.TemporaryDirectory(prefix=f".crossing-export.{tmp_tag()}-") as tmp:
-        set_metadata(model, meta)
-        bundle = read_bundle(write_bundle(Path(tmp) / "bundle", model_bytes(model), meta))
-        got = predict_bundle(bundle, data.images, batch=cfg.batch, progress=cfg.progress)
+    set_metadata(model, meta)
+    bundle = parse_meta(meta, need_bytes=False)
+    sess = inference.session_from_bytes(model_bytes(model))
+    check_session(bundle, sess)
+    got = inference.predict(sess, bundle.actions.n, data.images, batch=cfg.batch, progress=cfg.progress)
     correct = got["probs"].argmax(1) == data.actions
     fitted = cal.uncertainty_threshold(got[cfg.measure], correct)
     calib = cal.CalibrationResult(
@@ -354,11 +354,11 @@ def policy_metrics(ckpt: Path) -> dict:
 
 
 def _latency_ms(sess: Any, frame: np.ndarray, repeats: int = 10) -> float:
-    sess.run(None, {"frames": frame})
+    sess.run(None, {INPUT_NAME: frame})
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        sess.run(None, {"frames": frame})
+        sess.run(None, {INPUT_NAME: frame})
         times.append(time.perf_counter() - t0)
     return float(np.median(times) * 1000)
 
@@ -367,16 +367,14 @@ def compare_precisions(model: Any, fp32_model: Any, meta: dict, data: Labelled, 
                        repeats: int = 5) -> dict:
     """Size (bytes), single-frame latency (ms, median of 10, default session options) and
     evaluation-part accuracy (mean over ``repeats`` MC runs) of the int8 graph against fp32."""
-    import onnxruntime as ort
+    from crossing_assist import inference
 
-    from crossing_assist.bundle import parse_meta
-
-    bundle = parse_meta(meta, need_bytes=False)
+    n = parse_meta(meta, need_bytes=False).actions.n
     b32, b8 = model_bytes(fp32_model), model_bytes(model)
-    s32, s8 = ort.InferenceSession(b32), ort.InferenceSession(b8)
+    s32, s8 = inference.session_from_bytes(b32), inference.session_from_bytes(b8)
     acc = {}
     for name, sess in (("fp32", s32), ("int8", s8)):  # mean over repeats: MC noise moves argmaxes
-        acc[name] = float(np.mean([(predict_bundle(bundle, data.images, batch=batch, session=sess)["probs"]
+        acc[name] = float(np.mean([(inference.predict(sess, n, data.images, batch=batch)["probs"]
                                     .argmax(1) == data.actions).mean() for _ in range(repeats)]))
     frame = data.images[0][None]
     return {"size_fp32": len(b32), "size_int8": len(b8), "size_ratio": len(b8) / len(b32),

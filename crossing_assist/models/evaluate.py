@@ -131,16 +131,11 @@ def _eval_checkpoint(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, 
 
 
 def _eval_bundle(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, Any]:
-    try:
-        from ..export.evaluate import predict_bundle
-    except ImportError:
-        raise ConfigError("Invalid --bundle: bundle evaluation is not available (crossing_assist.export.evaluate"
-                          " is missing from this install)") from None
-    from ..bundle import read_bundle
+    from .. import inference
 
-    bundle = read_bundle(cfg.bundle)
+    bundle, sess = inference.open_session(cfg.bundle, threads=cfg.threads)
     images = [load_frame(part.image_path(r), r.flags) for r in part.rows]
-    out = predict_bundle(cfg.bundle, images, progress=cfg.progress)
+    out = inference.predict(sess, bundle.actions.n, images, progress=cfg.progress)
     majority = bundle.training.get("majority_action")
     info = {"source": "bundle", "bundle": str(cfg.bundle), "samples": int(bundle.mc.samples),
             "majority_from": "train" if majority is not None else "eval labels"}
@@ -149,7 +144,7 @@ def _eval_bundle(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, Any]
 
 def _bundle_conformal(bundle, probs: np.ndarray, labels: np.ndarray) -> dict:
     """Empirical coverage and set sizes of the bundle's conformal sets on these frames."""
-    from ..export.evaluate import bundle_conformal_report
+    from ..conformal import bundle_conformal_report
 
     return bundle_conformal_report(bundle, probs, labels)
 

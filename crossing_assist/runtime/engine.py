@@ -16,7 +16,8 @@ from typing import Callable
 
 import numpy as np
 
-from crossing_assist.bundle import INPUT_NAME, OUTPUT_NAMES, Bundle, BundleError, check_session, read_bundle
+from crossing_assist import inference
+from crossing_assist.bundle import Bundle, BundleError
 from crossing_assist.geometry import ORIENTATIONS, GeometryError, check_fov, check_frame_shape, orientation
 from crossing_assist.runtime.decide import DecisionConfig, Observation
 
@@ -71,25 +72,13 @@ class Engine:
     default for each frame's orientation). A FOV outside 20..170 degrees raises BundleError."""
 
     def __init__(self, bundle_dir: str | Path, *, threads: int = 1, fov_deg: float | None = None) -> None:
-        import onnxruntime as ort
-
-        self.bundle: Bundle = read_bundle(bundle_dir)
         try:
             self.fov_override = None if fov_deg is None else check_fov(fov_deg)
         except GeometryError as exc:
             raise BundleError(str(exc)) from None
-        opts = ort.SessionOptions()
-        if threads:
-            opts.intra_op_num_threads = int(threads)
-            opts.inter_op_num_threads = 1
-        opts.log_severity_level = 3
-        try:
-            self.session = ort.InferenceSession(str(self.bundle.model_path), sess_options=opts,
-                                                providers=["CPUExecutionProvider"])
-        except Exception as exc:  # onnxruntime raises its own error types
-            raise BundleError(f"bundle: onnxruntime cannot open {self.bundle.model_path} "
-                              f"({str(exc).splitlines()[0][:200]}); re-export the bundle") from None
-        check_session(self.bundle, self.session)
+        self.bundle: Bundle
+        self.bundle, self.session = inference.open_session(bundle_dir, threads=threads, inter_threads=1 if threads else 0,
+                                                           quiet=True)
         self.space = self.bundle.space
         self.measure = self.bundle.calibration.uncertainty.measure
         self.conformal_threshold = self.bundle.calibration.conformal.threshold
@@ -110,20 +99,18 @@ class Engine:
         return DecisionConfig(n_actions=self.bundle.actions.n, **kw)
 
     def _check_frame(self, frame: np.ndarray) -> np.ndarray:
-        if not isinstance(frame, np.ndarray):
-            raise TypeError(f"Invalid frame: {type(frame).__name__}; expected a numpy array")
-        if frame.dtype != np.uint8 or frame.ndim != 3 or frame.shape[2] != 3 or min(frame.shape[:2]) < 2:
-            raise ValueError(f"Invalid frame: shape {frame.shape} dtype {frame.dtype}; expected H x W x 3 uint8 RGB")
+        frame = inference.check_frame(frame)
         check_frame_shape(frame.shape[0], frame.shape[1])   # e.g. 1 x N or 1:10: never a heading
-        return np.ascontiguousarray(frame)[None]
+        return frame[None]
 
     def predict(self, frame_rgb: np.ndarray) -> Prediction:
         """Run one H x W x 3 uint8 RGB frame; failures come back as ``Prediction(ok=False)``."""
         t0 = self._clock()
         try:
             x = self._check_frame(frame_rgb)
-            outs = self.session.run(list(OUTPUT_NAMES), {INPUT_NAME: x})
-            probs, ent, mi, var, votes = (np.asarray(o, dtype=np.float64)[0] for o in outs)
+            outs = inference.run(self.session, x)
+            probs, ent, mi, var, votes = (np.asarray(outs[k], dtype=np.float64)[0] for k in
+                                          ("probs", "entropy", "mutual_info", "variance", "votes"))
             if probs.shape != (self.space.n,) or not np.all(np.isfinite(probs)):
                 raise ValueError(f"model returned probs of shape {probs.shape} with non-finite values"
                                  if probs.shape == (self.space.n,) else
