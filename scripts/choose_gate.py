@@ -153,7 +153,7 @@ def main(argv=None) -> int:
                         "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
         suffix = "" if view == "landscape" else f"_{view}"
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
-                           a.cv / f"gate_risk_coverage{suffix}.png", f"held-out photographers, {view}: gate threshold x scale")
+                           a.cv / f"gate_risk_coverage{suffix}.png", f"held out, {view}: gate threshold x scale")
         print(f"{view}: fitted threshold (scale 1): {fmt(one)}")
         print(f"{view}: chosen scale {best['scale']:g} ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
     # landscape stays at the top level (what build_default_bundle.sh and older readers take)

@@ -13,7 +13,7 @@ from crossing_assist.runtime import belief as bf
 from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
 from crossing_assist.runtime.gate import GateConfig
 from crossing_assist.runtime.live import is_fresh, same_frame
-from crossing_assist.runtime.vectors import FRAME_SIZES, GEOMETRY_V2, build_vectors, camera_fov, main
+from crossing_assist.runtime.vectors import FRAME_SIZES, GEOMETRY_V2, build_vectors, camera_fov, gate_threshold, main
 
 VECTORS = Path(__file__).resolve().parents[1] / "android_demo" / "test_vectors.json"
 
@@ -60,11 +60,14 @@ def test_vectors_replay_from_json_alone(stored):
     kinds = set()
     for sc in stored["scenarios"]:
         d = Decider(_config(sc["config"]))
-        fov_now = None
+        now = None
         for row in sc["steps"]:
-            if "frame" in row and row["fov_deg"] != fov_now:  # the phone turned: a fresh Decider with the new FOV
-                fov_now = row["fov_deg"]
-                d = Decider(dataclasses.replace(_config(sc["config"]), fov_deg=fov_now))
+            if "frame" in row:   # the FOV and gate threshold of the frame's orientation (version 3)
+                threshold = gate_threshold(sc["uncertainty"], *row["frame"])
+                assert threshold == row["threshold"]
+                if (row["fov_deg"], threshold) != now:   # the phone turned: a fresh Decider
+                    now = (row["fov_deg"], threshold)
+                    d = Decider(dataclasses.replace(_config(sc["config"]), fov_deg=row["fov_deg"], threshold=threshold))
             o = row["obs"]
             obs = None
             if o is not None and o["ok"]:  # the port starts from the graph's raw outputs
@@ -80,12 +83,15 @@ def test_vectors_replay_from_json_alone(stored):
                 assert _close(got[key], want, stored["tolerance"]), (sc["name"], row["t"], key)
             kinds.add((row["expect"]["gate"], row["expect"]["reason"]))
     # the vectors exercise every gate state and every stop reason
+    turned = next(sc for sc in stored["scenarios"] if sc["name"] == "portrait_threshold_phone_turned")
+    by_orientation = {(row["frame"][1] > row["frame"][0], row["expect"]["stop"]) for row in turned["steps"][10:]}
+    assert (True, False) in by_orientation and (False, False) not in by_orientation  # guided only in portrait
     assert {("learner", "ok"), ("hold", "ok"), ("stop", "uncertain"), ("stop", "stale"), ("stop", "failed")} <= kinds
 
 
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == 2
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == 3
     assert "decision steps" in capsys.readouterr().out
 
 
