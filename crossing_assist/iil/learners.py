@@ -19,7 +19,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from .config import LearnerConfig
+from .config import LearnerConfig  # noqa: F401 (re-exported)
 from .data import Aggregate, Step
 from .networks import SmallResNet
 
