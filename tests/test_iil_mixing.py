@@ -22,9 +22,12 @@ def test_coefficient_is_one_minus_tanh_and_half_at_threshold():
     assert coefficient(math.inf, c) == 0.0
     assert coefficient(0.7, 3.0) == pytest.approx(1 - math.tanh(2.1), abs=1e-15)
     with pytest.raises(ValueError):
-        coefficient(-0.1, c)
-    with pytest.raises(ValueError):
         saturation(0.0)
+    # the mixing law uses the one shared coefficient (crossing_assist.upms; its contract is tested there)
+    from crossing_assist import upms
+    from crossing_assist.runtime import gate
+
+    assert coefficient is upms.coefficient is gate.alpha
 
 
 @pytest.mark.parametrize("ut", GRID)

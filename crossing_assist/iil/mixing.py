@@ -6,7 +6,8 @@ index ``i`` (1-based), the two uncertainties and an explicit ``rng``. It returns
 agent and the probability with which it was chosen (UPMS's sampling step needs it).
 
 UPMS (uncertainty-aware policy mixing) uses the preferential coefficient
-``alpha(U) = 1 - tanh(c U)`` (``U = inf`` gives 0) and the rational law
+``alpha(U) = 1 - tanh(c U)`` (:func:`crossing_assist.upms.coefficient`, shared with the runtime's
+gate: ``U = inf`` or NaN gives 0) and the rational law
 ``p_expert = alpha_T / (alpha_T + alpha_L)``. Two ways to set ``c`` (the two configurations):
 
 * ``thesis``: ``c = 30`` for every agent (the thesis multiplies the uncertainty by 30, so that
@@ -29,30 +30,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..upms import SATURATION_HALF, coefficient, saturation  # noqa: F401 (re-exported: the one copy)
 from .data import EpisodeContext
 from .protocols import RiskCritic
 
 EXPERT, LEARNER, EXPLORER = "expert", "learner", "explorer"
 AGENTS = (EXPERT, LEARNER, EXPLORER)
-HALF_LEVEL = math.atanh(0.5)  # c * threshold, so that alpha(threshold) == 0.5
-
-
-def saturation(threshold: float) -> float:
-    """The coefficient ``c`` for which ``alpha(threshold) == 1/2``; ``threshold`` > 0 (units of U)."""
-    if not float(threshold) > 0:
-        raise ValueError(f"Invalid uncertainty threshold: {threshold}; valid: > 0")
-    return HALF_LEVEL / float(threshold)
-
-
-def coefficient(uncertainty: float, c: float) -> float:
-    """Preference ``alpha(U) = 1 - tanh(c U)`` in [0, 1]; ``U = inf`` (no answer) gives exactly 0."""
-    u = float(uncertainty)
-    if math.isnan(u) or u < 0:
-        raise ValueError(f"Invalid uncertainty: {uncertainty}; valid: 0 <= U <= inf")
-    x = 2.0 * c * u
-    if x > 700.0:  # exp overflows; the coefficient is below 1e-300
-        return 0.0
-    return 2.0 / (1.0 + math.exp(x))  # == 1 - tanh(c U), without cancelling to 0 for large U
 
 
 def non_preferential(uncertainty: float, c: float) -> float:
