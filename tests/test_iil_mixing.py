@@ -140,7 +140,10 @@ class _Critic:
 def test_thrifty_gate_reads_its_critic_each_episode():
     rng, critic = np.random.default_rng(0), _Critic()
     gate = ThriftyGate(critic=critic)
-    frame = lambda risk: np.full((2, 2, 3), int(risk * 255), np.uint8)  # noqa: E731
+
+    def frame(risk):
+        return np.full((2, 2, 3), int(risk * 255), np.uint8)
+
     gate.begin_episode(EpisodeContext(2, 10))
     assert (gate.novelty_threshold, gate.risk_threshold) == (0.5, 0.5)
     assert gate.choose(StepView(2, 0, 0, 0.1, 1, 1, novelty=0.1, obs=frame(0.2)), rng)[0] == LEARNER

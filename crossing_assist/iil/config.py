@@ -60,7 +60,7 @@ class AlgoParams:
     thrifty_rate: float = 0.1
     forward_block: int | None = None
 
-    def resolved(self, env) -> "AlgoParams":
+    def resolved(self, env) -> AlgoParams:
         """Fill ``None`` fields from the environment's defaults."""
         defaults = iil_env(env).iil_defaults
         return AlgoParams(**{f.name: (getattr(self, f.name) if getattr(self, f.name) is not None

@@ -15,12 +15,13 @@ variance over samples (in normalised units), as in the thesis's code.
 from __future__ import annotations
 
 import math
+
 import numpy as np
 import torch
 from torch import nn
 
 from ..models.mc import mc_summaries
-from .config import LearnerConfig  # noqa: F401 (re-exported)
+from .config import LearnerConfig
 from .data import Aggregate, Step
 from .networks import SmallResNet
 

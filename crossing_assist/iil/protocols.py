@@ -17,15 +17,16 @@ Actions are an ``int`` (Discrete spaces) or a float32 vector (bounded 1-D Box sp
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol, Sequence, Union, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
 if TYPE_CHECKING:
     from .data import Aggregate, Step
 
-Action = Union[int, np.ndarray]
+Action = int | np.ndarray
 
 
 @runtime_checkable
@@ -50,9 +51,9 @@ class Learner(Protocol):
 
     def act(self, obs: np.ndarray, t: int, rng: np.random.Generator) -> tuple[Action | None, float]: ...
 
-    def fit(self, data: "Aggregate", episode: int, rng: np.random.Generator) -> dict[str, Any]: ...
+    def fit(self, data: Aggregate, episode: int, rng: np.random.Generator) -> dict[str, Any]: ...
 
-    def observe_episode(self, trace: Sequence["Step"]) -> None: ...
+    def observe_episode(self, trace: Sequence[Step]) -> None: ...
 
     def state_dict(self) -> dict: ...
 

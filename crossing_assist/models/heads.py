@@ -34,7 +34,7 @@ class HeadError(UserError):
     """Invalid head kind or argument."""
 
 
-from .mc import mc_dropout  # noqa: E402 - explicit-mask dropout, the one copy (shared with the IIL)
+from .mc import mc_dropout  # explicit-mask dropout, the one copy (shared with the IIL)
 
 
 def pool_rows(features: torch.Tensor) -> torch.Tensor:

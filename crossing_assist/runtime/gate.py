@@ -23,7 +23,6 @@ from dataclasses import dataclass
 
 from crossing_assist.upms import SATURATION_HALF, coefficient
 
-
 GATE_LEARNER = "learner"
 GATE_HOLD = "hold"
 GATE_STOP = "stop"
