@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from crossing_assist.iil.algorithms import THESIS_ALGORITHMS, AlgoParams, create, list_algorithms
-from crossing_assist.iil.data import Aggregate, Step
+from crossing_assist.iil.data import Aggregate, EpisodeContext, Step
 from crossing_assist.iil.envs import make_env
 from crossing_assist.iil.experts import OracleExpert
 from crossing_assist.iil.learners import LearnerConfig
@@ -36,7 +36,7 @@ def _episodes(name, n=3, horizon=H, seed=0, config="code", binary_risk=None):
     data, rows = Aggregate(), []
     for i in range(1, n + 1):
         res = run_episode(env, OracleExpert(env, binary_risk=binary_risk), setup, i, horizon, streams)
-        rows.append({**res.metrics, **aggregate_and_learn(res, setup, data, i, streams.train), "trace": res.trace})
+        rows.append({**res.metrics, **aggregate_and_learn(res, setup, data, streams.train), "trace": res.trace})
     return rows, data
 
 
@@ -163,7 +163,8 @@ def _trace():
 def test_label_counting_is_exact(name, expert_labels, labels, self_labels):
     env = make_env("toy")
     setup = create(name, env, horizon=5, episodes=2, seed=0, cfg=TINY, params=AlgoParams(config="code"))
-    out = aggregate_and_learn(EpisodeResult({}, _trace()), setup, Aggregate(), 2, np.random.default_rng(0))
+    out = aggregate_and_learn(EpisodeResult({}, _trace(), EpisodeContext(2, 5)), setup, Aggregate(),
+                              np.random.default_rng(0))
     assert (out["expert_labels"], out["labels"], out["self_labels"]) == (expert_labels, labels, self_labels)
 
 

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from crossing_assist.iil.data import EpisodeContext
 from crossing_assist.iil.mixing import (EXPERT, EXPLORER, LEARNER, BetaDecay, ExpertGate, GeometricMixture,
                                         LearnerThreshold, PerStepSchedule, RationalMixing, StepView, ThriftyGate,
                                         action_distance, beta_schedule, coefficient, rational_mixing, saturation)
@@ -21,9 +22,12 @@ def test_coefficient_is_one_minus_tanh_and_half_at_threshold():
     assert coefficient(math.inf, c) == 0.0
     assert coefficient(0.7, 3.0) == pytest.approx(1 - math.tanh(2.1), abs=1e-15)
     with pytest.raises(ValueError):
-        coefficient(-0.1, c)
-    with pytest.raises(ValueError):
         saturation(0.0)
+    # the mixing law uses the one shared coefficient (crossing_assist.upms; its contract is tested there)
+    from crossing_assist import upms
+    from crossing_assist.runtime import gate
+
+    assert coefficient is upms.coefficient is gate.alpha
 
 
 @pytest.mark.parametrize("ut", GRID)
@@ -115,11 +119,45 @@ def test_threshold_gates():
 def test_thrifty_gate_switches_and_hands_back():
     rng = np.random.default_rng(0)
     gate = ThriftyGate(novelty_threshold=0.5, risk_threshold=0.5)
-    gate.begin_episode(2)
+    gate.begin_episode(EpisodeContext(2, 10))
     assert gate.choose(StepView(2, 0, 0, 0.1, 1, 1, novelty=0.1, risk=0.1), rng)[0] == LEARNER
     assert gate.choose(StepView(2, 1, 0, 0.9, 1, 2, novelty=0.9, risk=0.1), rng)[0] == EXPERT
     assert gate.choose(StepView(2, 2, 0, 0.1, 1, 2, novelty=0.1, risk=0.1), rng)[0] == EXPERT  # still differ
     assert gate.choose(StepView(2, 3, 0, 0.1, 1, 1, novelty=0.1, risk=0.1), rng)[0] == LEARNER  # agree: hand back
+
+
+class _Critic:
+    """A stand-in ThriftyDAgger learner: risk read from the frame's first pixel (0..255 -> 0..1)."""
+
+    def __init__(self):
+        self.novelty_threshold, self.risk_threshold, self.calls = 0.5, 0.5, 0
+
+    def risk(self, obs):
+        self.calls += 1
+        return float(obs[0, 0, 0]) / 255.0
+
+
+def test_thrifty_gate_reads_its_critic_each_episode():
+    rng, critic = np.random.default_rng(0), _Critic()
+    gate = ThriftyGate(critic=critic)
+
+    def frame(risk):
+        return np.full((2, 2, 3), int(risk * 255), np.uint8)
+
+    gate.begin_episode(EpisodeContext(2, 10))
+    assert (gate.novelty_threshold, gate.risk_threshold) == (0.5, 0.5)
+    assert gate.choose(StepView(2, 0, 0, 0.1, 1, 1, novelty=0.1, obs=frame(0.2)), rng)[0] == LEARNER
+    assert gate.choose(StepView(2, 1, 0, 0.1, 1, 1, novelty=0.1, obs=frame(0.9)), rng)[0] == EXPERT  # risky
+    assert gate.choose(StepView(2, 2, 0, 0.1, 1, 1, novelty=0.1, obs=frame(0.1)), rng)[0] == LEARNER  # hand back
+    critic.risk_threshold = 0.05  # refit after the episode: read at the next episode's start
+    assert gate.risk_threshold == 0.5
+    gate.begin_episode(EpisodeContext(3, 10))
+    assert gate.risk_threshold == 0.05
+    assert gate.choose(StepView(3, 0, 0, 0.1, 1, 1, novelty=0.1, obs=frame(0.1)), rng)[0] == EXPERT
+    calls = critic.calls  # no learner action: no risk asked, none assumed
+    gate.begin_episode(EpisodeContext(4, 10))
+    assert gate.choose(StepView(4, 0, 0, 0.1, 1, None, novelty=0.1, obs=frame(0.9)), rng)[0] == LEARNER
+    assert critic.calls == calls
 
 
 def test_action_distance():
@@ -136,14 +174,15 @@ def test_sampling_strategies():
     rng = np.random.default_rng(0)
     assert FullHorizon().control(_v(), LEARNER, 0.3, rng) == LEARNER
     sw = RandomSwitch()
-    sw.begin_episode(1, 10, rng)
+    sw.begin_episode(EpisodeContext(1, 10), rng)
     assert [sw.control(_v(t), LEARNER, 1.0, rng) for t in range(10)] == [EXPERT] * 10
-    sw.begin_episode(2, 10, rng)
-    ts = sw.switch_time
+    ctx = EpisodeContext(2, 10)
+    sw.begin_episode(ctx, rng)
+    ts = ctx.switch_time
     got = [sw.control(_v(t), LEARNER, 1.0, rng) for t in range(10)]
     assert got == [LEARNER] * ts + [EXPLORER] + [EXPERT] * (9 - ts)
     rs = RationalSampling("code", expert_threshold=1.0)
-    rs.begin_episode(2, 10, rng)
+    rs.begin_episode(EpisodeContext(2, 10), rng)
     assert all(rs.control(_v(u_expert=5.0), LEARNER, 1.0, rng) == LEARNER for _ in range(50))  # p_choice 1: kept
     # p_choice 0: E' = expert w.p. alpha_T; alpha(inf) = 0 -> always the explorer
     assert all(rs.control(_v(u_expert=math.inf), LEARNER, 0.0, rng) == EXPLORER for _ in range(50))
@@ -155,7 +194,7 @@ def test_code_sampling_never_explores_with_the_0_inf_expert():
     explorer never acts (U_T = inf makes the learner's choice certain, U_T = 0 makes E' the expert)."""
     rng = np.random.default_rng(0)
     mix, rs = RationalMixing(1.0, 1.0), RationalSampling("code", expert_threshold=1.0)
-    rs.begin_episode(2, 10, rng)
+    rs.begin_episode(EpisodeContext(2, 10), rng)
     for u_t in (0.0, math.inf):
         for u_l in (0.0, 0.3, 3.0):
             v = _v(u_expert=u_t, u_learner=u_l)
@@ -168,10 +207,10 @@ def test_thesis_rational_sampling_eq_19_to_21():
     """pi_RS = a pi_i + (1 - a) E', a = tanh(30 U_L); E' = alpha_T expert + (1 - alpha_T) E."""
     rng = np.random.default_rng(2)
     rs = RationalSampling("thesis", scale=30.0)
-    rs.begin_episode(1, 10, rng)
+    rs.begin_episode(EpisodeContext(1, 10), rng)
     assert all(rs.control(_v(u_expert=math.inf, u_learner=0.0, i=1), EXPERT, 1.0, rng) == EXPERT
                for _ in range(50))  # episode 1: the demonstration
-    rs.begin_episode(2, 10, rng)
+    rs.begin_episode(EpisodeContext(2, 10), rng)
     # a certain learner (U_L = 0): a = 0, always E'; the expert not intervening (inf): the explorer acts
     assert all(rs.control(_v(u_expert=math.inf, u_learner=0.0), LEARNER, 1.0, rng) == EXPLORER for _ in range(50))
     # ... the expert intervening (U_T = 0): alpha_T = 1, E' is the expert
@@ -186,7 +225,7 @@ def test_thesis_rational_sampling_eq_19_to_21():
     assert abs(kept / n - a) < 6 * math.sqrt(a * (1 - a) / n)
     # UPMS-NE: E = the learner, so no random explorer ever acts
     ne = RationalSampling("thesis", scale=30.0, explorer=LEARNER)
-    ne.begin_episode(2, 10, rng)
+    ne.begin_episode(EpisodeContext(2, 10), rng)
     got = {ne.control(_v(u_expert=math.inf, u_learner=u_l), EXPERT, 1.0, rng) for _ in range(500)}
     assert got == {EXPERT, LEARNER}
     with pytest.raises(ValueError, match="scale"):

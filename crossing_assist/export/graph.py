@@ -13,7 +13,8 @@ Layout of :class:`BundleGraph` (docs/contracts.md section 3):
       -> logits [T, N, A] / temperature -> per-sample softmax
       -> probs [N, A] (mean), entropy [N], mutual_info [N], variance [N, A], votes [N, A]
 
-:func:`mc_summaries` is the same tail in plain torch, used for the PyTorch reference.
+:func:`crossing_assist.models.mc.mc_summaries` is that tail (the one copy, shared with the IIL
+learners), also used for the PyTorch reference.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from torch import nn
 
 from crossing_assist.bundle import INPUT_NAME, OUTPUT_NAMES, SCHEMA_VERSION, embedded_meta
 from crossing_assist.geometry import FITS, PAD_RGB
+from crossing_assist.models.mc import mc_summaries
 
 OPSET = 18
 MAX_SIDE = 8192
@@ -59,28 +61,6 @@ class GraphSpec:
             raise ValueError(f"Invalid p: {self.p}; valid: 0 <= p < 1")
         if not self.temperature > 0:
             raise ValueError(f"Invalid temperature: {self.temperature}; valid: > 0")
-
-
-def mc_summaries(logits: torch.Tensor, temperature: float = 1.0) -> tuple[torch.Tensor, ...]:
-    """Summaries of T samples of logits ``[T, N, A]``.
-
-    Returns ``probs`` [N, A] (mean softmax), ``entropy`` [N] (nats, of ``probs``),
-    ``mutual_info`` [N] (entropy minus the mean per-sample entropy, clipped at 0),
-    ``variance`` [N, A] (population variance of the per-sample probabilities) and
-    ``votes`` [N, A] (fraction of samples whose argmax is each action).
-    """
-    logp = torch.log_softmax(logits / temperature, dim=-1)
-    p_s = logp.exp()
-    probs = p_s.mean(0)
-    entropy = -(probs * torch.log(probs.clamp_min(1e-30))).sum(-1)
-    expected = -(p_s * logp).sum(-1).mean(0)
-    mutual_info = (entropy - expected).clamp_min(0.0)
-    variance = (p_s - probs.unsqueeze(0)).square().mean(0)
-    n_actions = logits.shape[-1]
-    top = p_s.argmax(-1, keepdim=True)  # [T, N, 1]
-    arange = torch.arange(n_actions, device=logits.device).view(1, 1, n_actions)
-    votes = (top == arange).to(probs.dtype).mean(0)
-    return probs, entropy, mutual_info, variance, votes
 
 
 class BundleGraph(nn.Module):

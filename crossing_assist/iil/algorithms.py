@@ -1,5 +1,7 @@
 """The registry: each algorithm is a named combination of mixing, sampling, aggregation and
-learner. ``create(name, env, ...) -> Setup``; ``list_algorithms()``.
+learner. ``create(name, env, ...) -> Setup``; ``list_algorithms()``. The names and their order
+are :data:`crossing_assist.iil.config.ALGORITHMS`; each builder is registered under its name
+once and ``create`` puts that name on the :class:`~crossing_assist.iil.loop.Setup`.
 
 | name | who acts (mixing) | when the expert is asked (sampling) | aggregated |
 |---|---|---|---|
@@ -32,55 +34,39 @@ Two configurations (``AlgoParams.config``) of the thesis's algorithms:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-from typing import Callable
+from typing import Callable, NamedTuple
 
-from .aggregation import CostToGo, ExpertLabels, SelfLabelling
+from .aggregation import Aggregation, CostToGo, ExpertLabels, SelfLabelling
+from .config import ALGORITHMS, CONFIGS, THESIS_ALGORITHMS, AlgoParams, LearnerConfig  # noqa: F401 (re-exported)
 from .learner_variants import ForwardLearner, SmileLearner, ThriftyLearner
-from .learners import EnsembleLearner, LearnerConfig, NetLearner
+from .learners import EnsembleLearner, NetLearner
 from .loop import Setup
 from .mixing import EXPLORER, LEARNER
-from .mixing import (BetaDecay, ExpertGate, ExpertOnly, GeometricMixture, LearnerThreshold, PerStepSchedule,
+from .mixing import (BetaDecay, ExpertGate, ExpertOnly, GeometricMixture, LearnerThreshold, Mixing, PerStepSchedule,
                      RationalMixing, ThriftyGate)
-from .sampling import FullHorizon, RandomSwitch, RationalSampling
-
-CONFIGS = ("thesis", "code")
-THESIS_ALGORITHMS = ("supervised", "dagger", "aggrevate", "dropout-dagger", "upms", "upms-ne", "upms-sl", "upms-ne-sl")
+from .protocols import Learner
+from .sampling import FullHorizon, RandomSwitch, RationalSampling, Sampling
 
 
-@dataclass(frozen=True)
-class AlgoParams:
-    """Hyper-parameters of the strategies. Uncertainty thresholds are in each agent's own
-    units (the value where UPMS's coefficient is 1/2, ``code`` configuration); ``None`` means
-    the environment's default (``env.unwrapped.iil_defaults``). ``config`` picks the
-    configuration (module docstring); ``uncertainty_scale`` and ``dropout_threshold`` are the
-    thesis's (used by ``thesis`` only)."""
+class Parts(NamedTuple):
+    """What a builder returns: the algorithm's strategies and learner (``create`` names them)."""
 
-    config: str = "thesis"
-    uncertainty_scale: float = 30.0
-    dropout_threshold: float = 0.1
-    dagger_p: float = 0.5
-    smile_alpha: float = 0.3
-    expert_threshold: float | None = None
-    learner_threshold: float | None = None
-    ensemble_threshold: float | None = None
-    max_discrepancy: float | None = None
-    hg_threshold: float | None = None
-    thrifty_rate: float = 0.1
-    forward_block: int | None = None
-
-    def resolved(self, env) -> "AlgoParams":
-        """Fill ``None`` fields from the environment's defaults."""
-        defaults = getattr(env.unwrapped, "iil_defaults", {})
-        return AlgoParams(**{f.name: (getattr(self, f.name) if getattr(self, f.name) is not None
-                                      else defaults.get(f.name)) for f in fields(self)})
+    mixing: Mixing
+    sampling: Sampling
+    aggregation: Aggregation
+    learner: Learner
 
 
-Builder = Callable[..., Setup]
+Builder = Callable[..., Parts]
 _REGISTRY: dict[str, Builder] = {}
 
 
 def register(name: str) -> Callable[[Builder], Builder]:
+    """Register a builder ``fn(env, horizon, episodes, seed, p, cfg) -> Parts`` under ``name``,
+    which must be listed in :data:`~crossing_assist.iil.config.ALGORITHMS`."""
+    if name not in ALGORITHMS:
+        raise ValueError(f"Unknown algorithm: {name!r}; list it in crossing_assist.iil.config.ALGORITHMS first")
+
     def deco(fn: Builder) -> Builder:
         if name in _REGISTRY:
             raise ValueError(f"Algorithm {name!r} is already registered")
@@ -90,18 +76,20 @@ def register(name: str) -> Callable[[Builder], Builder]:
 
 
 def list_algorithms() -> list[str]:
-    return list(_REGISTRY)
+    """The registered algorithms, in the order of :data:`~crossing_assist.iil.config.ALGORITHMS`."""
+    return [n for n in ALGORITHMS if n in _REGISTRY]
 
 
 def create(name: str, env, *, horizon: int, episodes: int, seed: int,
            params: AlgoParams = AlgoParams(), cfg: LearnerConfig = LearnerConfig()) -> Setup:
     """Build algorithm ``name`` for ``env`` (its action space and defaults)."""
     if name not in _REGISTRY:
-        raise ValueError(f"Unknown algorithm: {name!r}; valid: {', '.join(_REGISTRY)}")
+        raise ValueError(f"Unknown algorithm: {name!r}; valid: {', '.join(list_algorithms())}")
     if params.config not in CONFIGS:
         raise ValueError(f"Unknown configuration: {params.config!r}; valid: {', '.join(CONFIGS)}")
     p = params.resolved(env)
-    return _REGISTRY[name](env=env, horizon=horizon, episodes=episodes, seed=seed, p=p, cfg=cfg)
+    parts = _REGISTRY[name](env=env, horizon=horizon, episodes=episodes, seed=seed, p=p, cfg=cfg)
+    return Setup(name, *parts)
 
 
 def _net(env, cfg, seed):
@@ -110,40 +98,40 @@ def _net(env, cfg, seed):
 
 @register("supervised")
 def _supervised(env, horizon, episodes, seed, p, cfg):
-    return Setup("supervised", ExpertOnly(), FullHorizon(), ExpertLabels("all"), _net(env, cfg, seed))
+    return Parts(ExpertOnly(), FullHorizon(), ExpertLabels("all"), _net(env, cfg, seed))
 
 
 @register("forward")
 def _forward(env, horizon, episodes, seed, p, cfg):
     block = p.forward_block or max(1, -(-horizon // episodes))
-    return Setup("forward", PerStepSchedule(block), FullHorizon(), ExpertLabels("block", block),
+    return Parts(PerStepSchedule(block), FullHorizon(), ExpertLabels("block", block),
                  ForwardLearner(env.action_space, cfg, seed, block))
 
 
 @register("smile")
 def _smile(env, horizon, episodes, seed, p, cfg):
-    return Setup("smile", GeometricMixture(p.smile_alpha), FullHorizon(), ExpertLabels("all"),
+    return Parts(GeometricMixture(p.smile_alpha), FullHorizon(), ExpertLabels("all"),
                  SmileLearner(env.action_space, cfg, seed, p.smile_alpha))
 
 
 @register("dagger")
 def _dagger(env, horizon, episodes, seed, p, cfg):
-    return Setup("dagger", BetaDecay(p.dagger_p), FullHorizon(), ExpertLabels("all"), _net(env, cfg, seed))
+    return Parts(BetaDecay(p.dagger_p), FullHorizon(), ExpertLabels("all"), _net(env, cfg, seed))
 
 
 @register("aggrevate")
 def _aggrevate(env, horizon, episodes, seed, p, cfg):
-    return Setup("aggrevate", BetaDecay(p.dagger_p), RandomSwitch(), CostToGo(), _net(env, cfg, seed))
+    return Parts(BetaDecay(p.dagger_p), RandomSwitch(), CostToGo(), _net(env, cfg, seed))
 
 
 @register("dropout-dagger")
 def _dropout_dagger(env, horizon, episodes, seed, p, cfg):
     gate = (LearnerThreshold(p.dropout_threshold) if p.config == "thesis"
             else LearnerThreshold(p.learner_threshold, p.max_discrepancy))
-    return Setup("dropout-dagger", gate, FullHorizon(), ExpertLabels("all"), _net(env, cfg, seed))
+    return Parts(gate, FullHorizon(), ExpertLabels("all"), _net(env, cfg, seed))
 
 
-def _upms(name, env, seed, p, cfg, explore: bool, self_label: bool) -> Setup:
+def _upms(env, seed, p, cfg, explore: bool, self_label: bool) -> Parts:
     agg = SelfLabelling(ExpertLabels("acting")) if self_label else ExpertLabels("acting")
     if p.config == "thesis":  # Eq. 19-21; UPMS-NE: E = the learner inside E'
         sampling = RationalSampling("thesis", scale=p.uncertainty_scale, explorer=EXPLORER if explore else LEARNER)
@@ -151,47 +139,42 @@ def _upms(name, env, seed, p, cfg, explore: bool, self_label: bool) -> Setup:
     else:
         sampling = RationalSampling("code", expert_threshold=p.expert_threshold) if explore else FullHorizon()
         mixing = RationalMixing(p.expert_threshold, p.learner_threshold)
-    return Setup(name, mixing, sampling, agg, _net(env, cfg, seed))
+    return Parts(mixing, sampling, agg, _net(env, cfg, seed))
 
 
 @register("upms")
 def _upms_full(env, horizon, episodes, seed, p, cfg):
-    return _upms("upms", env, seed, p, cfg, explore=True, self_label=False)
+    return _upms(env, seed, p, cfg, explore=True, self_label=False)
 
 
 @register("upms-ne")
 def _upms_ne(env, horizon, episodes, seed, p, cfg):
-    return _upms("upms-ne", env, seed, p, cfg, explore=False, self_label=False)
+    return _upms(env, seed, p, cfg, explore=False, self_label=False)
 
 
 @register("upms-sl")
 def _upms_sl(env, horizon, episodes, seed, p, cfg):
-    return _upms("upms-sl", env, seed, p, cfg, explore=True, self_label=True)
+    return _upms(env, seed, p, cfg, explore=True, self_label=True)
 
 
 @register("upms-ne-sl")
 def _upms_ne_sl(env, horizon, episodes, seed, p, cfg):
-    return _upms("upms-ne-sl", env, seed, p, cfg, explore=False, self_label=True)
+    return _upms(env, seed, p, cfg, explore=False, self_label=True)
 
 
 @register("ensemble-dagger")
 def _ensemble_dagger(env, horizon, episodes, seed, p, cfg):
-    return Setup("ensemble-dagger", LearnerThreshold(p.ensemble_threshold, p.max_discrepancy), FullHorizon(),
+    return Parts(LearnerThreshold(p.ensemble_threshold, p.max_discrepancy), FullHorizon(),
                  ExpertLabels("all"), EnsembleLearner(env.action_space, cfg, seed))
 
 
 @register("hg-dagger")
 def _hg_dagger(env, horizon, episodes, seed, p, cfg):
-    return Setup("hg-dagger", ExpertGate(p.hg_threshold), FullHorizon(), ExpertLabels("acting"), _net(env, cfg, seed))
+    return Parts(ExpertGate(p.hg_threshold), FullHorizon(), ExpertLabels("acting"), _net(env, cfg, seed))
 
 
 @register("thrifty-dagger")
 def _thrifty(env, horizon, episodes, seed, p, cfg):
     learner = ThriftyLearner(env.action_space, cfg, seed, target_rate=p.thrifty_rate)
-    gate = ThriftyGate(handback_distance=p.max_discrepancy or 0.0)
-
-    def sync() -> None:
-        gate.novelty_threshold, gate.risk_threshold = learner.novelty_threshold, learner.risk_threshold
-
-    return Setup("thrifty-dagger", gate, FullHorizon(), ExpertLabels("acting"), learner, after_fit=sync,
-                 risk=learner.risk)
+    gate = ThriftyGate(handback_distance=p.max_discrepancy or 0.0, critic=learner)
+    return Parts(gate, FullHorizon(), ExpertLabels("acting"), learner)

@@ -19,14 +19,14 @@ from pathlib import Path
 from typing import Sequence
 
 from ..errors import UserError
-from .config import LearnerConfig
+from .config import ALGORITHMS, CONFIGS, THESIS_ALGORITHMS, AlgoParams, LearnerConfig, RunConfig
 from .envs import ENV_NAMES
 from .files import RunError
 from .report import ReportError, write_report
 
 
 def _algos(names: list[str]) -> list[str]:
-    from .algorithms import THESIS_ALGORITHMS, list_algorithms  # noqa: PLC0415 - torch, only when running
+    from .algorithms import list_algorithms  # noqa: PLC0415 - torch, only when running
 
     out: list[str] = []
     for n in names:
@@ -49,13 +49,14 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="run algorithms x seeds on an environment (resumable per episode)")
     r.add_argument("--env", required=True, choices=ENV_NAMES)
     r.add_argument("--algo", nargs="+", required=True, help="names, 'thesis' or 'all'")
-    r.add_argument("--episodes", type=int, default=10)
-    r.add_argument("--horizon", type=int, default=512)
+    run_d, algo_d = RunConfig(env="", algo="", seed=0), AlgoParams()
+    r.add_argument("--episodes", type=int, default=run_d.episodes)
+    r.add_argument("--horizon", type=int, default=run_d.horizon, help=f"steps per episode (default {run_d.horizon})")
     r.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     r.add_argument("--out", type=Path, required=True)
-    r.add_argument("--config", choices=["thesis", "code"], default="thesis",
-                   help="thesis: chapter 4 as written; code: the earlier code variant (default: thesis)")
-    r.add_argument("--expert", choices=["oracle", "human"], default="oracle",
+    r.add_argument("--config", choices=CONFIGS, default=algo_d.config,
+                   help=f"thesis: chapter 4 as written; code: the earlier code variant (default: {algo_d.config})")
+    r.add_argument("--expert", choices=["oracle", "human"], default=run_d.expert,
                    help="oracle: the environment's scripted expert; human: you, in a window (keys; crossing/toy)")
     r.add_argument("--fps", type=float, default=5.0, help="human expert: frames a second shown (the loop's pace)")
     r.add_argument("--frame-size", type=int, nargs=2, metavar=("W", "H"), default=None,
@@ -69,8 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="train on the most recent N samples of D only (default: all of D, as the thesis)")
     r.add_argument("--expert-threshold", type=float, default=None, help="U_T where alpha = 1/2")
     r.add_argument("--learner-threshold", type=float, default=None, help="U_L where alpha = 1/2")
-    r.add_argument("--dagger-p", type=float, default=0.5,
-                   help="DAgger/AggreVaTe: the expert acts w.p. p^(i-1) in episode i (default 0.5)")
+    r.add_argument("--dagger-p", type=float, default=algo_d.dagger_p,
+                   help=f"DAgger/AggreVaTe: the expert acts w.p. p^(i-1) in episode i (default {algo_d.dagger_p})")
     r.add_argument("--binary-expert", type=float, default=None, metavar="RISK",
                    help="the thesis's 0/inf expert: U = 0 above this risk, inf below (default: 0.5 with "
                         "--config thesis; the continuous confidence with --config code)")
@@ -104,30 +105,34 @@ def _check_run_args(a: argparse.Namespace) -> None:
         raise RunError(f"Invalid --binary-expert {a.binary_expert}; valid: a finite risk")
 
 
-def _cmd_run(a: argparse.Namespace) -> int:
+def run_configs(a: argparse.Namespace) -> list[RunConfig]:
+    """The :class:`RunConfig` of every (algorithm, seed) the ``run``/``sweep`` options ask for
+    (options checked first; one line naming the option on a bad value)."""
     _check_run_args(a)
-    import torch  # noqa: PLC0415
-    from tqdm import tqdm  # noqa: PLC0415
-
-    from .algorithms import AlgoParams  # noqa: PLC0415
-    from .runner import RunConfig, run  # noqa: PLC0415
-
     if a.frame_size is not None and (a.env != "duckietown" or min(a.frame_size) < 16):
         raise RunError(f"--frame-size applies to duckietown only, each side >= 16 (got {a.env}, {a.frame_size})")
     if a.max_samples is not None and a.max_samples < 1:
         raise RunError(f"--max-samples={a.max_samples} must be >= 1")
-    torch.set_num_threads(max(1, a.threads))
-    algos = _algos(a.algo)
-    learner = LearnerConfig(lr=a.lr, epochs=a.epochs, mc_samples=a.mc_samples, ensemble=a.ensemble,
-                            max_samples=a.max_samples)
     if not 0.0 <= a.dagger_p <= 1.0:
         raise RunError(f"--dagger-p={a.dagger_p} must be in [0, 1]")
+    learner = LearnerConfig(lr=a.lr, epochs=a.epochs, mc_samples=a.mc_samples, ensemble=a.ensemble,
+                            max_samples=a.max_samples)
     params = AlgoParams(config=a.config, expert_threshold=a.expert_threshold, learner_threshold=a.learner_threshold,
                         dagger_p=a.dagger_p)
-    configs = [RunConfig(env=a.env, algo=al, seed=s, episodes=a.episodes, horizon=a.horizon,
-                         learner=learner, params=params, expert_binary_risk=a.binary_expert,
-                         frame_size=tuple(a.frame_size) if a.frame_size else None, expert=a.expert)
-               for al in algos for s in a.seeds]
+    return [RunConfig(env=a.env, algo=al, seed=s, episodes=a.episodes, horizon=a.horizon,
+                      learner=learner, params=params, expert_binary_risk=a.binary_expert,
+                      frame_size=tuple(a.frame_size) if a.frame_size else None, expert=a.expert)
+            for al in _algos(a.algo) for s in a.seeds]
+
+
+def _cmd_run(a: argparse.Namespace) -> int:
+    configs = run_configs(a)
+    import torch  # noqa: PLC0415
+    from tqdm import tqdm  # noqa: PLC0415
+
+    from .runner import run  # noqa: PLC0415
+
+    torch.set_num_threads(max(1, a.threads))
     expert = _human(a) if a.expert == "human" else None
     bar = tqdm(total=len(configs) * a.episodes * a.horizon, unit="step", disable=a.quiet, file=sys.stderr)
     for cfg in configs:
@@ -176,10 +181,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _main(argv: list[str]) -> int:
     a = build_parser().parse_args(argv)
     if a.cmd == "list":
-        from .algorithms import THESIS_ALGORITHMS, list_algorithms  # noqa: PLC0415
-
         print("environments:", ", ".join(ENV_NAMES))
-        print("algorithms:", ", ".join(list_algorithms()))
+        print("algorithms:", ", ".join(ALGORITHMS))
         print("thesis:", ", ".join(THESIS_ALGORITHMS))
         return 0
     try:

@@ -1,4 +1,5 @@
-"""Aggregated data (the ``D`` of Algorithm 4.1) and the per-episode trace the loop records."""
+"""Aggregated data (the ``D`` of Algorithm 4.1), the per-episode trace the loop records, the
+labels an aggregation picks from it and the episode context the strategies share."""
 
 from __future__ import annotations
 
@@ -82,3 +83,30 @@ class Step:
     reward: float
     out_of_bounds: bool
     expert_acted: bool
+
+
+@dataclass(frozen=True)
+class Label:
+    """One sample an aggregation adds to ``D``: the trace index ``index`` of its state, the
+    ``action`` it is labelled with, its sample ``weight`` (>= 0) and whether the label is the
+    learner's own (``self_labelled``, UPMS-SL) rather than the expert's."""
+
+    index: int
+    action: object
+    weight: float = 1.0
+    self_labelled: bool = False
+
+
+@dataclass
+class EpisodeContext:
+    """What the strategies of one episode share, created by the loop before the episode.
+
+    ``i``: episode (1-based); ``horizon``: steps. Written by a strategy, read by another:
+    ``switch_time`` (0-based step; AggreVaTe's sampling draws it, its aggregation labels from
+    it on; None: no switch this episode), ``cost_to_go`` (the aggregation's cost-to-go of the
+    explored action, reported by the loop; None: none computed)."""
+
+    i: int
+    horizon: int
+    switch_time: int | None = None
+    cost_to_go: float | None = None

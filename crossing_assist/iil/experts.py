@@ -23,11 +23,7 @@ from typing import Callable, Iterable, Protocol
 
 import numpy as np
 
-
-class Expert(Protocol):
-    """The expert contract."""
-
-    def act(self, obs: np.ndarray) -> tuple[object | None, float]: ...
+from .protocols import Expert, iil_env  # noqa: F401 (Expert: the contract, re-exported)
 
 
 def risk_to_uncertainty(risk: float, scale: float = 1.0) -> float:
@@ -48,9 +44,10 @@ class OracleExpert:
 
     def __init__(self, env, scale: float = 1.0, binary_risk: float | None = None):
         self.env, self.scale, self.binary_risk = env, float(scale), binary_risk
+        self._oracle = iil_env(env).oracle
 
     def act(self, obs: np.ndarray) -> tuple[object | None, float]:
-        action, risk = self.env.unwrapped.oracle()
+        action, risk = self._oracle()
         if action is None:
             return None, math.inf
         if self.binary_risk is not None:

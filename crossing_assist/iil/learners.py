@@ -15,10 +15,12 @@ variance over samples (in normalised units), as in the thesis's code.
 from __future__ import annotations
 
 import math
+
 import numpy as np
 import torch
 from torch import nn
 
+from ..models.mc import mc_summaries
 from .config import LearnerConfig
 from .data import Aggregate, Step
 from .networks import SmallResNet
@@ -48,14 +50,10 @@ class ActionCodec:
         """``out``: samples x 1 x n_out -> (action, uncertainty) for one observation. Discrete:
         ``measure`` is ``"entropy"`` (predictive entropy of the mean, nats: high for an
         untrained net too) or ``"mutual_info"`` (disagreement between samples/members)."""
-        if self.discrete:
-            probs = torch.softmax(out[:, 0], dim=-1).double().numpy()  # T x A
-            mean = probs.mean(0)
-            ent = float(-(mean * np.log(mean + 1e-12)).sum())
-            if measure == "entropy":
-                return int(mean.argmax()), max(ent, 0.0)
-            per = -(probs * np.log(probs + 1e-12)).sum(1).mean()
-            return int(mean.argmax()), float(max(ent - per, 0.0))
+        if self.discrete:  # the bundle graph's summaries (one copy), in float64
+            probs, ent, mi, _, _ = mc_summaries(out[:, :1].double())
+            u = ent if measure == "entropy" else mi
+            return int(probs[0].argmax()), max(float(u[0]), 0.0)
         vals = torch.tanh(out[:, 0]).double().numpy()  # T x d
         mean = vals.mean(0)
         action = (self.low + (mean + 1) / 2 * (self.high - self.low)).astype(np.float32)

@@ -36,23 +36,24 @@ from typing import Callable
 import numpy as np
 
 from .aggregation import Aggregation
-from .data import Aggregate, Step
+from .data import Aggregate, EpisodeContext, Step
 from .mixing import EXPERT, EXPLORER, LEARNER, Mixing, StepView
+from .protocols import Expert, Learner, iil_env
 from .sampling import Sampling
 
 
 @dataclass
 class Setup:
-    """One algorithm instance: the three strategies and a learner (plus an optional hook run
-    after each fit, e.g. ThriftyDAgger copying refit thresholds into its gate)."""
+    """One algorithm instance: its registered ``name``, the three strategies and a learner.
+    Strategies that need more of the learner compose it (ThriftyDAgger's gate reads its
+    critic); values that one strategy passes to another travel in the episode's
+    :class:`~crossing_assist.iil.data.EpisodeContext`."""
 
     name: str
     mixing: Mixing
     sampling: Sampling
     aggregation: Aggregation
-    learner: object
-    after_fit: Callable[[], None] | None = None
-    risk: Callable[[np.ndarray], float] | None = None
+    learner: Learner
 
     def describe(self) -> dict:
         return {"algorithm": self.name, "mixing": self.mixing.describe(), "sampling": self.sampling.describe(),
@@ -61,10 +62,12 @@ class Setup:
 
 @dataclass
 class EpisodeResult:
-    """Per-episode metrics (see :func:`run_episode`) and the trace of steps."""
+    """Per-episode metrics (see :func:`run_episode`), the trace of steps and the episode's
+    context (what the strategies shared; the aggregation reads and writes it too)."""
 
     metrics: dict
     trace: list[Step] = field(repr=False)
+    context: EpisodeContext
 
 
 def explore(space, rng: np.random.Generator):
@@ -106,7 +109,7 @@ class Streams:
             getattr(self, name).bit_generator.state = state[name]
 
 
-def run_episode(env, expert, setup: Setup, i: int, horizon: int, streams: Streams,
+def run_episode(env, expert: Expert, setup: Setup, i: int, horizon: int, streams: Streams,
                 progress: Callable[[int], None] | None = None) -> EpisodeResult:
     """Roll out episode ``i`` (1-based) for ``horizon`` steps and return its metrics and trace.
 
@@ -115,8 +118,10 @@ def run_episode(env, expert, setup: Setup, i: int, horizon: int, streams: Stream
     ``out_of_bounds`` (events), ``interventions`` (steps the expert acted), ``learner_steps``,
     ``explorer_steps``, mean uncertainties, and the sums of ``info["reward_terms"]``.
     """
-    setup.mixing.begin_episode(i)
-    setup.sampling.begin_episode(i, horizon, streams.sampling)
+    inner = iil_env(env)
+    ctx = EpisodeContext(i=i, horizon=horizon)
+    setup.mixing.begin_episode(ctx)
+    setup.sampling.begin_episode(ctx, streams.sampling)
     resets = 0
     obs, _ = env.reset(seed=start_seed(streams.seed, i, resets))
     trace, terms = [], {}
@@ -126,14 +131,13 @@ def run_episode(env, expert, setup: Setup, i: int, horizon: int, streams: Stream
         u_exp = math.inf if a_exp is None else float(u_exp)
         a_lrn, u_lrn = setup.learner.act(obs, t, streams.mixing)  # SMILe draws its policy here
         view = StepView(i=i, t=t, u_expert=u_exp, u_learner=float(u_lrn), expert_action=a_exp,
-                        learner_action=a_lrn, novelty=float(u_lrn),
-                        risk=setup.risk(obs) if setup.risk and a_lrn is not None else 0.0)
+                        learner_action=a_lrn, novelty=float(u_lrn), obs=obs)
         chosen, p_choice = setup.mixing.choose(view, streams.mixing)
         actor = setup.sampling.control(view, chosen, p_choice, streams.sampling)
         if actor == LEARNER and a_lrn is None:
             actor = EXPERT  # an untrained learner (Forward Training's future blocks) cannot act
         if actor == EXPERT:
-            action = a_exp if a_exp is not None else env.unwrapped.safe_action()
+            action = a_exp if a_exp is not None else inner.safe_action()
         elif actor == LEARNER:
             action = a_lrn
         else:
@@ -151,7 +155,7 @@ def run_episode(env, expert, setup: Setup, i: int, horizon: int, streams: Stream
             obs = nxt
         if progress:
             progress(1)
-    return EpisodeResult(_metrics(trace, terms, time.perf_counter() - t0), trace)
+    return EpisodeResult(_metrics(trace, terms, time.perf_counter() - t0), trace, ctx)
 
 
 def _metrics(trace: list[Step], terms: dict, seconds: float) -> dict:
@@ -175,28 +179,26 @@ def _metrics(trace: list[Step], terms: dict, seconds: float) -> dict:
     }
 
 
-def aggregate_and_learn(result: EpisodeResult, setup: Setup, data: Aggregate, i: int,
-                        rng: np.random.Generator) -> dict:
-    """Steps 3-4: add the episode's labels to ``data``, refit the learner (``rng``: the training
-    stream). Returns metrics to merge into the episode's: ``expert_labels`` (steps whose expert
+def aggregate_and_learn(result: EpisodeResult, setup: Setup, data: Aggregate, rng: np.random.Generator) -> dict:
+    """Steps 3-4: add the labels of episode ``result.context.i`` to ``data``, refit the learner
+    (``rng``: the training stream). Returns metrics to merge into the episode's: ``expert_labels`` (steps whose expert
     action went into ``D``), ``labels`` (all samples added), ``self_labels``, ``dataset``,
     ``loss``, ``seconds_fit`` (and the learner's extra fit statistics)."""
-    trace = result.trace
-    picked = setup.aggregation.select(trace, i, setup.sampling)
+    trace, ctx = result.trace, result.context
+    i = ctx.i
+    picked = setup.aggregation.select(trace, ctx)
     expert_labelled = set()
-    for k, label, weight, self_label in picked:
-        data.add(trace[k].obs, label, weight, i, trace[k].t, self_label)
-        if not self_label:
-            expert_labelled.add(k)
+    for lab in picked:
+        data.add(trace[lab.index].obs, lab.action, lab.weight, i, trace[lab.index].t, lab.self_labelled)
+        if not lab.self_labelled:
+            expert_labelled.add(lab.index)
     setup.learner.observe_episode(trace)
     t0 = time.perf_counter()
     stats = setup.learner.fit(data, i, rng)
-    if setup.after_fit:
-        setup.after_fit()
-    out = {"expert_labels": len(expert_labelled), "labels": len(picked), "self_labels": int(sum(r[3] for r in picked)),
+    out = {"expert_labels": len(expert_labelled), "labels": len(picked),
+           "self_labels": sum(lab.self_labelled for lab in picked),
            "dataset": len(data), "seconds_fit": round(time.perf_counter() - t0, 3)}
-    cost = getattr(setup.aggregation, "last_cost_to_go", None)
-    if cost is not None:
-        out["cost_to_go"] = float(cost)
+    if ctx.cost_to_go is not None:
+        out["cost_to_go"] = float(ctx.cost_to_go)
     out.update({k: v for k, v in stats.items() if k not in out})
     return out

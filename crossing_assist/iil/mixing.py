@@ -6,7 +6,8 @@ index ``i`` (1-based), the two uncertainties and an explicit ``rng``. It returns
 agent and the probability with which it was chosen (UPMS's sampling step needs it).
 
 UPMS (uncertainty-aware policy mixing) uses the preferential coefficient
-``alpha(U) = 1 - tanh(c U)`` (``U = inf`` gives 0) and the rational law
+``alpha(U) = 1 - tanh(c U)`` (:func:`crossing_assist.upms.coefficient`, shared with the runtime's
+gate: ``U = inf`` or NaN gives 0) and the rational law
 ``p_expert = alpha_T / (alpha_T + alpha_L)``. Two ways to set ``c`` (the two configurations):
 
 * ``thesis``: ``c = 30`` for every agent (the thesis multiplies the uncertainty by 30, so that
@@ -25,31 +26,16 @@ Its four laws, tested exactly:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..upms import SATURATION_HALF, coefficient, saturation  # noqa: F401 (re-exported: the one copy)
+from .data import EpisodeContext
+from .protocols import RiskCritic
+
 EXPERT, LEARNER, EXPLORER = "expert", "learner", "explorer"
 AGENTS = (EXPERT, LEARNER, EXPLORER)
-HALF_LEVEL = math.atanh(0.5)  # c * threshold, so that alpha(threshold) == 0.5
-
-
-def saturation(threshold: float) -> float:
-    """The coefficient ``c`` for which ``alpha(threshold) == 1/2``; ``threshold`` > 0 (units of U)."""
-    if not float(threshold) > 0:
-        raise ValueError(f"Invalid uncertainty threshold: {threshold}; valid: > 0")
-    return HALF_LEVEL / float(threshold)
-
-
-def coefficient(uncertainty: float, c: float) -> float:
-    """Preference ``alpha(U) = 1 - tanh(c U)`` in [0, 1]; ``U = inf`` (no answer) gives exactly 0."""
-    u = float(uncertainty)
-    if math.isnan(u) or u < 0:
-        raise ValueError(f"Invalid uncertainty: {uncertainty}; valid: 0 <= U <= inf")
-    x = 2.0 * c * u
-    if x > 700.0:  # exp overflows; the coefficient is below 1e-300
-        return 0.0
-    return 2.0 / (1.0 + math.exp(x))  # == 1 - tanh(c U), without cancelling to 0 for large U
 
 
 def non_preferential(uncertainty: float, c: float) -> float:
@@ -84,8 +70,10 @@ def beta_schedule(i: int, p: float) -> float:
 @dataclass(frozen=True)
 class StepView:
     """What a mixing strategy may look at: episode ``i`` (1-based), step ``t`` (0-based),
-    expert uncertainty (inf when the expert gave no action), learner uncertainty, and the
-    expert's and learner's proposed actions (for discrepancy gates; may be None)."""
+    expert uncertainty (inf when the expert gave no action), learner uncertainty, the
+    expert's and learner's proposed actions (for discrepancy gates; may be None), the
+    learner's novelty, a failure risk in [0, 1] given by the caller, and the observation
+    ``obs`` (H x W x 3 uint8; None where a caller has none) for gates with their own critic."""
 
     i: int
     t: int
@@ -95,6 +83,7 @@ class StepView:
     learner_action: object = None
     novelty: float = 0.0
     risk: float = 0.0
+    obs: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 class Mixing:
@@ -105,8 +94,8 @@ class Mixing:
     def choose(self, view: StepView, rng: np.random.Generator) -> tuple[str, float]:
         raise NotImplementedError
 
-    def begin_episode(self, i: int) -> None:
-        """Hook called before episode ``i``; stateful gates reset here."""
+    def begin_episode(self, ctx: EpisodeContext) -> None:
+        """Hook called before episode ``ctx.i``; stateful gates reset here."""
 
     def describe(self) -> dict:
         return {"name": self.name, **{k: v for k, v in vars(self).items() if not k.startswith("_")}}
@@ -219,31 +208,45 @@ class ExpertGate(Mixing):
 
 class ThriftyGate(Mixing):
     """ThriftyDAgger: the learner cedes control when novelty (ensemble variance) exceeds
-    ``novelty_threshold`` or the critic's failure risk exceeds ``risk_threshold``; the expert
-    hands back when its action matches the learner's and the risk is low again. Thresholds
-    are refit per episode by the algorithm (see :class:`crossing_assist.iil.learners.ThriftyLearner`)."""
+    ``novelty_threshold`` or the failure risk exceeds ``risk_threshold``; the expert hands back
+    when its action matches the learner's and the risk is low again.
+
+    With a ``critic`` (:class:`crossing_assist.iil.protocols.RiskCritic`, the ThriftyDAgger
+    learner) the gate reads the critic's refit thresholds at the start of every episode and the
+    risk of each step where the learner proposes an action from ``critic.risk(view.obs)``;
+    without one, the thresholds given here and the risk in the view are used."""
 
     name = "thrifty"
 
     def __init__(self, novelty_threshold: float = math.inf, risk_threshold: float = math.inf,
-                 handback_distance: float = 0.0):
+                 handback_distance: float = 0.0, critic: RiskCritic | None = None):
         self.novelty_threshold = float(novelty_threshold)
         self.risk_threshold = float(risk_threshold)
         self.handback_distance = float(handback_distance)
+        self._critic = critic
         self._expert_in_control = False
 
-    def begin_episode(self, i):
+    def begin_episode(self, ctx):
         self._expert_in_control = False
+        if self._critic is not None:
+            self.novelty_threshold = float(self._critic.novelty_threshold)
+            self.risk_threshold = float(self._critic.risk_threshold)
+
+    def _risk(self, view: StepView) -> float:
+        if self._critic is None:
+            return view.risk
+        return self._critic.risk(view.obs) if view.learner_action is not None else 0.0
 
     def choose(self, view, rng):
         if view.i == 1:
             return EXPERT, 1.0
+        risk = self._risk(view)
         if self._expert_in_control:
             same = (view.expert_action is not None and
                     action_distance(view.learner_action, view.expert_action) <= self.handback_distance)
-            if same and view.risk <= self.risk_threshold:
+            if same and risk <= self.risk_threshold:
                 self._expert_in_control = False
-        elif view.novelty > self.novelty_threshold or view.risk > self.risk_threshold:
+        elif view.novelty > self.novelty_threshold or risk > self.risk_threshold:
             self._expert_in_control = True
         return (EXPERT, 1.0) if self._expert_in_control else (LEARNER, 1.0)
 

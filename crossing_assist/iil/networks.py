@@ -4,8 +4,9 @@ late, explicit-mask MC dropout layer.
 Input: float ``N x 3 x H x W`` in [0, 1] (any H, W >= 16). The trunk (stem conv, one residual
 block, pooling that keeps 8 columns of the horizontal axis, a dense layer) runs once; the
 ``samples`` dropout masks are folded into the batch after it, so T samples cost one trunk
-pass. Masks are ``rand_like(x) >= p`` scaled by ``1 / (1 - p)`` (never ``nn.Dropout``, which
-export and graph optimisers remove). Output: ``samples x N x out`` (logits, or raw values for
+pass. Masks are ``u >= p`` scaled by ``1 / (1 - p)``, drawn from the learner's own generator
+(:func:`crossing_assist.models.mc.mc_dropout`, the policy heads' layer; never ``nn.Dropout``,
+which export and graph optimisers remove). Output: ``samples x N x out`` (logits, or raw values for
 a continuous action).
 """
 
@@ -13,6 +14,8 @@ from __future__ import annotations
 
 import torch
 from torch import nn
+
+from ..models.mc import mc_dropout
 
 
 class ResidualBlock(nn.Module):
@@ -51,8 +54,5 @@ class SmallResNet(nn.Module):
         """``x``: N x 3 x H x W float -> ``samples x N x n_out``; ``mc=None`` means training mode."""
         h = self.trunk(x)
         mc = self.training if mc is None else mc
-        h = h.unsqueeze(0).expand(samples, *h.shape)
-        if mc and self.p > 0:
-            u = torch.rand(h.shape, generator=generator, dtype=h.dtype, device=h.device)
-            h = h * (u >= self.p).to(h.dtype) / (1.0 - self.p)
+        h = mc_dropout(h.unsqueeze(0).expand(samples, *h.shape), self.p, mc, generator)
         return self.head(h)

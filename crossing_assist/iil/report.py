@@ -22,14 +22,14 @@ from pathlib import Path
 
 import numpy as np
 
+from .config import ALGORITHMS, THESIS_HORIZON
 from .files import _atomic_write, read_episodes
 
 METRICS = (("training_reward", "Figure 4.4: training reward per episode"),
            ("interventions", "Figure 4.5: expert interventions per episode"),
            ("penalties", "Figure 4.6: penalties per episode"),
            ("out_of_bounds", "Figure 4.7: out-of-bounds events per episode"))
-ORDER = ("supervised", "forward", "smile", "dagger", "aggrevate", "dropout-dagger", "upms", "upms-ne", "upms-sl",
-         "upms-ne-sl", "ensemble-dagger", "hg-dagger", "thrifty-dagger")
+ORDER = ALGORITHMS  # the table's row order
 UPMS = ("upms", "upms-ne", "upms-sl", "upms-ne-sl")
 # Algorithms that neither configuration changes (they ignore the expert's uncertainty and use
 # no UPMS/DropoutDAgger setting): one set of runs serves both configurations' tables (tested:
@@ -39,7 +39,6 @@ CONFIG_FREE = ("supervised", "dagger", "aggrevate")
 # The thesis's Table 3 (Duckietown udem1, 3 iterations x 10 episodes x 512 steps; mean +- sd
 # over iterations): training reward, penalties, out of bounds, queries (= interventions).
 THESIS_STEPS = 5120
-THESIS_HORIZON = 512
 THESIS_TABLE3 = {
     "supervised": (3434.85, 8.67, 9.06, 0.36, 2, 5120),
     "dagger": (3175.94, 14.63, 32.88, 4.47, 1, 2924),

@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 import platform
 import sys
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 from typing import Callable
 
@@ -30,39 +30,13 @@ import numpy as np
 import torch
 
 from ..fileio import atomic_path
-from .algorithms import AlgoParams, create
+from .algorithms import create
+from .config import THESIS_BINARY_RISK, AlgoParams, LearnerConfig, RunConfig  # noqa: F401 (re-exported)
 from .data import Aggregate
 from .envs import make_env
 from .experts import OracleExpert
-from .learners import LearnerConfig
 from .files import RunError, _atomic_write, _write_csv, read_episodes  # noqa: F401 (re-exported)
-from .loop import Streams, aggregate_and_learn, run_episode
-
-THESIS_BINARY_RISK = 0.5
-
-
-@dataclass(frozen=True)
-class RunConfig:
-    env: str
-    algo: str
-    seed: int
-    episodes: int = 10
-    horizon: int = 512
-    learner: LearnerConfig = field(default_factory=LearnerConfig)
-    params: AlgoParams = field(default_factory=AlgoParams)
-    expert_scale: float = 1.0
-    expert_binary_risk: float | None = None  # r0: the 0/inf expert; None: thesis config 0.5, code config continuous
-    frame_size: tuple[int, int] | None = None  # (W, H) of Duckietown's frames; None: the env's (160 x 120)
-    expert: str = "oracle"  # "oracle" (scripted) or "human" (keyboard/gamepad window)
-
-    def folder(self, out: Path) -> Path:
-        return Path(out) / self.env / self.params.config / self.algo / f"seed{self.seed}"
-
-    def binary_risk(self) -> float | None:
-        """The 0/inf expert's risk threshold, or None for the continuous confidence."""
-        if self.expert_binary_risk is not None:
-            return self.expert_binary_risk
-        return THESIS_BINARY_RISK if self.params.config == "thesis" else None
+from .loop import Setup, Streams, aggregate_and_learn, run_episode
 
 
 def make_run_env(cfg: RunConfig):
@@ -123,7 +97,7 @@ def run(cfg: RunConfig, out: Path, *, progress: Callable[[int], None] | None = N
         expert = OracleExpert(env, cfg.expert_scale, cfg.binary_risk())
     for i in range(done + 1, cfg.episodes + 1):
         res = run_episode(env, expert, setup, i, cfg.horizon, streams, progress)
-        row = {"episode": i, **res.metrics, **aggregate_and_learn(res, setup, data, i, streams.train)}
+        row = {"episode": i, **res.metrics, **aggregate_and_learn(res, setup, data, streams.train)}
         data.save_episode(folder / "data" / f"ep{i}.npz", i)
         rows.append(row)
         _save_state(folder / "state.pt", setup, streams, i)
@@ -133,13 +107,13 @@ def run(cfg: RunConfig, out: Path, *, progress: Callable[[int], None] | None = N
     return folder
 
 
-def _save_state(path: Path, setup, streams: Streams, episode: int) -> None:
+def _save_state(path: Path, setup: Setup, streams: Streams, episode: int) -> None:
     with atomic_path(path) as tmp:
         torch.save({"episode": episode, "learner": setup.learner.state_dict(),
                     "streams": json.dumps(streams.state())}, tmp)
 
 
-def _resume(folder: Path, setup, data: Aggregate, streams: Streams, rows: list[dict]) -> int:
+def _resume(folder: Path, setup: Setup, data: Aggregate, streams: Streams, rows: list[dict]) -> int:
     state_path, csv_path = folder / "state.pt", folder / "episodes.csv"
     if not (state_path.exists() and csv_path.exists()):
         return 0
@@ -152,8 +126,6 @@ def _resume(folder: Path, setup, data: Aggregate, streams: Streams, rows: list[d
     for i in range(1, done + 1):
         data.load_episode(folder / "data" / f"ep{i}.npz")
     setup.learner.load_state_dict(state["learner"])
-    if setup.after_fit:
-        setup.after_fit()
     if "streams" not in state:
         raise RunError(f"{state_path}: a run from before the per-concern random streams; delete the folder to start again")
     streams.set_state(json.loads(state["streams"]))

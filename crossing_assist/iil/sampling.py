@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .data import EpisodeContext
 from .mixing import EXPERT, EXPLORER, LEARNER, StepView, coefficient, non_preferential, saturation
 
 
@@ -32,8 +33,9 @@ class Sampling:
 
     name = "sampling"
 
-    def begin_episode(self, i: int, horizon: int, rng: np.random.Generator) -> None:
-        """Hook called before episode ``i`` (1-based) with the horizon (steps)."""
+    def begin_episode(self, ctx: EpisodeContext, rng: np.random.Generator) -> None:
+        """Hook called before episode ``ctx.i`` (1-based) of ``ctx.horizon`` steps; ``rng``:
+        the sampling stream."""
 
     def control(self, view: StepView, chosen: str, p_choice: float, rng: np.random.Generator) -> str:
         raise NotImplementedError
@@ -52,25 +54,25 @@ class FullHorizon(Sampling):
 
 
 class RandomSwitch(Sampling):
-    """AggreVaTe: mixed policy before ``switch_time``, explorer at it, expert after it.
-    Episode 1 is the expert's throughout (nothing to explore from yet)."""
+    """AggreVaTe: mixed policy before the switch time, explorer at it, expert after it. The
+    switch time is drawn per episode into ``ctx.switch_time`` (None in episode 1, which is the
+    expert's throughout: nothing to explore from yet), where the aggregation reads it."""
 
     name = "random-switch"
 
     def __init__(self):
-        self.switch_time: int | None = None
-        self._first = True
+        self._switch: int | None = None
 
-    def begin_episode(self, i, horizon, rng):
-        self._first = i == 1
-        self.switch_time = None if self._first else int(rng.integers(0, horizon))
+    def begin_episode(self, ctx, rng):
+        self._switch = None if ctx.i == 1 else int(rng.integers(0, ctx.horizon))
+        ctx.switch_time = self._switch
 
     def control(self, view, chosen, p_choice, rng):
-        if self._first:
+        if self._switch is None:
             return EXPERT
-        if view.t < self.switch_time:
+        if view.t < self._switch:
             return chosen
-        return EXPLORER if view.t == self.switch_time else EXPERT
+        return EXPLORER if view.t == self._switch else EXPERT
 
 
 class RationalSampling(Sampling):
@@ -94,8 +96,8 @@ class RationalSampling(Sampling):
         self.c_learner = float(scale) if mode == "thesis" else None
         self._first = True
 
-    def begin_episode(self, i, horizon, rng):
-        self._first = i == 1
+    def begin_episode(self, ctx, rng):
+        self._first = ctx.i == 1
 
     def _e_prime(self, view: StepView, rng) -> str:
         return EXPERT if rng.random() < coefficient(view.u_expert, self.c_expert) else self.explorer

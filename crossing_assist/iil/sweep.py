@@ -95,19 +95,13 @@ def sweep(configs: list, out: Path, *, address: str | None = None, cpus: int | N
 
 def cmd_sweep(a: argparse.Namespace) -> int:
     """``crossing-iil sweep``: the configurations of ``run``, as Ray tasks."""
-    from .algorithms import AlgoParams  # noqa: PLC0415
-    from .cli import _algos, _check_run_args  # noqa: PLC0415
-    from .config import LearnerConfig  # noqa: PLC0415
-    from .runner import RunConfig  # noqa: PLC0415
+    from .cli import run_configs  # noqa: PLC0415
 
-    _check_run_args(a)
     if a.cpus is not None and a.cpus < 1:
         raise RunError(f"Invalid --cpus {a.cpus}; valid: >= 1")
-    learner = LearnerConfig(lr=a.lr, epochs=a.epochs, mc_samples=a.mc_samples, ensemble=a.ensemble)
-    params = AlgoParams(expert_threshold=a.expert_threshold, learner_threshold=a.learner_threshold)
-    configs = [RunConfig(env=a.env, algo=al, seed=s, episodes=a.episodes, horizon=a.horizon,
-                         learner=learner, params=params, expert_binary_risk=a.binary_expert)
-               for al in _algos(a.algo) for s in a.seeds]
+    if a.expert != "oracle":
+        raise RunError(f"--expert {a.expert} cannot run as Ray tasks; use `crossing-iil run`")
+    configs = run_configs(a)
     res = sweep(configs, a.out, address=a.address, cpus=a.cpus, threads=a.threads,
                 log=(lambda *_: None) if a.quiet else print)
     print(f"done: {len(res['ran'])} run(s) as Ray tasks, {len(res['skipped'])} already finished, in {a.out}")

@@ -39,12 +39,7 @@ class HeadError(UserError):
     """Invalid head kind or argument."""
 
 
-def mc_dropout(x: torch.Tensor, p: float, active: bool) -> torch.Tensor:
-    """Explicit-mask dropout: ``x * (rand_like(x) >= p) / (1 - p)`` when active, else ``x``."""
-    if not active or p <= 0.0:
-        return x
-    keep = (torch.rand_like(x) >= p).to(x.dtype)
-    return x * keep * (1.0 / (1.0 - p))
+from .mc import mc_dropout  # explicit-mask dropout, the one copy (shared with the IIL)
 
 
 def pool_rows(features: torch.Tensor) -> torch.Tensor:

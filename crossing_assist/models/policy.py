@@ -12,7 +12,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from ..actions import get_space
+from ..actions import DEFAULT_FOV_DEG, get_space
 from .backbones import Backbone, create_backbone
 from .heads import Head, create_head
 
@@ -20,7 +20,7 @@ CONFIG_KEYS = ("backbone", "head", "n_actions", "p", "input_size", "mean", "std"
 
 
 def policy_config(backbone: Backbone, head_kind: str, n_actions: int, *, p: float = 0.5,
-                  input_size: tuple[int, int] | None = None, fov_deg: float = 90.0,
+                  input_size: tuple[int, int] | None = None, fov_deg: float = DEFAULT_FOV_DEG,
                   **extra: Any) -> dict:
     """The plain-JSON config of a policy (what checkpoints and bundles carry)."""
     f = backbone.facts

@@ -2,7 +2,8 @@
 
 Two policies propose a heading: the *learner* (the filtered vision policy) and the *fallback*
 (heading hold: the last confident learner heading, carried by the yaw input). Each gets a
-coefficient ``alpha(U) = 1 - tanh(c U)`` from its uncertainty ``U``; ``c = saturation /
+coefficient ``alpha(U) = 1 - tanh(c U)`` from its uncertainty ``U``
+(:func:`crossing_assist.upms.coefficient`, shared with the IIL: ``U = inf`` or NaN gives 0); ``c = saturation /
 threshold`` with ``saturation = atanh(1/2)`` so that ``alpha(threshold) = 1/2`` (the bundle's
 calibrated threshold is where trust is one half). Rational mixing normalises the coefficients
 into weights ``w_L = alpha_L / (alpha_L + alpha_F)``, ``w_F = 1 - w_L`` (consistency: a policy
@@ -18,10 +19,9 @@ could point between them, into traffic.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-SATURATION_HALF = math.atanh(0.5)  # alpha(threshold) = 1/2
+from crossing_assist.upms import SATURATION_HALF, coefficient
 
 GATE_LEARNER = "learner"
 GATE_HOLD = "hold"
@@ -54,11 +54,7 @@ class GateConfig:
             raise ValueError(f"Invalid alpha_min: {self.alpha_min}; valid: 0 < alpha_min < 1")
 
 
-def alpha(u: float, c: float) -> float:
-    """UPMS coefficient ``1 - tanh(c u)`` in [0, 1]; ``u = inf`` (or nan) gives 0."""
-    if not math.isfinite(u):
-        return 0.0
-    return 1.0 - math.tanh(c * max(u, 0.0))
+alpha = coefficient  # the UPMS coefficient, one copy: crossing_assist.upms (NaN and inf give 0)
 
 
 @dataclass(frozen=True)

@@ -1,27 +1,49 @@
-"""Environments for interactive imitation learning (gymnasium API).
+"""Environments for interactive imitation learning (gymnasium API), by name.
 
-Each implements, beyond ``reset``/``step``: ``oracle() -> (action, risk in [0, 1])`` for the
-scripted expert, ``safe_action()`` (what the expert does when it must act but gave nothing),
-``iil_defaults`` (uncertainty thresholds in this environment's units), and reports
-``info["out_of_bounds"]`` and ``info["reward_terms"]``.
+Each implements :class:`crossing_assist.iil.protocols.IILEnv` beyond ``reset``/``step``:
+``oracle() -> (action, risk in [0, 1])`` for the scripted expert, ``safe_action()`` (what the
+expert does when it must act but gave nothing), ``iil_defaults``
+(:class:`~crossing_assist.iil.protocols.IILDefaults`: uncertainty thresholds in this
+environment's units), and reports ``info["out_of_bounds"]`` and ``info["reward_terms"]``.
+Environments know no horizon: the loop takes ``horizon`` steps and resets them as often as needed.
 """
 
 from __future__ import annotations
 
-
-def make_env(name: str, *, horizon: int = 512, **kwargs):
-    """``toy`` | ``crossing`` | ``crossing-synthetic`` | ``duckietown`` -> a gymnasium.Env."""
-    if name == "toy":
-        from .toy import ToyLaneEnv
-        return ToyLaneEnv(**kwargs)
-    if name in ("crossing", "crossing-synthetic"):
-        from .crossing import CrossingEnv, CrossingConfig
-        return CrossingEnv(CrossingConfig(photos=None if name == "crossing-synthetic" else kwargs.pop("ptl_dir", "auto"),
-                                          **kwargs))
-    if name == "duckietown":
-        from .duckietown import DuckietownLaneEnv
-        return DuckietownLaneEnv(**kwargs)
-    raise ValueError(f"Unknown environment: {name!r}; valid: toy, crossing, crossing-synthetic, duckietown")
+from typing import Any, Callable
 
 
-ENV_NAMES = ("toy", "crossing", "crossing-synthetic", "duckietown")
+def _toy(**kwargs):
+    from .toy import ToyLaneEnv  # noqa: PLC0415 - each environment's imports only when made
+    return ToyLaneEnv(**kwargs)
+
+
+def _crossing(synthetic: bool) -> Callable[..., Any]:
+    def make(**kwargs):
+        from .crossing import CrossingConfig, CrossingEnv  # noqa: PLC0415
+        photos = None if synthetic else kwargs.pop("ptl_dir", "auto")
+        return CrossingEnv(CrossingConfig(photos=photos, **kwargs))
+    return make
+
+
+def _duckietown(**kwargs):
+    from .duckietown import DuckietownLaneEnv  # noqa: PLC0415
+    return DuckietownLaneEnv(**kwargs)
+
+
+# name -> factory(**kwargs); the one list of environments (CLI choices, errors, docs).
+ENVIRONMENTS: dict[str, Callable[..., Any]] = {
+    "toy": _toy,
+    "crossing": _crossing(synthetic=False),
+    "crossing-synthetic": _crossing(synthetic=True),
+    "duckietown": _duckietown,
+}
+ENV_NAMES = tuple(ENVIRONMENTS)
+
+
+def make_env(name: str, **kwargs):
+    """``toy`` | ``crossing`` | ``crossing-synthetic`` | ``duckietown`` -> a gymnasium.Env;
+    ``kwargs`` go to the environment (its config fields, e.g. ``obs_size`` for Duckietown)."""
+    if name not in ENVIRONMENTS:
+        raise ValueError(f"Unknown environment: {name!r}; valid: {', '.join(ENV_NAMES)}")
+    return ENVIRONMENTS[name](**kwargs)

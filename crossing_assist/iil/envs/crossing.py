@@ -33,6 +33,7 @@ import gymnasium as gym
 import numpy as np
 
 from crossing_assist.actions import DEFAULT_FOV_DEG, N_BINS, UNKNOWN, get_space, heading_to_x, x_to_bin, x_to_heading
+from crossing_assist.iil.protocols import IILDefaults
 
 SHARED_PTL = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "ptl"
 
@@ -79,8 +80,8 @@ def _load_photos(cfg: CrossingConfig, rng: np.random.Generator) -> list[tuple[np
 
 class CrossingEnv(gym.Env):
     metadata = {"render_modes": []}
-    iil_defaults = {"expert_threshold": 1.0, "learner_threshold": 1.0, "ensemble_threshold": 0.05,
-                    "hg_threshold": 0.5}
+    iil_defaults = IILDefaults(expert_threshold=1.0, learner_threshold=1.0, ensemble_threshold=0.05,
+                               hg_threshold=0.5)
 
     def __init__(self, cfg: CrossingConfig = CrossingConfig(), photo_seed: int = 0):
         self.cfg = cfg

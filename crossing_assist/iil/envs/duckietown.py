@@ -36,6 +36,8 @@ import math
 import gymnasium as gym
 import numpy as np
 
+from ..protocols import IILDefaults
+
 LANE_HALF_WIDTH_M = 0.15  # risk 1 at this lateral offset from the lane centre
 ANGLE_LIMIT_DEG = 45.0
 
@@ -67,8 +69,8 @@ def _preload_torch_compiler() -> None:
 
 class DuckietownLaneEnv(gym.Env):
     metadata = {"render_modes": []}
-    iil_defaults = {"expert_threshold": 1.0, "learner_threshold": 0.003, "ensemble_threshold": 0.003,
-                    "hg_threshold": 0.5, "max_discrepancy": 0.3}
+    iil_defaults = IILDefaults(expert_threshold=1.0, learner_threshold=0.003, ensemble_threshold=0.003,
+                               hg_threshold=0.5, max_discrepancy=0.3)
     source = "duckietown udem1"
 
     def __init__(self, map_name: str = "udem1", obs_size: tuple[int, int] = (160, 120), steer_gain: float = 10.0,

@@ -6,14 +6,16 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
+from ..protocols import IILDefaults
+
 
 class ToyLaneEnv(gym.Env):
     """Position ``x`` in [-1, 1]; ``|x| > 1`` is out of bounds (reward -1000, terminated).
     Reward ``0.5 - |x|`` per step (negative beyond 0.5: a penalty)."""
 
     metadata = {"render_modes": []}
-    iil_defaults = {"expert_threshold": 1.0, "learner_threshold": 0.5, "ensemble_threshold": 0.05,
-                    "hg_threshold": 1.0}
+    iil_defaults = IILDefaults(expert_threshold=1.0, learner_threshold=0.5, ensemble_threshold=0.05,
+                               hg_threshold=1.0)
 
     def __init__(self, size: int = 16, drift: float = 0.15):
         self.size, self.drift = int(size), float(drift)
