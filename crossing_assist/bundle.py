@@ -18,7 +18,6 @@ only fields left out of the copy embedded in the ONNX metadata (``bundle_json``)
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 import hashlib
 import json
 import math
@@ -30,7 +29,8 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from crossing_assist.actions import VALID_SPACES, ActionSpace, get_space
-from crossing_assist.geometry import FITS, GeometryError, Geometry, check_fov
+from crossing_assist.errors import UserError
+from crossing_assist.geometry import FITS, Geometry, GeometryError, check_fov
 
 SCHEMA_VERSION = 2
 READABLE_SCHEMAS = (1, 2)

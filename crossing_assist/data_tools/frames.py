@@ -13,7 +13,6 @@ Label Studio tasks served from local files (``/data/local-files/?d=<OUT name>/<i
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 import csv
 import io
 import json
@@ -26,6 +25,7 @@ from tqdm import tqdm
 
 from crossing_assist.data_tools.images import save_rgb
 from crossing_assist.data_tools.manifest import atomic_write_text
+from crossing_assist.errors import UserError
 
 FRAMES_CSV = "frames.csv"
 LABEL_STUDIO_TASKS = "label_studio_tasks.json"

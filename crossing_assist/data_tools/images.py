@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 import os
 from pathlib import Path
 
@@ -10,6 +9,7 @@ import cv2
 import numpy as np
 
 from crossing_assist.data_tools.manifest import atomic_write_bytes
+from crossing_assist.errors import UserError
 
 
 class ImageError(UserError):

@@ -19,19 +19,19 @@ the width absorbs rounding at strip boundaries); image paths are unique.
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 import csv
 import io
 import math
 import os
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
-from contextlib import contextmanager
 from typing import Iterable, Iterator
 
 import numpy as np
 
 from crossing_assist.actions import N_BINS, UNKNOWN, format_label, parse_label, x_to_bin
+from crossing_assist.errors import UserError
 from crossing_assist.fileio import atomic_write_bytes, atomic_write_text  # noqa: F401 (re-exported)
 
 MANIFEST_NAME = "manifest.csv"

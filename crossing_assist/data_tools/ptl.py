@@ -15,7 +15,6 @@ fails with a clear error naming the line if the dataset or the PTL folder is mov
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 import csv
 import os
 from dataclasses import dataclass
@@ -26,6 +25,7 @@ from tqdm import tqdm
 from crossing_assist.actions import parse_label
 from crossing_assist.data_tools.images import check_image_file
 from crossing_assist.data_tools.manifest import SPLITS, Row, check_row, is_file, reading_csv, write_manifest
+from crossing_assist.errors import UserError
 from crossing_assist.fileio import link_or_copy
 
 REQUIRED = ("image", "split", "photographer", "far_x", "bin12")

@@ -7,12 +7,12 @@ sources and the fractions are met as closely as source sizes allow.
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from crossing_assist.data_tools.manifest import SPLITS, Row
+from crossing_assist.errors import UserError
 
 
 class SplitError(UserError):

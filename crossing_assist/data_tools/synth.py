@@ -16,8 +16,6 @@ sidecar records the command and the per-frame ground truth.
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
-
 import json
 import math
 import os
@@ -32,6 +30,7 @@ from crossing_assist.actions import DEFAULT_FOV_DEG, format_label
 from crossing_assist.data_tools.images import save_rgb
 from crossing_assist.data_tools.manifest import Row, atomic_write_text, write_manifest
 from crossing_assist.data_tools.synth_scene import Camera, Occluder, Scene, goal_label, render, sample_scene
+from crossing_assist.errors import UserError
 
 
 class SynthError(UserError):

@@ -24,7 +24,6 @@ Agreement
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 import csv
 import json
 import re
@@ -38,6 +37,7 @@ import numpy as np
 
 from crossing_assist.actions import N_BINS, UNKNOWN, format_label, parse_label
 from crossing_assist.data_tools.manifest import reading_csv
+from crossing_assist.errors import UserError
 
 TIE_RULES = ("unknown", "drop")
 _UPLOAD_PREFIX = re.compile(r"^[0-9a-f]{8}-")

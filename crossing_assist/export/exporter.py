@@ -19,7 +19,6 @@ Steps (:func:`export_bundle`):
 from __future__ import annotations
 
 import dataclasses
-from crossing_assist.errors import UserError
 import hashlib
 import math
 import shlex
@@ -35,9 +34,17 @@ import torch
 
 import crossing_assist
 from crossing_assist.actions import get_space
-from crossing_assist.bundle import (INPUT_NAME, SCHEMA_VERSION, check_replaceable, check_session, parse_meta,
-                                    read_bundle, write_bundle)
+from crossing_assist.bundle import (
+    INPUT_NAME,
+    SCHEMA_VERSION,
+    check_replaceable,
+    check_session,
+    parse_meta,
+    read_bundle,
+    write_bundle,
+)
 from crossing_assist.conformal import conformal_report
+from crossing_assist.errors import UserError
 from crossing_assist.export import calibrate as cal
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
 from crossing_assist.export.quantize import INT8_MODES, quantize_convs

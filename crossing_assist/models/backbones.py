@@ -13,13 +13,14 @@ torchvision ``.pth`` file), which is how offline users bring ImageNet weights.
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
 import torch
 from torch import nn
+
+from crossing_assist.errors import UserError
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)

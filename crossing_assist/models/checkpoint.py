@@ -7,7 +7,6 @@ objects, so ``torch.load(weights_only=True)`` reads it and a checkpoint cannot r
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 import json
 import os
 from dataclasses import replace
@@ -15,6 +14,8 @@ from pathlib import Path
 from typing import Any
 
 import torch
+
+from crossing_assist.errors import UserError
 
 from ..fileio import atomic_path
 from .policy import Policy

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 from dataclasses import asdict, dataclass, fields
+
+from crossing_assist.errors import UserError
 
 from ..actions import VALID_SPACES
 from ..geometry import FITS, TRAIN_FOV_DEG

@@ -25,10 +25,11 @@ Kinds
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 import torch
 import torch.nn.functional as F
 from torch import nn
+
+from crossing_assist.errors import UserError
 
 from ..actions import N_BINS
 

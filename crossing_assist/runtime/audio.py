@@ -7,11 +7,11 @@ else: it copies prepared samples (no inference, allocation, locks or I/O).
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 from pathlib import Path
 
 import numpy as np
 
+from crossing_assist.errors import UserError
 from crossing_assist.fileio import atomic_path
 from crossing_assist.runtime.beacon import CuePlayer
 

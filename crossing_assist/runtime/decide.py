@@ -17,6 +17,7 @@ import numpy as np
 from crossing_assist.actions import DEFAULT_FOV_DEG, ActionSpace, get_space, heading_to_pan
 from crossing_assist.runtime import belief as bf
 from crossing_assist.runtime.gate import GATE_STOP, GateConfig, alpha, mix
+from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
 
 REASON_OK = "ok"
 REASON_UNCERTAIN = "uncertain"
@@ -44,7 +45,7 @@ class DecisionConfig:
     fov_deg: float = DEFAULT_FOV_DEG
     measure: str = "entropy"
     threshold: float = 1.2
-    watchdog_s: float = 0.5
+    watchdog_s: float = DEFAULT_WATCHDOG_S
     rate_min_hz: float = 2.0
     rate_max_hz: float = 6.0
     filter: bf.FilterConfig = field(default_factory=bf.FilterConfig)

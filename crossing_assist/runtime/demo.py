@@ -11,12 +11,14 @@ Offline it writes ``beacon.wav`` (on the video's timeline), ``annotated.mp4``, `
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 import argparse
 import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+
+from crossing_assist.errors import UserError
+from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
 
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
 DEFAULT_BUNDLE = ASSETS / "default_bundle"
@@ -62,8 +64,8 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
     ap.add_argument("--fov", type=float, default=None, metavar="DEG",
                     help="the camera's horizontal field of view in its present orientation, 20..170 "
                          "(default: the bundle's, per orientation: typical phone 67 landscape, 53 portrait)")
-    ap.add_argument("--watchdog", type=float, default=0.5, help="seconds without a fresh decision before "
-                    f"the beacon stops (default 0.5; 0 < w <= {MAX_WATCHDOG_S})")
+    ap.add_argument("--watchdog", type=float, default=DEFAULT_WATCHDOG_S, help="seconds without a fresh decision "
+                    f"before the beacon stops (default {DEFAULT_WATCHDOG_S}; 0 < w <= {MAX_WATCHDOG_S})")
     ap.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     a = ap.parse_args(argv)
     if a.video is not None and a.camera is not None:

@@ -16,7 +16,7 @@ import numpy as np
 from crossing_assist.runtime.beacon import KIND_STOP, Cue
 from crossing_assist.runtime.beacon import CuePlayer
 from crossing_assist.runtime.pipeline import Pipeline, Step, cached_loop
-from crossing_assist.runtime.watchdog import Watchdog
+from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 
 @dataclass(frozen=True)
@@ -25,7 +25,7 @@ class LiveConfig:
     in real time (its ``t`` are offsets from the start); ``frozen_check``: a frame identical to
     the previous one (a frozen camera) does not count as fresh; ``max_seconds``: stop after."""
 
-    watchdog_s: float = 0.5
+    watchdog_s: float = DEFAULT_WATCHDOG_S
     pace: bool = False
     frozen_check: bool = True
     max_seconds: float | None = None

@@ -6,13 +6,14 @@ the video ends or the camera stops delivering. Tests substitute any iterable of 
 
 from __future__ import annotations
 
-from crossing_assist.errors import UserError
 import time
 from pathlib import Path
 from typing import Iterator
 
 import cv2
 import numpy as np
+
+from crossing_assist.errors import UserError
 
 
 class SourceError(UserError, RuntimeError):

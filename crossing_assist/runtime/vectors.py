@@ -48,7 +48,7 @@ from crossing_assist.runtime.beacon import BeaconConfig, itd_seconds, pan_gains
 from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
 from crossing_assist.runtime.engine import measure_value
 from crossing_assist.runtime.live import is_fresh, same_frame
-from crossing_assist.runtime.watchdog import Watchdog
+from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
 VERSION = 3
@@ -287,7 +287,7 @@ def _guards(rng: np.random.Generator) -> dict:
              for n, c, w in ((1.0, 0.9, 0.5), (1.0, 0.5, 0.5), (1.0, 0.49, 0.5), (2.0, 2.0, 0.5), (3.3, 3.0, 0.3),
                              (3.31, 3.0, 0.3))]
     clock = [0.0]
-    dog = Watchdog(0.5, lambda: None, clock=lambda: clock[0])
+    dog = Watchdog(DEFAULT_WATCHDOG_S, lambda: None, clock=lambda: clock[0])
     ops = []
     script = [("poll", 0.1), ("beat", 0.2), ("poll", 0.6), ("poll", 0.71), ("poll", 0.75), ("poll", 1.0),
               ("beat", 1.05), ("poll", 1.1), ("poll", 1.56), ("beat", 1.6), ("poll", 2.0), ("poll", 2.2)]
@@ -300,7 +300,7 @@ def _guards(rng: np.random.Generator) -> dict:
             fired_before = dog.fired
             stale = dog.poll()
             ops.append({"op": "poll", "t": t, "stale": stale, "fired": dog.fired > fired_before})
-    return {"same_frame": same, "fresh": fresh, "watchdog": {"period_s": 0.5, "start": 0.0, "ops": ops}}
+    return {"same_frame": same, "fresh": fresh, "watchdog": {"period_s": DEFAULT_WATCHDOG_S, "start": 0.0, "ops": ops}}
 
 
 def _status_vectors() -> list[dict]:

@@ -11,6 +11,8 @@ import threading
 import time
 from typing import Callable
 
+DEFAULT_WATCHDOG_S = 0.5   # the longest time without a fresh decision before the beacon stops
+
 
 class Watchdog:
     """Calls ``on_stale()`` once each time ``clock() - last_beat > period_s`` becomes true."""

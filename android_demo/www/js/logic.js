@@ -159,8 +159,12 @@ export function beliefHeading(b, groups, fovDeg) {
 
 /** UPMS coefficient 1 - tanh(c u) in [0, 1]; u = Infinity (or NaN) gives 0. */
 export function alpha(u, c) {
+  // crossing_assist/upms.py coefficient: 1 - tanh(c u) computed as 2 / (1 + exp(2 c u)) (the
+  // same number, bit for bit with Python); non-finite u gives 0, negative u counts as 0.
   if (!Number.isFinite(u)) return 0;
-  return 1 - Math.tanh(c * Math.max(u, 0));
+  const x = 2 * c * Math.max(u, 0);
+  if (x > 700) return 0;
+  return 2 / (1 + Math.exp(x));
 }
 
 /** Rational mixing of the learner and the hold: {state, heading_deg, weight_learner, confidence}. */
