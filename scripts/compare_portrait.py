@@ -1,11 +1,13 @@
-"""Portrait vs landscape localisation of bundles on one held-out photographer's photos.
+"""Portrait vs landscape localisation of bundles: where the model puts the goal.
 
-For each bundle (exported from a leave-one-photographer-out fold, so the photographer is
-unseen): the argmax strip of each photo as taken and of its 3:4 portrait windows (goal in view
-only), as accuracy, share >= 2 strips off, bin MAE and the histogram of the strips chosen.
-No decision logic: this measures the model's placement, the input to everything else.
+For each bundle: the argmax strip of each photo as taken and of its 3:4 portrait windows (goal
+in view only), as accuracy, share >= 2 strips off, bin MAE and the histogram of the strips
+chosen. No decision logic: this measures the model's placement, the input to everything else.
+With ``--source`` the photos are one photographer's (bundles exported from leave-one-photographer-
+out folds, so the photographer is unseen); without it, every photo of ``--split``.
 
-    .venv/bin/python scripts/compare_portrait.py --source ptl:john --frames 300 \\
+    .venv/bin/python scripts/compare_portrait.py --split val default=crossing_assist/assets/default_bundle
+    .venv/bin/python scripts/compare_portrait.py --source ptl:john --split train --frames 300 \\
         spatial=runs/default/cv/fold-ptl_john/bundle fine=runs/exp/cv_fine/fold-ptl_john/bundle
 """
 
@@ -26,24 +28,25 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("bundles", nargs="+", help="NAME=BUNDLE_DIR")
     ap.add_argument("--ptl", default="runs/data/ptl")
-    ap.add_argument("--source", required=True, help="the held-out photographer (e.g. ptl:john)")
-    ap.add_argument("--split", default="train", help="their photos the fold never saw (train: PTL's train split)")
-    ap.add_argument("--frames", type=int, default=300)
+    ap.add_argument("--source", help="one photographer only (e.g. ptl:john, held out by the bundles' folds)")
+    ap.add_argument("--split", default="val", help="split of the photos (a held-out photographer's: train)")
+    ap.add_argument("--frames", type=int, default=0, help="a random sample of this many photos (0: all)")
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args(argv)
     ds = read_manifest(a.ptl)
-    rows = [r for r in ds.rows if r.source == a.source and r.split == a.split and r.label != 0]
+    rows = [r for r in ds.rows if a.source in (None, r.source) and r.split == a.split and r.label != 0]
     if not rows:
-        print(f"error: no labelled {a.split} photos of {a.source} in {a.ptl}", file=sys.stderr)
+        print(f"error: no labelled {a.split} photos{f' of {a.source}' if a.source else ''} in {a.ptl}", file=sys.stderr)
         return 2
-    rng = np.random.default_rng(a.seed)
-    rows = [rows[i] for i in sorted(rng.choice(len(rows), min(a.frames, len(rows)), replace=False))]
+    if a.frames:
+        rng = np.random.default_rng(a.seed)
+        rows = [rows[i] for i in sorted(rng.choice(len(rows), min(a.frames, len(rows)), replace=False))]
     views = {"landscape": [], "portrait": []}
     for r in rows:
         img = load_frame(ds.image_path(r), r.flags)
         views["landscape"].append((img, r.label))
         views["portrait"] += [(w, lab) for w, _, lab, inside in portrait_views(img, r.far_x, r.label, 3) if inside]
-    print(f"{a.source}: {len(rows)} photos, {len(views['portrait'])} portrait windows with the goal in view")
+    print(f"{a.source or a.split}: {len(rows)} photos, {len(views['portrait'])} portrait windows with the goal in view")
     for spec in a.bundles:
         name, _, path = spec.partition("=")
         eng = Engine(path, threads=1)
