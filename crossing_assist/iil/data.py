@@ -49,10 +49,11 @@ class Aggregate:
 
     def save_episode(self, path: Path, episode: int) -> None:
         """Write one episode's samples to ``path`` (compressed npz, atomic)."""
-        arrs = self.arrays(episode)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(tmp, **arrs) if arrs else np.savez_compressed(tmp, empty=np.zeros(0))
-        tmp.replace(path)
+        from crossing_assist.fileio import atomic_path
+
+        arrs = self.arrays(episode) or {"empty": np.zeros(0)}
+        with atomic_path(path) as tmp:
+            np.savez_compressed(tmp, **arrs)
 
     def load_episode(self, path: Path) -> None:
         """Append the samples of an npz written by :meth:`save_episode`."""

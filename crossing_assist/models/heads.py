@@ -4,7 +4,7 @@ Every head splits into a deterministic ``trunk`` (run once per frame) and a stoc
 ``tail``: the T Monte-Carlo samples are folded into the batch *after* the trunk, so T samples
 cost almost nothing over one. Dropout masks are explicit (``torch.rand_like(x) >= p``, scaled
 by ``1 / (1 - p)``), which exports to ONNX as ``RandomUniformLike`` and is never removed by
-export or graph optimisation (``nn.Dropout`` is; see ``DESIGN.md``).
+export or graph optimisation (``nn.Dropout`` is; docs/export.md, "Randomness under onnxruntime").
 
 Kinds
     ``spatial`` (default): features pooled over *rows only* (mean and max; the horizontal axis
