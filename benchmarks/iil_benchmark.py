@@ -5,7 +5,7 @@ unfinished runs. Seed by seed, so that a partial result holds complete iteration
     python benchmarks/iil_benchmark.py duckietown --config thesis             # the full protocol:
     python benchmarks/iil_benchmark.py duckietown --config code               #   3 x 10 x 512 steps each
     python benchmarks/iil_benchmark.py duckietown --config thesis --horizon 128   # as run for docs/iil (reduced)
-    python benchmarks/iil_benchmark.py report --horizon 128
+    python benchmarks/iil_benchmark.py report --horizon 128                  # -> docs/iil/duckietown-h128
     python benchmarks/iil_benchmark.py duckietown-peers    # the five others (code configuration)
     python benchmarks/iil_benchmark.py crossing            # .venv, all 13 algorithms (code configuration)
     python benchmarks/iil_benchmark.py crossing-binary     # the thesis's 0/inf expert
@@ -55,8 +55,11 @@ def main() -> int:
             print("error: .venv-duckietown is missing; see docs/iil.md", file=sys.stderr)
             return 2
         h = a.horizon or "512"
+        # supervised, dagger and aggrevate are the same under both configurations (the report
+        # borrows the `thesis` runs for the `code` table): `code` runs the five others only
+        algos = "thesis" if a.config == "thesis" else "dropout-dagger,upms,upms-ne,upms-sl,upms-ne-sl"
         for s in a.seeds:
-            _cli(DT_PY, "run", "--env", "duckietown", "--algo", "thesis", "--config", a.config, "--episodes", a.episodes,
+            _cli(DT_PY, "run", "--env", "duckietown", "--algo", algos, "--config", a.config, "--episodes", a.episodes,
                  "--horizon", h, "--seeds", s, "--quiet", "--out", str(RUNS / f"duckietown-h{h}"))
     elif a.what == "duckietown-peers":  # Forward Training, SMILe and the three peers
         h = a.horizon or "512"
@@ -66,7 +69,8 @@ def main() -> int:
                  "--out", str(RUNS / f"duckietown-peers-h{h}"))
     else:
         h = a.horizon or "512"
-        names = {"crossing": "crossing", "crossing-binary": "crossing-binary", f"duckietown-h{h}": "duckietown",
+        names = {"crossing": "crossing", "crossing-binary": "crossing-binary",
+                 f"duckietown-h{h}": "duckietown" if h == "512" else f"duckietown-h{h}",
                  "duckietown-peers-h512": "duckietown-peers"}
         for run_name, doc_name in names.items():
             if (RUNS / run_name).exists():
