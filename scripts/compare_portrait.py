@@ -2,7 +2,8 @@
 
 For each bundle: the argmax strip of each photo as taken and of its 3:4 portrait windows (goal
 in view only), as accuracy, share >= 2 strips off, bin MAE and the histogram of the strips
-chosen. No decision logic: this measures the model's placement, the input to everything else.
+chosen, beside the histogram of the true strips. No decision logic: this measures the model's
+placement, the input to everything else.
 With ``--source`` the photos are one photographer's (bundles exported from leave-one-photographer-
 out folds, so the photographer is unseen); without it, every photo of ``--split``.
 
@@ -47,6 +48,8 @@ def main(argv=None) -> int:
         views["landscape"].append((img, r.label))
         views["portrait"] += [(w, lab) for w, _, lab, inside in portrait_views(img, r.far_x, r.label, 3) if inside]
     print(f"{a.source or a.split}: {len(rows)} photos, {len(views['portrait'])} portrait windows with the goal in view")
+    for view, frames in views.items():
+        print(f"  {'truth':>10} {view:>9}: strips {np.bincount([lab for _, lab in frames], minlength=13)[1:].tolist()}")
     for spec in a.bundles:
         name, _, path = spec.partition("=")
         eng = Engine(path, threads=1)
