@@ -92,6 +92,31 @@ def test_spatial_head_is_translation_aware_and_groups_strips():
 
 
 
+def test_strip_spatial_head_can_peak_on_any_strip_of_a_narrow_window():
+    """On a window 4 feature columns wide (a 3:4 portrait frame on a landscape canvas),
+    ``spatial``'s strip scores are linear between columns, so its argmax never lands on some
+    strips; ``spatial_strips`` resamples features before its non-linearity and reaches all 12."""
+    torch.manual_seed(0)
+    feats = torch.randn(400, 8, 2, 4) * 3
+    reached = {}
+    for kind in ("spatial", "spatial_strips"):
+        head = create_head(kind, 8, 13, p=0.0).eval()
+        with torch.no_grad():
+            for prm in head.parameters():
+                prm.mul_(4.0)
+            maps = head.column_maps(feats)[:, 0]                          # N x 12
+        reached[kind] = set((maps.argmax(1) + 1).tolist())
+    assert len(reached["spatial"]) <= 6
+    assert reached["spatial_strips"] == set(range(1, 13))
+    head = create_head("spatial_strips", 8, 13, p=0.5).eval()
+    z = head.trunk(feats[:2])
+    assert z.shape == (2, 128, 4)
+    whole = head.tail(z, mc=False)
+    portrait = head.tail(z, mc=False, window=torch.tensor([[0.21875, 0.78125]] * 2))
+    assert whole.shape == portrait.shape == (2, 13) and not torch.allclose(whole, portrait)
+    assert not torch.allclose(head(feats[:2], samples=2, mc=True)[0], head(feats[:2], samples=2, mc=True)[1])
+
+
 def test_fine_spatial_head_scores_twice_the_columns_and_reads_the_window():
     """spatial_fine: the trunk has 2w columns (so its scores can peak between two feature
     columns); a narrower window (a portrait frame on a landscape canvas) reads other strips."""

@@ -71,7 +71,7 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--extra-data", action="append", default=[], help="another dataset folder whose train rows are added (repeatable)")
     p.add_argument("--backbone", default=d["backbone"])
     p.add_argument("--weights", default=d["weights"], help="imagenet | none | PATH to a state dict")
-    p.add_argument("--head", default=d["head"], help="spatial | spatial_fine | spatial_mlp | thesis | thesis_fc")
+    p.add_argument("--head", default=d["head"], help="spatial | spatial_fine | spatial_strips | spatial_mlp | thesis | thesis_fc")
     p.add_argument("--actions", type=int, default=d["actions"], help="4 | 8 | 13")
     p.add_argument("--epochs", type=int, default=d["epochs"])
     p.add_argument("--batch-size", type=int, default=d["batch_size"])

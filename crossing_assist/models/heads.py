@@ -16,6 +16,8 @@ Kinds
     ``spatial``'s strip scores are linear between column centres, so its argmax always sits at
     a column: 7 columns on a 224-wide canvas, ~4 across a 3:4 portrait window letterboxed onto
     it, and on PTL val portrait windows it never chose strip 2, 5, 8 or 11.
+    ``spatial_strips``: ``spatial`` with the reduced features resampled to the window's 12
+    strips *before* the context conv (over strips) and its ReLU, so any strip can peak.
     ``spatial_mlp``: rows-only pooling, 1x1 conv + ReLU, columns resampled to 12, then
     dropout -> linear -> ReLU -> dropout -> linear (not translation equivariant).
     ``thesis``: the thesis's head, 3x3x32 conv (ReLU) -> dropout -> 1x1x|A| conv -> ReLU ->
@@ -33,7 +35,7 @@ from crossing_assist.errors import UserError
 
 from ..actions import N_BINS
 
-HEAD_KINDS = ("spatial", "spatial_fine", "spatial_mlp", "thesis", "thesis_fc")
+HEAD_KINDS = ("spatial", "spatial_fine", "spatial_strips", "spatial_mlp", "thesis", "thesis_fc")
 
 
 class HeadError(UserError):
@@ -46,6 +48,21 @@ from .mc import mc_dropout  # explicit-mask dropout, the one copy (shared with t
 def pool_rows(features: torch.Tensor) -> torch.Tensor:
     """N x C x h x w -> N x 2C x w: mean and max over the rows, the columns kept."""
     return torch.cat([features.mean(2), features.amax(2)], 1)
+
+
+def strip_weights(w: int, window: torch.Tensor | None, like: torch.Tensor) -> torch.Tensor:
+    """Linear-interpolation weights (N|1) x 12 x ``w`` from ``w`` feature columns to the centres
+    of the 12 strips of the content ``window`` [N, 2] (fractions of the canvas width; None = the
+    whole canvas, where this is a bilinear resize of the columns to 12)."""
+    centres = (torch.arange(N_BINS, dtype=like.dtype, device=like.device) + 0.5) / N_BINS
+    if window is None:
+        pos = centres.unsqueeze(0)                                        # 1 x 12
+    else:
+        window = window.to(like.dtype)
+        pos = window[:, :1] + (window[:, 1:] - window[:, :1]) * centres   # N x 12
+    src = (pos * w - 0.5).clamp(0.0, w - 1.0)                             # column coordinate
+    j = torch.arange(w, dtype=like.dtype, device=like.device)
+    return F.relu(1.0 - (src.unsqueeze(-1) - j).abs())
 
 
 class Head(nn.Module):
@@ -156,16 +173,7 @@ class SpatialHead(Head):
         of the canvas width; None = the whole canvas, where this equals a bilinear resize of the
         columns to 12)."""
         cols = self.score(z)[:, 0]                                        # N x w
-        w = cols.shape[-1]
-        centres = (torch.arange(N_BINS, dtype=cols.dtype, device=cols.device) + 0.5) / N_BINS
-        if window is None:
-            pos = centres.unsqueeze(0)                                    # 1 x 12
-        else:
-            window = window.to(cols.dtype)
-            pos = window[:, :1] + (window[:, 1:] - window[:, :1]) * centres   # N x 12
-        src = (pos * w - 0.5).clamp(0.0, w - 1.0)                         # column coordinate
-        j = torch.arange(w, dtype=cols.dtype, device=cols.device)
-        weight = F.relu(1.0 - (src.unsqueeze(-1) - j).abs())             # (N|1) x 12 x w
+        weight = strip_weights(cols.shape[-1], window, cols)             # (N|1) x 12 x w
         return (weight * cols.unsqueeze(1)).sum(-1) + self.bias
 
     def column_maps(self, features: torch.Tensor, window: torch.Tensor | None = None) -> torch.Tensor:
@@ -197,6 +205,33 @@ class FineSpatialHead(SpatialHead):
         z = F.relu(self.reduce(pool_rows(features)))                      # N x W x w
         z = F.interpolate(z, scale_factor=float(self.UPSAMPLE), mode="linear", align_corners=False)
         return F.relu(self.context(z))                                    # N x W x 2w
+
+
+class StripSpatialHead(SpatialHead):
+    """:class:`SpatialHead` that resamples the reduced *features* (not the scores) to the 12
+    strips of the content window, then runs its context conv (+-1 strip), ReLU, dropout and
+    score per strip: the non-linearity comes after the resampling, so any strip can score
+    highest however few feature columns the window covers (~4 for a 3:4 portrait window)."""
+
+    kind = "spatial_strips"
+
+    def trunk(self, features: torch.Tensor) -> torch.Tensor:
+        return F.relu(self.reduce(pool_rows(features)))                   # N x W x w
+
+    def strip_features(self, z: torch.Tensor, window: torch.Tensor | None = None) -> torch.Tensor:
+        """N x W x w -> N x W x 12: the features at the strips' centres, with context."""
+        weight = strip_weights(z.shape[-1], window, z)                    # (N|1) x 12 x w
+        return F.relu(self.context(torch.einsum("ncw,nsw->ncs", z, weight.expand(z.shape[0], -1, -1))))
+
+    def column_maps(self, features: torch.Tensor, window: torch.Tensor | None = None) -> torch.Tensor:
+        bins = self.score(self.strip_features(self.trunk(features), window))[:, 0] + self.bias
+        return bins.unsqueeze(1).expand(bins.shape[0], self.n_actions, N_BINS)
+
+    def tail(self, z: torch.Tensor, mc: bool, window: torch.Tensor | None = None) -> torch.Tensor:
+        s = mc_dropout(self.strip_features(z, window), self.p, mc)        # N x W x 12
+        bins = self.score(s)[:, 0] + self.bias                            # N x 12
+        known = torch.logsumexp(bins.unsqueeze(1) + self.groups_mask, -1)  # N x (A - 1)
+        return torch.cat([self.unknown(s.mean(2)), known], 1)
 
 
 class ThesisHead(Head):
@@ -240,7 +275,7 @@ class ThesisFCHead(Head):
         return torch.einsum("nchw,ac->nahw", features, self.fc.weight)
 
 
-_KINDS = {"spatial": SpatialHead, "spatial_fine": FineSpatialHead, "spatial_mlp": SpatialMLPHead, "thesis": ThesisHead, "thesis_fc": ThesisFCHead}
+_KINDS = {"spatial": SpatialHead, "spatial_fine": FineSpatialHead, "spatial_strips": StripSpatialHead, "spatial_mlp": SpatialMLPHead, "thesis": ThesisHead, "thesis_fc": ThesisFCHead}
 
 
 def create_head(kind: str, in_channels: int, n_actions: int, *, p: float = 0.5) -> Head:
