@@ -21,6 +21,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from crossing_assist.actions import DEFAULT_FOV_DEG
 from crossing_assist.data_tools.images import save_rgb
 from crossing_assist.data_tools.manifest import Dataset, Row, read_manifest, write_manifest
 from crossing_assist.models.backbones import create_backbone
@@ -68,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         opt.step()
 
     t0 = time.perf_counter()
-    fs = compute_features(bb, nb, ds, size, variants, 90.0, tmp / "cache", progress=False)
+    fs = compute_features(bb, nb, ds, size, variants, DEFAULT_FOV_DEG, tmp / "cache", progress=False)
     t_build = time.perf_counter() - t0
     feats, labels = torch.from_numpy(np.array(fs.feats)), torch.from_numpy(fs.labels)
     order = rng.permutation(len(labels))
@@ -82,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
         for idx in batches:
             imgs, ys = [], []
             for k in idx:
-                img, _, lab, _ = load_variants(ds, ds.rows[fs.row[k]], size, (variants[fs.variant[k]],), 90.0)[0]
+                img, _, lab, _ = load_variants(ds, ds.rows[fs.row[k]], size, (variants[fs.variant[k]],), DEFAULT_FOV_DEG)[0]
                 imgs.append(img)
                 ys.append(lab)
             with torch.no_grad():

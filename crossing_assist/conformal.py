@@ -45,13 +45,6 @@ def conformal_report(probs: np.ndarray, labels: np.ndarray, threshold: float) ->
     }
 
 
-def format_conformal_report(rep: dict[str, Any], target: float | None = None) -> str:
-    """One line: coverage (vs target), mean set size, empty sets."""
-    tgt = f" (target {target:.1%})" if target is not None else ""
-    return (f"conformal sets (threshold {rep['threshold']:.4f}, n={rep['n']}): coverage {rep['coverage']:.1%}{tgt}, "
-            f"mean size {rep['mean_size']:.2f}, median {rep['median_size']:.0f}, empty {rep['empty']:.1%}")
-
-
 def bundle_conformal_report(bundle_dir: str | os.PathLike | Bundle, probs: np.ndarray,
                             labels: np.ndarray) -> dict[str, Any]:
     """:func:`conformal_report` at the bundle's own threshold, with its target ``coverage`` and

@@ -18,6 +18,7 @@ orientation (:func:`camera_fov`), never a constant.
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass
 
 import numpy as np
@@ -83,6 +84,32 @@ def check_fov(fov_deg: float) -> float:
     if not lo <= fov <= hi:
         raise GeometryError(f"Invalid field of view: {fov_deg} degrees; valid: {lo:g}..{hi:g}")
     return fov
+
+
+#: How a size is typed on a command line -> an example.
+SIZE_ORDERS = {"HxW": "168x224", "WxH": "320x240"}
+
+
+def parse_size(text: str, typed: str = "HxW") -> tuple[int, int]:
+    """A size typed on a command line, returned as ``(height, width)``: the package's one order
+    (numpy's, :data:`DEFAULT_CANVAS`'s, ``input_size``'s).
+
+    ``typed`` says how the user writes it: ``"HxW"`` for a model canvas
+    (``crossing-train --input-size 168x224``, like ``input_size``), ``"WxH"`` for a frame or a
+    video, as screens are named (``crossing-data synth --size 320x240``). One number is a
+    square. An argparse ``type``: raises ``argparse.ArgumentTypeError`` (one line) otherwise.
+    """
+    example = SIZE_ORDERS[typed]
+    try:
+        parts = [int(v) for v in text.lower().split("x")]
+    except ValueError:
+        parts = []
+    if len(parts) == 1:
+        parts *= 2
+    if len(parts) != 2 or min(parts) < 1:
+        raise argparse.ArgumentTypeError(f"size {text!r} invalid; expected {typed} in pixels (or one number "
+                                         f"for a square), e.g. {example}")
+    return (parts[0], parts[1]) if typed == "HxW" else (parts[1], parts[0])
 
 
 def check_frame_shape(height: int, width: int) -> None:

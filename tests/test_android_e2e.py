@@ -44,7 +44,7 @@ import pytest
 from crossing_assist.geometry import orientation
 from crossing_assist.runtime.decide import Decider, Observation
 from crossing_assist.runtime.engine import Engine
-from crossing_assist.runtime.vectors import STATUS_STOP, status_message
+from crossing_assist.runtime.status import STATUS_STOP, status_message
 
 REPO = Path(__file__).resolve().parents[1]
 DEMO = REPO / "android_demo"

@@ -19,8 +19,21 @@ from crossing_assist.geometry import (
     letterbox,
     letterbox_box,
     orientation,
+    parse_size,
     window_x,
 )
+
+
+def test_parse_size_returns_height_width_whichever_order_the_user_types():
+    """One parser, one returned order (H, W): crossing-train types a canvas HxW, crossing-data a
+    frame WxH; one number is a square; anything else is one argparse error line."""
+    import argparse
+
+    assert parse_size("168x224", "HxW") == (168, 224) and parse_size("320x240", "WxH") == (240, 320)
+    assert parse_size("64") == (64, 64) and parse_size("64", "WxH") == (64, 64)
+    for bad in ("", "x", "1x2x3", "axb", "0x5", "-3x4"):
+        with pytest.raises(argparse.ArgumentTypeError, match="expected WxH in pixels"):
+            parse_size(bad, "WxH")
 
 
 def test_orientation_and_fov_per_orientation():

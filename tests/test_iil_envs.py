@@ -96,16 +96,20 @@ def test_crossing_with_real_ptl_photos(ptl_dir):
 
 
 def _fake_ptl(root, n=6, seed=0):
-    """A PTL-shaped folder of random-texture photos (no pixel is black)."""
+    """A PTL-shaped folder of random-texture photos (no pixel is black), read by
+    ``data_tools.ptl.read_ptl_labels`` like the real one."""
     import cv2
+
+    from crossing_assist.actions import x_to_bin
 
     rng = np.random.default_rng(seed)
     (root / "images").mkdir(parents=True)
-    lines = ["image,split,far_x"]
+    lines = ["image,split,photographer,far_x,bin12"]
     for k in range(n):
         img = rng.integers(30, 226, size=(96, 128, 3), dtype=np.uint8)
         cv2.imwrite(str(root / "images" / f"p{k}.png"), img)
-        lines.append(f"images/p{k}.png,train,{rng.uniform(0.2, 0.8):.3f}")
+        far_x = round(float(rng.uniform(0.2, 0.8)), 3)
+        lines.append(f"images/p{k}.png,train,p{k},{far_x},{x_to_bin(far_x)}")
     (root / "labels.csv").write_text("\n".join(lines) + "\n")
     return root
 

@@ -1,7 +1,7 @@
 """The import direction (README "Layout"): ``models`` never imports ``export`` (it evaluates
 bundles through the shared ``inference`` module and the runtime), ``runtime`` never imports
 ``models``, ``export``, ``iil`` or torch, ``data_tools`` none of those, and the
-shared torch-free modules (``inference``, ``conformal``, ``bundle``, ``geometry``) import none of
+shared torch-free modules (``inference``, ``conformal``, ``bundle``, ``geometry``, ``registry``) import none of
 the subpackages. Read from the source (every import statement, lazy ones inside functions too)."""
 
 import ast
@@ -45,7 +45,7 @@ def test_subpackage_imports_point_one_way(sub, forbidden):
     assert not bad, bad
 
 
-@pytest.mark.parametrize("name", ["inference", "conformal", "bundle", "geometry", "actions", "upms"])
+@pytest.mark.parametrize("name", ["inference", "conformal", "bundle", "geometry", "actions", "upms", "registry"])
 def test_shared_modules_import_no_subpackage(name):
     path = PKG / f"{name}.py"
     subs = ("crossing_assist.models", "crossing_assist.export", "crossing_assist.runtime", "crossing_assist.iil",

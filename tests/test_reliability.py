@@ -24,6 +24,7 @@ from crossing_assist.data_tools.cli import main as data_main
 from crossing_assist.data_tools.images import save_rgb
 from crossing_assist.errors import UserError, run_cli
 from crossing_assist.fileio import sweep_orphans
+from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
 
 
 def one_error_line(text: str) -> bool:
@@ -176,7 +177,9 @@ def _avi(path: Path, xs, fps: float = 10.0) -> Path:
     return path
 
 
-def test_truncated_video_warns_and_ends_on_a_stop(tmp_path, toy_bundle, capsys):  # noqa: F811
+@pytest.mark.parametrize("watchdog", [None, 1.0])
+def test_truncated_video_warns_and_ends_on_a_stop(tmp_path, toy_bundle, capsys, watchdog):  # noqa: F811
+    """... and the stop comes ``--watchdog`` after the last frame, offline as live."""
     from crossing_assist.runtime.beacon import BeaconConfig
     from crossing_assist.runtime.demo import main
     from crossing_assist.runtime.offline import STOP_TAIL_S
@@ -185,7 +188,8 @@ def test_truncated_video_warns_and_ends_on_a_stop(tmp_path, toy_bundle, capsys):
     cut = tmp_path / "cut.avi"
     cut.write_bytes(full.read_bytes()[: full.stat().st_size // 2])
     out = tmp_path / "out"
-    assert main([str(cut), "--bundle", str(toy_bundle), "--out", str(out), "--no-video", "--quiet"]) == 0
+    period = ["--watchdog", str(watchdog)] if watchdog else []
+    assert main([str(cut), "--bundle", str(toy_bundle), "--out", str(out), "--no-video", "--quiet", *period]) == 0
     err = capsys.readouterr().err
     warning = [ln for ln in err.splitlines() if ln.startswith("warning:")]
     assert len(warning) == 1 and "of 40 frames" in warning[0], err
@@ -194,6 +198,7 @@ def test_truncated_video_warns_and_ends_on_a_stop(tmp_path, toy_bundle, capsys):
     trace = [json.loads(ln) for ln in (out / "trace.jsonl").read_text().splitlines()]
     assert len(trace) == n + 1 and trace[-2]["stop"] is False  # it was guiding when the video died
     assert trace[-1]["stop"] is True and trace[-1]["reason"] in ("stale", "failed") and trace[-1]["cue"] == "stop"
+    assert trace[-1]["t"] - trace[-2]["t"] == pytest.approx(watchdog or DEFAULT_WATCHDOG_S, rel=1e-3)
     audio, sr = sf.read(out / "beacon.wav")
     assert len(audio) == pytest.approx((trace[-1]["t"] + STOP_TAIL_S) * sr, abs=2)
     # the last second is the stop cue (centred: both channels alike), not the panned beacon

@@ -206,7 +206,8 @@ def test_no_audio_device_is_one_clear_line(tmp_path, toy_bundle):  # noqa: F811
 
 def test_import_runtime_leaves_torch_out():
     code = ("import sys, crossing_assist.runtime, crossing_assist.runtime.demo, crossing_assist.runtime.offline, "
-            "crossing_assist.runtime.live, crossing_assist.runtime.engine, crossing_assist.runtime.vectors; "
+            "crossing_assist.runtime.live, crossing_assist.runtime.engine, crossing_assist.runtime.status, "
+            "crossing_assist.runtime.camera, crossing_assist.testing.vectors; "
             "bad = [m for m in sys.modules if m == 'torch' or m.startswith(('torch.', 'crossing_assist.models', "
             "'crossing_assist.export', 'crossing_assist.iil'))]; print(bad); sys.exit(3 if bad else 0)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)

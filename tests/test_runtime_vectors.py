@@ -13,7 +13,8 @@ from crossing_assist.runtime import belief as bf
 from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
 from crossing_assist.runtime.gate import GateConfig
 from crossing_assist.runtime.live import is_fresh, same_frame
-from crossing_assist.runtime.vectors import FRAME_SIZES, GEOMETRY_V2, build_vectors, camera_fov, gate_threshold, main
+from crossing_assist.runtime.camera import camera_fov, gate_threshold
+from crossing_assist.testing.vectors import FRAME_SIZES, GEOMETRY_V2, build_vectors, main
 
 VECTORS = Path(__file__).resolve().parents[1] / "android_demo" / "test_vectors.json"
 
@@ -21,7 +22,7 @@ VECTORS = Path(__file__).resolve().parents[1] / "android_demo" / "test_vectors.j
 @pytest.fixture(scope="module")
 def stored():
     if not VECTORS.is_file():
-        pytest.fail(f"{VECTORS} is missing; run python -m crossing_assist.runtime.vectors")
+        pytest.fail(f"{VECTORS} is missing; run python -m crossing_assist.testing.vectors")
     return json.loads(VECTORS.read_text())
 
 

@@ -19,7 +19,7 @@ import { statusMessage } from '../www/js/view.js';
 const HERE = dirname(fileURLToPath(import.meta.url));
 const VECTORS = join(HERE, '..', 'test_vectors.json');
 const loadVectors = () => JSON.parse(readFileSync(VECTORS, 'utf8'));
-const noVectors = existsSync(VECTORS) ? false : 'android_demo/test_vectors.json is missing: python -m crossing_assist.runtime.vectors --out android_demo/test_vectors.json';
+const noVectors = existsSync(VECTORS) ? false : 'android_demo/test_vectors.json is missing: python -m crossing_assist.testing.vectors --out android_demo/test_vectors.json';
 
 test('the shared test vectors are reproduced exactly', { skip: noVectors }, () => {
   const r = replayVectors(loadVectors());

@@ -9,14 +9,13 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
+from crossing_assist.actions import DEFAULT_FOV_DEG
+from crossing_assist.geometry import parse_size
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size {text!r} invalid; expected WxH, e.g. 320x240") from None
-    return w, h
+def _frame_size(text: str) -> tuple[int, int]:
+    """``--size WxH`` (width first, as frames and videos are named) -> (H, W)."""
+    return parse_size(text, "WxH")
 
 
 # ---------------------------------------------------------------- sub-commands
@@ -74,7 +73,7 @@ def _cmd_photo_clip(args: argparse.Namespace) -> int:
 def _cmd_synth(args: argparse.Namespace) -> int:
     from crossing_assist.data_tools import synth
     if args.video:
-        w, h = args.size or (320, 240)
+        h, w = args.size or (240, 320)
         command = "crossing-data " + " ".join(sys.argv[1:]) if args.record_command is None else args.record_command
         cfg = synth.ClipConfig(Path(args.out), args.seed, args.seconds, args.fps, w, h, args.fov,
                                args.supersample, command, not args.quiet)
@@ -82,7 +81,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         print(f"wrote {video} ({video.stat().st_size / 1e6:.2f} MB, {int(round(args.seconds * args.fps))} frames) "
               f"and {side}")
         return 0
-    w, h = args.size or (224, 168)
+    h, w = args.size or (168, 224)
     cfg = synth.SynthConfig(Path(args.out), args.frames, args.seed, w, h, args.fov, args.unknown_fraction,
                             args.val_fraction, args.supersample, not args.quiet)
     path = synth.synth_dataset(cfg)
@@ -215,7 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--no-mirror", action="store_true", help="no mirrored copies")
     p.add_argument("--yaw", type=float, nargs="*", default=[], help="yaw angles in degrees (+ = user turned right)")
-    p.add_argument("--fov", type=float, default=90.0, help="assumed horizontal field of view, degrees")
+    p.add_argument("--fov", type=float, default=DEFAULT_FOV_DEG, help="assumed horizontal field of view, degrees")
     p.add_argument("--out-of-frame", choices=("unknown", "edge"), default="unknown",
                    help="label of a goal the yaw pushes out of the frame")
     p.add_argument("--drop-unknown", action="store_true", help="skip yawed copies whose goal left the frame")
@@ -231,7 +230,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="dataset folder; with --video the .mp4 file to write")
     p.add_argument("--frames", type=int, default=d_frames.frames, help="frames to render (dataset)")
     p.add_argument("--seed", type=int, default=d_frames.seed)
-    p.add_argument("--size", type=_size, help="WxH (default 224x168 frames, 320x240 video)")
+    p.add_argument("--size", type=_frame_size, help="WxH (default 224x168 frames, 320x240 video)")
     p.add_argument("--fov", type=float, default=d_frames.fov_deg, help="horizontal field of view, degrees")
     p.add_argument("--unknown-fraction", type=float, default=d_frames.unknown_fraction,
                    help="share of frames with no crossing in view (labelled unknown)")

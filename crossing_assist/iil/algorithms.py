@@ -36,6 +36,8 @@ from __future__ import annotations
 
 from typing import Callable, NamedTuple
 
+from crossing_assist.registry import Registry
+
 from .aggregation import Aggregation, CostToGo, ExpertLabels, SelfLabelling
 from .config import ALGORITHMS, CONFIGS, THESIS_ALGORITHMS, AlgoParams, LearnerConfig  # noqa: F401 (re-exported)
 from .learner_variants import ForwardLearner, SmileLearner, ThriftyLearner
@@ -58,37 +60,29 @@ class Parts(NamedTuple):
 
 
 Builder = Callable[..., Parts]
-_REGISTRY: dict[str, Builder] = {}
+BUILDERS: Registry[Builder] = Registry("algorithm", catalogue=ALGORITHMS,
+                                       catalogue_name="crossing_assist.iil.config.ALGORITHMS")
 
 
 def register(name: str) -> Callable[[Builder], Builder]:
     """Register a builder ``fn(env, horizon, episodes, seed, p, cfg) -> Parts`` under ``name``,
     which must be listed in :data:`~crossing_assist.iil.config.ALGORITHMS`."""
-    if name not in ALGORITHMS:
-        raise ValueError(f"Unknown algorithm: {name!r}; list it in crossing_assist.iil.config.ALGORITHMS first")
-
-    def deco(fn: Builder) -> Builder:
-        if name in _REGISTRY:
-            raise ValueError(f"Algorithm {name!r} is already registered")
-        _REGISTRY[name] = fn
-        return fn
-    return deco
+    return BUILDERS.register(name)
 
 
 def list_algorithms() -> list[str]:
     """The registered algorithms, in the order of :data:`~crossing_assist.iil.config.ALGORITHMS`."""
-    return [n for n in ALGORITHMS if n in _REGISTRY]
+    return list(BUILDERS.names())
 
 
 def create(name: str, env, *, horizon: int, episodes: int, seed: int,
            params: AlgoParams = AlgoParams(), cfg: LearnerConfig = LearnerConfig()) -> Setup:
     """Build algorithm ``name`` for ``env`` (its action space and defaults)."""
-    if name not in _REGISTRY:
-        raise ValueError(f"Unknown algorithm: {name!r}; valid: {', '.join(list_algorithms())}")
+    builder = BUILDERS.get(name)
     if params.config not in CONFIGS:
         raise ValueError(f"Unknown configuration: {params.config!r}; valid: {', '.join(CONFIGS)}")
     p = params.resolved(env)
-    parts = _REGISTRY[name](env=env, horizon=horizon, episodes=episodes, seed=seed, p=p, cfg=cfg)
+    parts = builder(env=env, horizon=horizon, episodes=episodes, seed=seed, p=p, cfg=cfg)
     return Setup(name, *parts)
 
 

@@ -21,6 +21,7 @@ import torch
 from torch import nn
 
 from crossing_assist.errors import UserError
+from crossing_assist.registry import Registry
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -87,18 +88,13 @@ class _Spec:
     imagenet: Callable[[nn.Module], str]               # loads ImageNet weights, returns source
 
 
-_REGISTRY: dict[str, _Spec] = {}
-
-
-def _register(name: str, spec: _Spec) -> None:
-    if name in _REGISTRY:
-        raise ValueError(f"Duplicate backbone: {name}")
-    _REGISTRY[name] = spec
+BACKBONES: Registry[_Spec] = Registry("backbone", error=BackboneError)
+_register = BACKBONES.register
 
 
 def list_backbones() -> list[str]:
     """Names accepted by :func:`create_backbone`, sorted."""
-    return sorted(_REGISTRY)
+    return sorted(BACKBONES.names())
 
 
 # ---------------------------------------------------------------- weights
@@ -260,9 +256,7 @@ def create_backbone(name: str, *, weights: str | Path = "imagenet") -> Backbone:
     Raises :class:`BackboneError` (one clear line) for an unknown name, missing weights
     (offline), or a weights file that does not fit.
     """
-    if name not in _REGISTRY:
-        raise BackboneError(f"Unknown backbone: {name!r}; valid: {', '.join(list_backbones())}")
-    spec = _REGISTRY[name]
+    spec = BACKBONES.get(name)
     model = spec.build()
     w = str(weights)
     if w == "none":

@@ -8,6 +8,7 @@ import sys
 from dataclasses import fields
 from typing import Callable, Sequence
 
+from ..geometry import parse_size
 from .config import ConfigError, TrainConfig
 
 _DEFAULTS = {f.name: f.default for f in fields(TrainConfig) if f.name not in ("data", "out")}
@@ -43,17 +44,9 @@ def _resume_hint(out: str) -> Callable[[], str]:
     return hint
 
 
-def _size(text: str) -> tuple[int, int]:
-    """``224`` -> (224, 224); ``224x298`` -> (H=224, W=298)."""
-    try:
-        parts = [int(p) for p in text.lower().split("x")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid size {text!r}; expected H or HxW, e.g. 224x298") from None
-    if len(parts) == 1:
-        parts *= 2
-    if len(parts) != 2:
-        raise argparse.ArgumentTypeError(f"invalid size {text!r}; expected H or HxW, e.g. 224x298")
-    return parts[0], parts[1]
+def _canvas_size(text: str) -> tuple[int, int]:
+    """``--input-size``: ``224`` -> (224, 224); ``224x298`` -> (H=224, W=298)."""
+    return parse_size(text, "HxW")
 
 
 def _floats(text: str) -> tuple[float, ...]:
@@ -86,7 +79,7 @@ def train_parser() -> argparse.ArgumentParser:
                    help="random field views per frame: roll, phone aspect (letterboxed), corruption")
     p.add_argument("--fov", dest="fov_deg", type=float, default=d["fov_deg"],
                    help="horizontal field of view of the training photos (deg)")
-    p.add_argument("--input-size", type=_size, default=d["input_size"], help="canvas H or HxW, e.g. 168x224 (4:3)")
+    p.add_argument("--input-size", type=_canvas_size, default=d["input_size"], help="canvas H or HxW, e.g. 168x224 (4:3)")
     p.add_argument("--fit", default=d["fit"], help="letterbox (default) | stretch: how frames meet the canvas")
     p.add_argument("--four-three", action="store_true", help="shortcut for --input-size 224x298")
     p.add_argument("--unfreeze", type=int, default=d["unfreeze"], help="train the last N backbone blocks")

@@ -32,14 +32,16 @@ import torch.nn.functional as F
 from torch import nn
 
 from crossing_assist.errors import UserError
+from crossing_assist.registry import Registry
 
 from ..actions import N_BINS
-
-HEAD_KINDS = ("spatial", "spatial_fine", "spatial_strips", "spatial_mlp", "thesis", "thesis_fc")
 
 
 class HeadError(UserError):
     """Invalid head kind or argument."""
+
+
+HEADS: Registry[type] = Registry("head", error=HeadError)   # kind -> Head subclass (bottom of the file)
 
 
 from .mc import mc_dropout  # explicit-mask dropout, the one copy (shared with the IIL)
@@ -275,11 +277,12 @@ class ThesisFCHead(Head):
         return torch.einsum("nchw,ac->nahw", features, self.fc.weight)
 
 
-_KINDS = {"spatial": SpatialHead, "spatial_fine": FineSpatialHead, "spatial_strips": StripSpatialHead, "spatial_mlp": SpatialMLPHead, "thesis": ThesisHead, "thesis_fc": ThesisFCHead}
+for _cls in (SpatialHead, FineSpatialHead, StripSpatialHead, SpatialMLPHead, ThesisHead, ThesisFCHead):
+    HEADS.register(_cls.kind, _cls)
+del _cls
+HEAD_KINDS = HEADS.names()   # ("spatial", "spatial_fine", "spatial_strips", "spatial_mlp", "thesis", "thesis_fc")
 
 
 def create_head(kind: str, in_channels: int, n_actions: int, *, p: float = 0.5) -> Head:
-    """Build head ``kind`` (``spatial`` | ``thesis`` | ``thesis_fc``) on C = ``in_channels``."""
-    if kind not in _KINDS:
-        raise HeadError(f"Unknown head: {kind!r}; valid: {', '.join(HEAD_KINDS)}")
-    return _KINDS[kind](in_channels, n_actions, p=p)
+    """Build head ``kind`` (one of :data:`HEAD_KINDS`) on C = ``in_channels``."""
+    return HEADS.get(kind)(in_channels, n_actions, p=p)

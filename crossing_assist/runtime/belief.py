@@ -125,11 +125,17 @@ def predict(b: np.ndarray, dt: float, yaw_rate_dps: float, fov_deg: float, cfg: 
     return forget(b, dt, cfg.tau_forget_s)
 
 
-def belief_entropy(b: np.ndarray, space: ActionSpace) -> float:
-    """Entropy (nats) of the belief summed into the bundle's action space (0 log 0 = 0)."""
-    p = space.bin_probs_to_action_probs(b)
+def entropy(p: np.ndarray) -> float:
+    """Entropy (nats) of a probability vector, ``-sum p log p`` with 0 log 0 = 0 (the one numpy
+    copy: the belief's, and the test vectors' frames)."""
+    p = np.asarray(p)
     p = p[p > 0]
     return float(-(p * np.log(p)).sum())
+
+
+def belief_entropy(b: np.ndarray, space: ActionSpace) -> float:
+    """Entropy (nats) of the belief summed into the bundle's action space (0 log 0 = 0)."""
+    return entropy(space.bin_probs_to_action_probs(b))
 
 
 def belief_heading(b: np.ndarray, space: ActionSpace, fov_deg: float) -> tuple[int, float | None]:

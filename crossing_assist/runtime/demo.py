@@ -110,18 +110,14 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
 def run_live_demo(cfg: DemoConfig) -> None:
     """Live: frames -> decisions -> headphones; trace.jsonl in the output folder."""
     from crossing_assist.runtime.audio import LiveAudio
-    from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
-    from crossing_assist.runtime.engine import Engine
+    from crossing_assist.runtime.beacon import CuePlayer
     from crossing_assist.runtime.live import LiveConfig, run_live
-    from crossing_assist.runtime.offline import trace_record
-    from crossing_assist.runtime.pipeline import Pipeline
+    from crossing_assist.runtime.pipeline import open_pipeline, trace_record
     from crossing_assist.runtime.sources import CameraSource, VideoSource
 
-    engine = Engine(cfg.bundle, fov_deg=cfg.fov_deg)
-    beacon = BeaconConfig()
-    player = CuePlayer(beacon)
+    pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s)
+    player = CuePlayer(pipeline.beacon_cfg)
     source = CameraSource(cfg.camera) if cfg.camera is not None else VideoSource(cfg.video)
-    pipeline = Pipeline(engine, engine.decision_config(watchdog_s=cfg.watchdog_s), beacon)
     cfg.out_dir.mkdir(parents=True, exist_ok=True)
     trace_path = cfg.out_dir / "trace.jsonl"
     with LiveAudio(player, device=cfg.audio_device), open(trace_path, "w", encoding="utf-8") as trace:
@@ -145,7 +141,8 @@ def run(cfg: DemoConfig) -> None:
     from crossing_assist.runtime.offline import OfflineConfig, run_offline
 
     summary = run_offline(OfflineConfig(video=cfg.video, bundle=cfg.bundle, out_dir=cfg.out_dir,
-                                        annotate=cfg.annotate, progress=cfg.progress, fov_deg=cfg.fov_deg))
+                                        annotate=cfg.annotate, progress=cfg.progress, fov_deg=cfg.fov_deg,
+                                        watchdog_s=cfg.watchdog_s))
     for warning in summary.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"crossing-demo: {cfg.video} with bundle {cfg.bundle}")

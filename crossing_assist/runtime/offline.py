@@ -26,8 +26,9 @@ from crossing_assist.runtime.annotate import annotate
 from crossing_assist.runtime.audio import write_wav
 from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
 from crossing_assist.runtime.engine import Engine
-from crossing_assist.runtime.pipeline import Pipeline, Step
+from crossing_assist.runtime.pipeline import Pipeline, Step, open_pipeline, trace_record
 from crossing_assist.runtime.truth import compare, load_truth, truth_line
+from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
 
 
 STOP_TAIL_S = 1.0  # seconds of stop cue that end the WAV of a video that died mid-way
@@ -47,6 +48,7 @@ class OfflineConfig:
     max_width: int | None = 640
     beacon: BeaconConfig = field(default_factory=BeaconConfig)
     fov_deg: float | None = None     # the camera's horizontal FOV; None = the bundle's per orientation
+    watchdog_s: float = DEFAULT_WATCHDOG_S   # seconds without a fresh frame before the stop (a video that dies)
 
 
 @dataclass(frozen=True)
@@ -84,19 +86,6 @@ class Summary:
             out.append(truth_line(self.truth))
         out += [f"{k}: {v}" for k, v in self.outputs.items()]
         return out
-
-
-def trace_record(i: int, step: Step) -> dict:
-    """One trace.jsonl line: frame index, model outputs and the decision."""
-    p, d = step.prediction, step.decision
-    rec = {"frame": i, "ok": p.ok, "error": p.error or None, "action": p.action if p.ok else None,
-           "probs": None if p.probs is None else [round(float(v), 5) for v in p.probs],
-           "entropy": p.entropy if p.ok else None, "mutual_info": p.mutual_info if p.ok else None,
-           "uncertainty": p.uncertainty if p.ok else None, "conformal_set": list(p.conformal_set),
-           "cue": step.cue.kind}
-    rec.update(d.to_json())
-    rec["belief"] = [round(v, 5) for v in rec["belief"]]
-    return rec
 
 
 def run_frames(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, *, sink) -> int:
@@ -226,9 +215,10 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
 
     from crossing_assist.runtime.sources import SourceError, VideoSource
 
-    engine = engine or Engine(cfg.bundle, fov_deg=cfg.fov_deg)
+    pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, beacon=cfg.beacon,
+                             engine=engine)
+    engine = pipeline.engine
     source = VideoSource(cfg.video, max_width=cfg.max_width)
-    pipeline = Pipeline(engine, beacon_cfg=cfg.beacon)
     rec = _Recorder(cfg, engine, source.fps)
     t0 = time.perf_counter()
     with tqdm(total=source.frame_count or None, unit="frame", disable=not cfg.progress, leave=False,

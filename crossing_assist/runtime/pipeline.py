@@ -1,10 +1,14 @@
 """One step end to end: frame -> :class:`Prediction` -> :class:`Decision` -> :class:`Cue` -> loop.
 
 Used by the offline demo, the live loop and the benchmark, so they all make the same decisions.
+:func:`open_pipeline` is the one wiring of a bundle into engine + decision logic (filter, gate,
+watchdog period) + beacon that ``crossing-demo`` uses live and offline; :func:`trace_record`
+is the one trace.jsonl line of a step, written by both.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
@@ -13,6 +17,7 @@ import numpy as np
 from crossing_assist.runtime.beacon import BeaconConfig, Cue, cue_for, render_cue
 from crossing_assist.runtime.decide import Decider, Decision, DecisionConfig
 from crossing_assist.runtime.engine import Engine, Prediction
+from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
 
 
 @dataclass(frozen=True)
@@ -60,3 +65,26 @@ class Pipeline:
         decision = self.decider.step(t, obs, yaw_rate_dps)
         cue = cue_for(decision)
         return Step(pred, decision, cue, cached_loop(cue, self.beacon_cfg))
+
+
+def open_pipeline(bundle: str | os.PathLike, *, fov_deg: float | None = None, watchdog_s: float = DEFAULT_WATCHDOG_S,
+                  beacon: BeaconConfig | None = None, engine: Engine | None = None) -> Pipeline:
+    """The demo's pipeline for ``bundle``: its :class:`Engine` (``fov_deg``: the camera's
+    horizontal FOV, None = the bundle's per orientation; or the given ``engine``), the bundle's
+    decision config with ``watchdog_s`` as the stale-frame period, and ``beacon`` (default
+    :class:`BeaconConfig`). The live and the offline demo both build theirs here."""
+    engine = engine or Engine(bundle, fov_deg=fov_deg)
+    return Pipeline(engine, engine.decision_config(watchdog_s=watchdog_s), beacon or BeaconConfig())
+
+
+def trace_record(i: int, step: Step) -> dict:
+    """One trace.jsonl line: frame index, model outputs and the decision."""
+    p, d = step.prediction, step.decision
+    rec = {"frame": i, "ok": p.ok, "error": p.error or None, "action": p.action if p.ok else None,
+           "probs": None if p.probs is None else [round(float(v), 5) for v in p.probs],
+           "entropy": p.entropy if p.ok else None, "mutual_info": p.mutual_info if p.ok else None,
+           "uncertainty": p.uncertainty if p.ok else None, "conformal_set": list(p.conformal_set),
+           "cue": step.cue.kind}
+    rec.update(d.to_json())
+    rec["belief"] = [round(v, 5) for v in rec["belief"]]
+    return rec

@@ -1,6 +1,6 @@
 // The camera-geometry contract (bundle.json schema 2, `geometry`; docs/contracts.md), the
 // app's side: which horizontal field of view turns the 12 strips of THIS frame into headings.
-// Pure (no DOM); the Python reference is crossing_assist/runtime/vectors.py (camera_fov), and
+// Pure (no DOM); the Python reference is crossing_assist/runtime/camera.py (camera_fov), and
 // test_vectors.json's `geometry` section holds the cases both must agree on.
 //
 // * orientation of a frame: 'portrait' if height > width, else 'landscape';
@@ -50,7 +50,7 @@ export function cameraFov(geometry, width, height, override = null) {
 }
 
 /**
- * The gate threshold for a width x height frame (Python: runtime/vectors.py gate_threshold):
+ * The gate threshold for a width x height frame (Python: runtime/camera.py gate_threshold):
  * `uncertainty` is the bundle's calibration.uncertainty.
  */
 export function gateThreshold(uncertainty, width, height) {

@@ -19,8 +19,8 @@ export const SLIGHT_DEG = 22.5;
 
 /**
  * The one sentence shown and spoken for a decision ({stop, reason, heading_deg}) and its
- * style: [text, 'stop' | 'go']. Pure; the same as vectors.status_message in Python (the shared
- * test vectors' `status` section).
+ * style: [text, 'stop' | 'go']. Pure; the same as status_message in Python (runtime/status.py;
+ * the shared test vectors' `status` section).
  */
 export function statusMessage(d) {
   if (d.stop || d.heading_deg === null || d.heading_deg === undefined) return [STATUS_STOP[d.reason] || STATUS_STOP.uncertain, 'stop'];

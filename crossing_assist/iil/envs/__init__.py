@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
+from crossing_assist.registry import Registry
+
 
 def _toy(**kwargs):
     from .toy import ToyLaneEnv  # noqa: PLC0415 - each environment's imports only when made
@@ -32,18 +34,15 @@ def _duckietown(**kwargs):
 
 
 # name -> factory(**kwargs); the one list of environments (CLI choices, errors, docs).
-ENVIRONMENTS: dict[str, Callable[..., Any]] = {
-    "toy": _toy,
-    "crossing": _crossing(synthetic=False),
-    "crossing-synthetic": _crossing(synthetic=True),
-    "duckietown": _duckietown,
-}
-ENV_NAMES = tuple(ENVIRONMENTS)
+ENVIRONMENTS: Registry[Callable[..., Any]] = Registry("environment")
+ENVIRONMENTS.register("toy", _toy)
+ENVIRONMENTS.register("crossing", _crossing(synthetic=False))
+ENVIRONMENTS.register("crossing-synthetic", _crossing(synthetic=True))
+ENVIRONMENTS.register("duckietown", _duckietown)
+ENV_NAMES = ENVIRONMENTS.names()
 
 
 def make_env(name: str, **kwargs):
     """``toy`` | ``crossing`` | ``crossing-synthetic`` | ``duckietown`` -> a gymnasium.Env;
     ``kwargs`` go to the environment (its config fields, e.g. ``obs_size`` for Duckietown)."""
-    if name not in ENVIRONMENTS:
-        raise ValueError(f"Unknown environment: {name!r}; valid: {', '.join(ENV_NAMES)}")
-    return ENVIRONMENTS[name](**kwargs)
+    return ENVIRONMENTS.get(name)(**kwargs)

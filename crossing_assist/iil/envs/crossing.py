@@ -22,7 +22,6 @@ terminated); reaching the far kerb ends the crossing (terminated, a new one star
 
 from __future__ import annotations
 
-import csv
 import math
 import os
 from dataclasses import dataclass
@@ -60,21 +59,18 @@ class CrossingConfig:
 def _load_photos(cfg: CrossingConfig, rng: np.random.Generator) -> list[tuple[np.ndarray, float]]:
     env_dir = os.environ.get("CROSSING_PTL_DIR")
     root = (Path(env_dir) if env_dir else SHARED_PTL) if cfg.photos == "auto" else Path(cfg.photos)
-    labels = root / "labels.csv"
-    if not labels.is_file():
-        if cfg.photos == "auto":
-            return []
-        raise FileNotFoundError(f"{labels}: PTL labels not found; pass the PTL folder or use crossing-synthetic")
+    if cfg.photos == "auto" and not (root / "labels.csv").is_file():
+        return []
     from crossing_assist.data_tools.images import load_rgb  # noqa: PLC0415
+    from crossing_assist.data_tools.ptl import read_ptl_labels  # noqa: PLC0415
 
-    with labels.open(newline="") as fh:
-        rows = [r for r in csv.DictReader(fh) if r["split"] == "train" and r["far_x"]]
+    rows = [r for r in read_ptl_labels(root) if r.split == "train" and r.far_x is not None]
     pick = rng.choice(len(rows), size=min(cfg.n_photos, len(rows)), replace=False)
     out = []
     for k in pick:
-        img = load_rgb(root / rows[k]["image"])
+        img = load_rgb(root / rows[k].image)
         img = cv2.resize(img, (2 * cfg.width, 2 * cfg.height), interpolation=cv2.INTER_AREA)  # undo 4:3 squash
-        out.append((img, float(rows[k]["far_x"])))
+        out.append((img, rows[k].far_x))
     return out
 
 

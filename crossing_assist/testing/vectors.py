@@ -1,6 +1,11 @@
 """Shared decision test vectors: the phone app must reproduce these decisions exactly.
 
-    python -m crossing_assist.runtime.vectors --out android_demo/test_vectors.json
+    python -m crossing_assist.testing.vectors --out android_demo/test_vectors.json
+
+A generator, not part of the runtime: the rules it records live in the runtime
+(:mod:`~crossing_assist.runtime.decide`, :mod:`~crossing_assist.runtime.beacon`,
+:mod:`~crossing_assist.runtime.live`, :mod:`~crossing_assist.runtime.status`,
+:mod:`~crossing_assist.runtime.camera`).
 
 Each scenario gives the full :class:`DecisionConfig`, then one entry per step with the inputs
 (``t`` seconds, ``yaw_rate_dps``, and ``obs``: null for a tick without a frame, else the
@@ -16,8 +21,10 @@ Version 2 adds what the live loop decides around the Decider, so the app and Pyt
 * ``guards``: the frozen-frame rule (:func:`~crossing_assist.runtime.live.same_frame`: same
   shape and every byte equal), freshness (:func:`~crossing_assist.runtime.live.is_fresh`) and
   the watchdog (:class:`~crossing_assist.runtime.watchdog.Watchdog` on a scripted clock);
-* ``status``: the sentence shown and spoken for each decision (:func:`status_message`);
-* ``geometry``: the camera-geometry contract's field-of-view choice (:func:`camera_fov`:
+* ``status``: the sentence shown and spoken for each decision
+  (:func:`~crossing_assist.runtime.status.status_message`);
+* ``geometry``: the camera-geometry contract's field-of-view choice
+  (:func:`~crossing_assist.runtime.camera.camera_fov`:
   orientation of the frame -> the override or the bundle's ``camera_fov_deg``, refused
   outside 20..170 degrees; schema 1 reads as one FOV for both orientations), and scenarios
   whose frames are portrait and landscape of several aspects: each step's FOV comes from
@@ -25,7 +32,8 @@ Version 2 adds what the live loop decides around the Decider, so the app and Pyt
 
 Version 3: each geometry scenario also carries the bundle's ``calibration.uncertainty``
 (``threshold``, optional ``portrait_threshold``); each step's gate threshold is its frame's
-orientation's (:func:`gate_threshold`), and a change of FOV *or* threshold starts a fresh Decider.
+orientation's (:func:`~crossing_assist.runtime.camera.gate_threshold`), and a change of FOV *or*
+threshold starts a fresh Decider.
 """
 
 from __future__ import annotations
@@ -40,90 +48,25 @@ from pathlib import Path
 
 import numpy as np
 
-from crossing_assist.actions import get_space, heading_to_pan
-from crossing_assist.bundle import UncertaintySpec
+from crossing_assist.actions import DEFAULT_FOV_DEG, get_space, heading_to_pan
 from crossing_assist.fileio import atomic_write_text
-from crossing_assist.geometry import FOV_RANGE_DEG, Geometry, orientation
+from crossing_assist.geometry import FOV_RANGE_DEG, orientation
 from crossing_assist.runtime.beacon import BeaconConfig, itd_seconds, pan_gains
+from crossing_assist.runtime.belief import entropy
+from crossing_assist.runtime.camera import camera_fov, gate_threshold, geometry_of
 from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
 from crossing_assist.runtime.engine import measure_value
 from crossing_assist.runtime.live import is_fresh, same_frame
+from crossing_assist.runtime.status import status_message
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
 VERSION = 3
 
-# ----------------------------------------------------------------------------- camera geometry
-# The reference of the geometry contract's FOV choice (issue 12) for the vectors; the bundle
-# reader's ``Bundle.camera_fov`` must agree (tests/test_android_logic.py checks it where present).
-
-ORIENTATIONS = ("landscape", "portrait")
-
-
-def geometry_of(meta: dict) -> dict:
-    """A bundle.json's geometry block; schema 1 reads as ``fit=stretch`` with its ``fov_deg``
-    for both orientations."""
-    if meta.get("schema_version", 1) >= 2:
-        return meta["geometry"]
-    fov = float(meta["fov_deg"])
-    return {"fit": "stretch", "strips": "frame", "camera_fov_deg": {"landscape": fov, "portrait": fov},
-            "train_fov_deg": fov}
-
-
-def camera_fov(geometry: dict, width: int, height: int, override: float | None = None) -> float:
-    """Horizontal FOV (degrees) for a ``width x height`` frame: ``override`` (the user's or the
-    device's value for this orientation) if given, else ``geometry.camera_fov_deg`` of the
-    frame's orientation. Raises ValueError outside 20..170 degrees (the runtime then plays the
-    stop cue)."""
-    cam = geometry["camera_fov_deg"]
-    return Geometry(camera_fov_deg=(cam["landscape"], cam["portrait"])).camera_fov(width, height, override)
-
-
-def gate_threshold(uncertainty: dict, width: int, height: int) -> float:
-    """The gate threshold for a ``width x height`` frame: a bundle's ``calibration.uncertainty``
-    ``portrait_threshold`` for portrait frames when it has one, else its ``threshold``."""
-    spec = UncertaintySpec(uncertainty.get("measure", "entropy"), uncertainty["threshold"],
-                           uncertainty.get("portrait_threshold"))
-    return spec.threshold_for(orientation(width, height))
-
-
-# ----------------------------------------------------------------------------- status sentences
-#: Stop reasons beyond the Decider's: audio cannot play, the app is in the background, the
-#: field-of-view setting is invalid. Each is a stop (the beacon never plays then).
-STATUS_STOP = {
-    "uncertain": "Stop. Not sure: scan slowly.",
-    "stale": "Stop. Camera stalled.",
-    "failed": "Stop. The model failed.",
-    "audio": "Audio stopped. Tap to resume.",
-    "background": "Stop. The app is in the background.",
-    "fov": "Stop. The camera field of view setting is invalid.",
-}
-STRAIGHT_DEG = 7.5  # |heading| below: straight ahead
-SLIGHT_DEG = 22.5  # below: bear slightly; at or above: turn
-
-
-def status_message(stop: bool, reason: str, heading_deg: float | None) -> tuple[str, str]:
-    """The one sentence the phone shows and speaks for a decision, and its style
-    (``stop``/``go``): the stop reason, or the direction by |heading| (< 7.5 straight ahead,
-    < 22.5 bear slightly, else turn; negative = left)."""
-    if stop or heading_deg is None:
-        return STATUS_STOP.get(reason, STATUS_STOP["uncertain"]), "stop"
-    side = "left" if heading_deg < 0 else "right"
-    if abs(heading_deg) < STRAIGHT_DEG:
-        return "Go straight ahead.", "go"
-    if abs(heading_deg) < SLIGHT_DEG:
-        return f"Bear slightly {side}.", "go"
-    return f"Turn {side}.", "go"
-
-
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
     p[action] = conf
     return p
-
-
-def _entropy(p: np.ndarray) -> float:
-    return float(-(p * np.log(p)).sum())
 
 
 @dataclass(frozen=True)
@@ -157,7 +100,7 @@ def _frame(space_n: int, action: int, conf: float, rng: np.random.Generator) -> 
     p = _probs_for(space_n, action, conf)
     p = p * rng.uniform(0.9, 1.1, size=space_n)
     p = p / p.sum()
-    return RawOutputs(p, _entropy(p), float(rng.uniform(0.0, 0.3)), rng.uniform(0.0, 0.03, size=space_n))
+    return RawOutputs(p, entropy(p), float(rng.uniform(0.0, 0.3)), rng.uniform(0.0, 0.03, size=space_n))
 
 
 def _scenarios(rng: np.random.Generator) -> list[tuple[str, DecisionConfig, list[tuple[float, float, RawOutputs | None]]]]:
@@ -223,7 +166,7 @@ def _geometry_scenarios(rng: np.random.Generator) -> list[tuple]:
     out.append(("phone_turned_landscape_portrait_landscape", GEOMETRY_V2, {}, one, turn))
     steps = [(i / FPS, 10.0, _frame(13, 11, 0.9, rng), FRAME_SIZES[i // 20 % 2]) for i in range(40)]
     out.append(("user_fov_portrait_60", GEOMETRY_V2, {"portrait": 60.0}, one, steps))
-    schema1 = geometry_of({"schema_version": 1, "fov_deg": 90.0})
+    schema1 = geometry_of({"schema_version": 1, "fov_deg": DEFAULT_FOV_DEG})
     steps = [(i / FPS, 0.0, _frame(13, 2, 0.9, rng), FRAME_SIZES[3]) for i in range(30)]
     out.append(("schema1_portrait", schema1, {}, one, steps))
     # Version 3: a portrait threshold above the landscape one. Frames whose entropy (~1.4 nats)
@@ -254,7 +197,7 @@ def _run_geometry_scenario(geometry: dict, overrides: dict, uncertainty: dict, s
 
 def _fov_choices() -> list[dict]:
     """orientation -> FOV cases: bundle defaults, overrides, schema 1, refused values."""
-    schema1 = geometry_of({"schema_version": 1, "fov_deg": 90.0})
+    schema1 = geometry_of({"schema_version": 1, "fov_deg": DEFAULT_FOV_DEG})
     cases = []
     for geom in (GEOMETRY_V2, schema1):
         for w, h in FRAME_SIZES:
@@ -345,7 +288,7 @@ def build_vectors(seed: int = 20240601) -> dict:
     headings = [-80.0, -45.0, -12.5, 0.0, 7.5, 30.0, 60.0]
     return {
         "version": VERSION,
-        "generator": "python -m crossing_assist.runtime.vectors",
+        "generator": "python -m crossing_assist.testing.vectors",
         "tolerance": 1e-9,
         "spec": "docs/runtime.md (Decision logic)",
         "scenarios": scenarios,
@@ -353,7 +296,8 @@ def build_vectors(seed: int = 20240601) -> dict:
             "config": dataclasses.asdict(bcfg),
             "pan_gains": [{"pan": p, "left": pan_gains(p)[0], "right": pan_gains(p)[1]} for p in pans],
             "itd_seconds": [{"heading_deg": h, "itd_s": itd_seconds(h)} for h in headings],
-            "heading_to_pan": [{"heading_deg": h, "fov_deg": 90.0, "pan": heading_to_pan(h, 45.0)} for h in headings],
+            "heading_to_pan": [{"heading_deg": h, "fov_deg": DEFAULT_FOV_DEG, "pan": heading_to_pan(h, DEFAULT_FOV_DEG / 2)}
+                               for h in headings],
             "loop_samples": [{"rate_hz": r, "samples": round(bcfg.sample_rate / r)} for r in (2.0, 3.3, 4.0, 6.0)],
         },
         "actions": {str(n): [list(g) for g in get_space(n).groups] for n in (4, 8, 13)},
@@ -369,7 +313,7 @@ def write_vectors(path: str | Path, seed: int = 20240601) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m crossing_assist.runtime.vectors", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m crossing_assist.testing.vectors", description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=Path("android_demo/test_vectors.json"))
     ap.add_argument("--seed", type=int, default=20240601)
     a = ap.parse_args(argv)

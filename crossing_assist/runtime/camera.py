@@ -1,0 +1,43 @@
+"""A frame's field of view and gate threshold from a bundle.json's own blocks (pure Python).
+
+The camera-geometry contract (docs/contracts.md, "Camera geometry") on the JSON the phone app
+reads: :func:`geometry_of` (schema 1 reads as one FOV for both orientations),
+:func:`camera_fov` (the frame's orientation -> the override or the bundle's ``camera_fov_deg``,
+refused outside 20..170 degrees) and :func:`gate_threshold` (the orientation's threshold).
+They agree with :meth:`crossing_assist.bundle.Bundle.camera_fov` and
+:meth:`~crossing_assist.bundle.UncertaintySpec.threshold_for`, which they call; the app's
+``android_demo/www/js/geometry.js`` is the same rule, checked against the shared test vectors
+(``python -m crossing_assist.testing.vectors``).
+"""
+
+from __future__ import annotations
+
+from crossing_assist.bundle import UncertaintySpec
+from crossing_assist.geometry import Geometry, orientation
+
+
+def geometry_of(meta: dict) -> dict:
+    """A bundle.json's geometry block; schema 1 reads as ``fit=stretch`` with its ``fov_deg``
+    for both orientations."""
+    if meta.get("schema_version", 1) >= 2:
+        return meta["geometry"]
+    fov = float(meta["fov_deg"])
+    return {"fit": "stretch", "strips": "frame", "camera_fov_deg": {"landscape": fov, "portrait": fov},
+            "train_fov_deg": fov}
+
+
+def camera_fov(geometry: dict, width: int, height: int, override: float | None = None) -> float:
+    """Horizontal FOV (degrees) for a ``width x height`` frame: ``override`` (the user's or the
+    device's value for this orientation) if given, else ``geometry.camera_fov_deg`` of the
+    frame's orientation. Raises ValueError outside 20..170 degrees (the runtime then plays the
+    stop cue)."""
+    cam = geometry["camera_fov_deg"]
+    return Geometry(camera_fov_deg=(cam["landscape"], cam["portrait"])).camera_fov(width, height, override)
+
+
+def gate_threshold(uncertainty: dict, width: int, height: int) -> float:
+    """The gate threshold for a ``width x height`` frame: a bundle's ``calibration.uncertainty``
+    ``portrait_threshold`` for portrait frames when it has one, else its ``threshold``."""
+    spec = UncertaintySpec(uncertainty.get("measure", "entropy"), uncertainty["threshold"],
+                           uncertainty.get("portrait_threshold"))
+    return spec.threshold_for(orientation(width, height))

@@ -1,0 +1,35 @@
+"""The one sentence the phone shows and speaks for a decision (pure Python).
+
+The app's ``statusMessage`` (``android_demo/www/js/view.js``) is the same rule; the shared test
+vectors' ``status`` section (``python -m crossing_assist.testing.vectors``) holds the cases
+both must agree on.
+"""
+
+from __future__ import annotations
+
+#: Stop reasons beyond the Decider's: audio cannot play, the app is in the background, the
+#: field-of-view setting is invalid. Each is a stop (the beacon never plays then).
+STATUS_STOP = {
+    "uncertain": "Stop. Not sure: scan slowly.",
+    "stale": "Stop. Camera stalled.",
+    "failed": "Stop. The model failed.",
+    "audio": "Audio stopped. Tap to resume.",
+    "background": "Stop. The app is in the background.",
+    "fov": "Stop. The camera field of view setting is invalid.",
+}
+STRAIGHT_DEG = 7.5  # |heading| below: straight ahead
+SLIGHT_DEG = 22.5  # below: bear slightly; at or above: turn
+
+
+def status_message(stop: bool, reason: str, heading_deg: float | None) -> tuple[str, str]:
+    """The one sentence the phone shows and speaks for a decision, and its style
+    (``stop``/``go``): the stop reason, or the direction by |heading| (< 7.5 straight ahead,
+    < 22.5 bear slightly, else turn; negative = left)."""
+    if stop or heading_deg is None:
+        return STATUS_STOP.get(reason, STATUS_STOP["uncertain"]), "stop"
+    side = "left" if heading_deg < 0 else "right"
+    if abs(heading_deg) < STRAIGHT_DEG:
+        return "Go straight ahead.", "go"
+    if abs(heading_deg) < SLIGHT_DEG:
+        return f"Bear slightly {side}.", "go"
+    return f"Turn {side}.", "go"
