@@ -28,7 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from crossing_assist.actions import VALID_SPACES, ActionSpace, get_space
+from crossing_assist import __version__
+from crossing_assist.actions import DEFAULT_FOV_DEG, VALID_SPACES, ActionSpace, get_space
 from crossing_assist.errors import UserError
 from crossing_assist.geometry import FITS, Geometry, GeometryError, check_fov
 
@@ -63,11 +64,23 @@ class ActionsSpec:
     def space(self) -> ActionSpace:
         return get_space(self.n)
 
+    @classmethod
+    def of(cls, n: int) -> "ActionsSpec":
+        """The spec of the ``n``-action space (names and bins from :mod:`crossing_assist.actions`)."""
+        if isinstance(n, bool) or n not in VALID_SPACES:
+            raise BundleError(f"bundle: actions.n = {n!r} invalid; valid: 4, 8, 13")
+        space = get_space(n)
+        return cls(n=space.n, names=tuple(space.names), bins=tuple(tuple(g) for g in space.groups))
+
+    def to_json(self) -> dict:
+        return {"n": self.n, "names": list(self.names), "bins": [list(g) for g in self.bins]}
+
 
 @dataclass(frozen=True)
 class InputSpec:
     """Input of the graph: uint8 NHWC RGB frames, resized to ``size`` = (H, W) and normalised
-    with ``(x / 255 - mean) / std`` inside the graph."""
+    with ``(x / 255 - mean) / std`` inside the graph; ``resize`` describes the resize (free text,
+    optional)."""
 
     size: tuple[int, int]
     mean: tuple[float, float, float]
@@ -75,6 +88,14 @@ class InputSpec:
     layout: str = "NHWC"
     dtype: str = "uint8"
     color: str = "RGB"
+    resize: str = ""
+
+    def to_json(self) -> dict:
+        d = {"layout": self.layout, "dtype": self.dtype, "color": self.color, "size": list(self.size),
+             "mean": list(self.mean), "std": list(self.std)}
+        if self.resize:
+            d["resize"] = self.resize
+        return d
 
 
 @dataclass(frozen=True)
@@ -83,6 +104,9 @@ class McSpec:
 
     samples: int
     p: float
+
+    def to_json(self) -> dict:
+        return {"samples": self.samples, "p": self.p}
 
 
 @dataclass(frozen=True)
@@ -94,6 +118,9 @@ class ConformalSpec:
     coverage: float
     threshold: float
     n_frames: int
+
+    def to_json(self) -> dict:
+        return {"coverage": self.coverage, "threshold": self.threshold, "n_frames": self.n_frames}
 
 
 @dataclass(frozen=True)
@@ -114,6 +141,12 @@ class UncertaintySpec:
             return self.portrait_threshold
         return self.threshold
 
+    def to_json(self) -> dict:
+        d = {"measure": self.measure, "threshold": self.threshold}
+        if self.portrait_threshold is not None:
+            d["portrait_threshold"] = self.portrait_threshold
+        return d
+
 
 @dataclass(frozen=True)
 class Calibration:
@@ -122,6 +155,10 @@ class Calibration:
     temperature: float
     conformal: ConformalSpec
     uncertainty: UncertaintySpec
+
+    def to_json(self) -> dict:
+        return {"temperature": self.temperature, "conformal": self.conformal.to_json(),
+                "uncertainty": self.uncertainty.to_json()}
 
 
 @dataclass(frozen=True)
@@ -246,7 +283,8 @@ def _parse_input(d: Any) -> InputSpec:
             or not all(isinstance(s, int) and not isinstance(s, bool) and 16 <= s <= 4096 for s in size)):
         raise BundleError(f"bundle.json: input.size = {size!r} invalid; valid: [H, W] integers in 16..4096")
     return InputSpec(size=(size[0], size[1]), mean=_triple(_get(d, "mean", "input"), "input.mean", positive=False),
-                     std=_triple(_get(d, "std", "input"), "input.std", positive=True))
+                     std=_triple(_get(d, "std", "input"), "input.std", positive=True),
+                     resize=_str(d.get("resize", ""), "input.resize"))
 
 
 def _parse_calibration(d: Any) -> Calibration:
@@ -295,6 +333,8 @@ def _parse_geometry(d: Any, fov_deg: float, version: int) -> Geometry:
             raise BundleError(f"bundle.json: geometry.pad_rgb = {pad!r} must be three integers 0..255")
     train = _num(d.get("train_fov_deg", fovs[0]), "geometry.train_fov_deg", 0.0, 180.0, lo_open=True, hi_open=True)
     return Geometry(fit=fit, pad_rgb=tuple(pad), camera_fov_deg=(fovs[0], fovs[1]), train_fov_deg=train)
+
+
 def _str(value: Any, name: str) -> str:
     if not isinstance(value, str):
         raise BundleError(f"bundle.json: {name} = {_short(value)} must be a string")
@@ -422,6 +462,41 @@ def embedded_meta(meta: Mapping[str, Any]) -> dict[str, Any]:
     """The bundle.json dict without the fields that depend on the model bytes (for metadata_props),
     as strict JSON (non-finite numbers become null)."""
     return {k: _strict(v) for k, v in meta.items() if k not in BYTE_FIELDS}
+
+
+def graph_metadata(meta: Mapping[str, Any]) -> dict[str, str]:
+    """The ONNX ``metadata_props`` entries that carry a bundle's facts inside its graph:
+    ``bundle_json`` (:func:`embedded_meta`, keys sorted) and ``schema_version``."""
+    return {"bundle_json": json.dumps(embedded_meta(meta), sort_keys=True),
+            "schema_version": str(meta["schema_version"])}
+
+
+def make_meta(*, n_actions: int, input: InputSpec, mc: McSpec, calibration: Calibration,
+              geometry: Geometry | None, precision: str = "fp32", training: Mapping[str, Any] | None = None,
+              metrics: Mapping[str, Any] | None = None, provenance: Mapping[str, Any] | None = None,
+              model_file: str = MODEL_FILE) -> dict[str, Any]:
+    """The bundle.json dict (without the byte fields, which :func:`write_bundle` adds) from typed
+    parts: the one place that lays bundle metadata out. ``geometry=None`` writes a schema-1
+    bundle (stretched frames, one FOV of 90 degrees), which readers still accept; otherwise the
+    current schema, whose ``fov_deg`` is the landscape camera FOV. Validated before it is returned."""
+    meta: dict[str, Any] = {
+        "schema_version": 1 if geometry is None else SCHEMA_VERSION,
+        "model_file": model_file,
+        "actions": ActionsSpec.of(n_actions).to_json(),
+        "fov_deg": DEFAULT_FOV_DEG if geometry is None else geometry.camera_fov_deg[0],
+        "input": input.to_json(),
+        "mc": mc.to_json(),
+        "calibration": calibration.to_json(),
+        "precision": precision,
+        "training": dict(training or {}),
+        "metrics": dict(metrics or {}),
+        "package_version": __version__,
+        "provenance": dict(provenance or {}),
+    }
+    if geometry is not None:
+        meta["geometry"] = geometry.to_json()
+    parse_meta(meta, need_bytes=False)
+    return meta
 
 
 def check_replaceable(bundle_dir: str | os.PathLike, *, force: bool = False) -> None:

@@ -41,10 +41,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from crossing_assist.geometry import orientation
+from crossing_assist.geometry import Geometry, orientation
 from crossing_assist.runtime.decide import Decider, Observation
 from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.status import STATUS_STOP, status_message
+from crossing_assist.testing import toy_bundle
 
 REPO = Path(__file__).resolve().parents[1]
 DEMO = REPO / "android_demo"
@@ -57,6 +58,9 @@ WATCHDOG_S = 0.5
 BAR_PX = 80  # the helper bar under the control (4rem of 20 px)
 DEFAULT_BUNDLE = REPO / "crossing_assist" / "assets" / "default_bundle"
 SAMPLE_CLIP = REPO / "crossing_assist" / "assets" / "sample_clip.mp4"
+#: The test bundle's geometry: distinct default FOVs per orientation, so the tests see which one
+#: the app chose; the toy graph resizes whatever it gets to its canvas, hence ``fit: stretch``.
+APP_GEOMETRY = Geometry(fit="stretch", camera_fov_deg=(67.0, 53.0), train_fov_deg=67.0)
 
 
 def _why_skip() -> str | None:
@@ -78,10 +82,9 @@ def _tools():
     sys.path.insert(0, str(DEMO / "tools"))
     try:
         import clip
-        import make_test_bundle
     finally:
         sys.path.pop(0)
-    return clip, make_test_bundle
+    return clip, toy_bundle
 
 
 def _build(tmp: Path, bundle: Path) -> Path:
@@ -109,14 +112,14 @@ def run(tmp_path_factory) -> dict:
     """Build the app with the test bundle (schema-2 json), run the driver once, return its record."""
     clip, mtb = _tools()
     tmp = tmp_path_factory.mktemp("android_e2e")
-    bundle = mtb.make_test_bundle(tmp / "bundle")
-    www = _build(tmp, mtb.schema2_copy(bundle, tmp / "bundle_v2"))
+    bundle = mtb.make_toy_bundle(tmp / "bundle", mtb.APP_TOY, geometry=APP_GEOMETRY)
+    www = _build(tmp, bundle)
     frames, strips, frozen = clip.bar_clip(fps=FPS, flip_s=FLIP_S)
     clip.write_y4m(tmp / "clip.y4m", frames, FPS)
     result = _drive(tmp, www, tmp / "clip.y4m", RUN_S)
     return {"result": result, "engine": Engine(bundle), "clip": np.stack(frames), "strips": strips,
             "frozen": frozen, "vectors": (DEMO / "test_vectors.json").is_file(), "www": www,
-            "geometry": mtb.TEST_GEOMETRY}
+            "geometry": APP_GEOMETRY.to_json()}
 
 
 @pytest.fixture(scope="module")
@@ -129,8 +132,7 @@ def portrait(tmp_path_factory) -> dict:
     clip, mtb = _tools()
     tmp = tmp_path_factory.mktemp("android_e2e_portrait")
     det = mtb.deterministic_copy(DEFAULT_BUNDLE, tmp / "bundle")
-    v2 = mtb.schema2_copy(det, tmp / "bundle_v2")
-    www = _build(tmp, v2)
+    www = _build(tmp, det)
     cap = cv2.VideoCapture(str(SAMPLE_CLIP))
     frames = []
     while len(frames) < 120:
@@ -143,7 +145,7 @@ def portrait(tmp_path_factory) -> dict:
         frames.append(cv2.cvtColor(bgr[: h // 2 * 2, x0:x0 + pw], cv2.COLOR_BGR2RGB))
     clip.write_y4m(tmp / "clip.y4m", frames, 10)
     result = _drive(tmp, www, tmp / "clip.y4m", 8.0, "--phases", "short", "--viewport", "390x844")
-    meta = json.loads((v2 / "bundle.json").read_text())
+    meta = json.loads((det / "bundle.json").read_text())
     return {"result": result, "engine": Engine(det), "geometry": meta["geometry"]}
 
 

@@ -13,7 +13,6 @@ import math
 import re
 import shutil
 import subprocess
-import sys
 from dataclasses import asdict, replace
 from pathlib import Path
 
@@ -151,12 +150,9 @@ needs_npm = pytest.mark.skipif(NO_NPM, reason="npm packages not installed: run `
 
 def _make_bundle(out: Path) -> Path:
     pytest.importorskip("onnx", reason="onnx is needed to make the test bundle (pip install -e '.[train]')")
-    sys.path.insert(0, str(DEMO / "tools"))
-    try:
-        from make_test_bundle import make_test_bundle
-    finally:
-        sys.path.pop(0)
-    return make_test_bundle(out)
+    from crossing_assist.testing.toy_bundle import APP_TOY, make_toy_bundle
+
+    return make_toy_bundle(out, APP_TOY)
 
 
 @needs_npm

@@ -11,6 +11,7 @@ import pytest
 from crossing_assist.actions import get_space
 from crossing_assist.bundle import (
     BundleError,
+    McSpec,
     check_session,
     embedded_meta,
     read_bundle,
@@ -61,6 +62,58 @@ def test_roundtrip(bundle_dir):
     assert b.space is get_space(13)
     with pytest.raises(Exception):
         b.fov_deg = 60.0  # frozen
+
+
+def _typed_parts(**over) -> dict:
+    """The typed parts of :func:`make_meta`'s literal dict above."""
+    from crossing_assist.bundle import Calibration, ConformalSpec, InputSpec, McSpec, UncertaintySpec
+
+    parts = dict(n_actions=13, input=InputSpec((224, 224), (0.485, 0.456, 0.406), (0.229, 0.224, 0.225)),
+                 mc=McSpec(16, 0.5), geometry=None,
+                 calibration=Calibration(1.3, ConformalSpec(0.9, 0.05, 432), UncertaintySpec("entropy", 1.2)),
+                 training=make_meta()["training"], metrics=make_meta()["metrics"],
+                 provenance=make_meta()["provenance"])
+    parts.update(over)
+    return parts
+
+
+def test_the_writer_lays_out_the_documented_schema():
+    """bundle.make_meta (the one writer of bundle metadata) gives exactly the hand-written
+    schema-1 dict from the typed parts, and the reader gives the typed parts back."""
+    from crossing_assist import bundle as B
+
+    parts = _typed_parts()
+    meta = B.make_meta(**parts)
+    assert meta == make_meta()
+    b = B.parse_meta(meta, need_bytes=False)
+    assert (b.input, b.mc, b.calibration, b.actions) == (parts["input"], parts["mc"], parts["calibration"],
+                                                       B.ActionsSpec.of(13))
+
+
+def test_the_writer_writes_schema2_with_geometry_and_portrait_threshold():
+    from crossing_assist import bundle as B
+    from crossing_assist.geometry import Geometry
+
+    geo = Geometry(fit="letterbox", pad_rgb=(1, 2, 3), camera_fov_deg=(70.0, 50.0), train_fov_deg=66.0)
+    cal = B.Calibration(1.0, B.ConformalSpec(0.9, 0.1, 5), B.UncertaintySpec("mutual_info", 0.3, 0.5))
+    inp = B.InputSpec((168, 224), (0.5, 0.5, 0.5), (0.5, 0.5, 0.5), resize="bilinear, antialiased")
+    meta = B.make_meta(**_typed_parts(geometry=geo, calibration=cal, input=inp, precision="int8"))
+    assert meta["schema_version"] == B.SCHEMA_VERSION and meta["fov_deg"] == 70.0
+    b = B.parse_meta(meta, need_bytes=False)
+    assert (b.geometry, b.calibration, b.input, b.precision) == (geo, cal, inp, "int8")
+    assert b.calibration.uncertainty.threshold_for("portrait") == 0.5
+    assert json.loads(B.graph_metadata(meta)["bundle_json"]) == meta
+
+
+@pytest.mark.parametrize("over, words", [
+    (dict(mc=McSpec(0, 0.5)), "mc.samples"), (dict(n_actions=5), "actions.n"), (dict(precision="fp16"), "precision"),
+])
+def test_the_writer_refuses_bad_parts_with_one_line(over, words):
+    from crossing_assist import bundle as B
+
+    with pytest.raises(BundleError) as e:
+        B.make_meta(**_typed_parts(**over))
+    assert words in str(e.value) and "\n" not in str(e.value)
 
 
 def test_write_replaces_existing_atomically_and_leaves_no_temp(tmp_path):

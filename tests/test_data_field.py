@@ -197,7 +197,7 @@ def test_negatives_writes_unknown_views_above_the_kerb_with_source_and_split(tmp
         h, w = crop.shape[:2]
         assert max(h, w) / min(h, w) == pytest.approx(4 / 3, abs=0.05)
         assert crop[..., 1].mean() < 60 and crop[..., 0].mean() > 150      # all above the kerb
-    r2 = _cli("negatives", ds, "--out", tmp_path / "neg2", "--quiet")
+    _cli("negatives", ds, "--out", tmp_path / "neg2", "--quiet")
     assert sorted(x.image for x in read_manifest(tmp_path / "neg2").rows) == sorted(x.image for x in neg.rows)
 
 

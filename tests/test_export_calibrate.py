@@ -161,7 +161,7 @@ def test_uncalibrated_defaults_are_safe():
     c = uncalibrated(13)
     assert c.threshold == 0.0 and c.n_frames == 0 and c.temperature == 1.0
     assert c.uncertainty_threshold == pytest.approx(math.log(13) / 2)
-    assert c.to_json()["conformal"]["threshold"] == 0.0
+    assert c.spec().to_json()["conformal"]["threshold"] == 0.0 and c.spec().uncertainty.threshold == c.uncertainty_threshold
 
 
 @pytest.mark.parametrize("module", ["crossing_assist.export", "crossing_assist.export.calibrate",

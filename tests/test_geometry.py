@@ -6,8 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from geometry_toy import LANDSCAPE_FOV, PORTRAIT_FOV, make_toy2_bundle, toy2_meta
-from runtime_toy import make_toy_bundle
+from runtime_toy import LANDSCAPE_FOV, PORTRAIT_FOV, TOY2, make_toy_bundle, toy_meta
 
 from crossing_assist.bundle import BundleError, parse_meta, read_bundle
 from crossing_assist.geometry import (
@@ -90,10 +89,10 @@ def _err(meta) -> str:
 
 
 def test_schema2_geometry_parses():
-    b = parse_meta(toy2_meta(), need_bytes=False)
+    b = parse_meta(toy_meta(TOY2), need_bytes=False)
     assert b.schema_version == 2 and b.geometry.fit == "stretch"
     assert b.geometry.camera_fov_deg == (LANDSCAPE_FOV, PORTRAIT_FOV) and b.geometry.train_fov_deg == 67.0
-    lb = toy2_meta()
+    lb = toy_meta(TOY2)
     lb["geometry"].update(fit="letterbox", pad_rgb=[1, 2, 3])
     assert parse_meta(lb, need_bytes=False).geometry.pad_rgb == (1, 2, 3)
 
@@ -113,16 +112,16 @@ def test_schema2_geometry_parses():
     (lambda g: g.update(strips="canvas"), "strips"),
 ])
 def test_schema2_geometry_errors_are_one_line(edit, words):
-    meta = toy2_meta()
+    meta = toy_meta(TOY2)
     edit(meta["geometry"])
     assert words in _err(meta)
 
 
 def test_schema2_without_geometry_is_refused_and_schema3_unsupported():
-    meta = toy2_meta()
+    meta = toy_meta(TOY2)
     del meta["geometry"]
     assert "geometry" in _err(meta)
-    assert "unsupported" in _err(toy2_meta() | {"schema_version": 3})
+    assert "unsupported" in _err(toy_meta(TOY2) | {"schema_version": 3})
 
 
 def test_schema1_reads_as_stretch_with_one_fov(tmp_path):
@@ -133,7 +132,7 @@ def test_schema1_reads_as_stretch_with_one_fov(tmp_path):
 
 
 def test_bundle_camera_fov_by_orientation_and_override(tmp_path):
-    b = read_bundle(make_toy2_bundle(tmp_path / "b2"))
+    b = read_bundle(make_toy_bundle(tmp_path / "b2", TOY2))
     assert b.camera_fov(640, 480) == LANDSCAPE_FOV
     assert b.camera_fov(480, 640) == PORTRAIT_FOV
     assert b.camera_fov(480, 640, override=60.0) == 60.0 == b.camera_fov(640, 480, override=60)
@@ -149,7 +148,7 @@ def test_bundle_camera_fov_by_orientation_and_override(tmp_path):
 def test_edited_geometry_in_bundle_json_is_caught_against_the_graph(tmp_path, edit, key):
     from crossing_assist.runtime.engine import Engine
 
-    folder = make_toy2_bundle(tmp_path / "b")
+    folder = make_toy_bundle(tmp_path / "b", TOY2)
     Engine(folder)                                   # as written: fine
     meta = json.loads((folder / "bundle.json").read_text())
     edit(meta)

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 import pytest
 import soundfile as sf
-from runtime_toy import make_toy_bundle, toy_bundle, toy_meta, toy_graph_bytes, bar_frame  # noqa: F401
+from runtime_toy import make_toy_bundle, toy_bundle, toy_meta, toy_model_bytes, bar_frame  # noqa: F401
 
 from crossing_assist.bundle import BundleError, read_bundle, write_bundle
 from crossing_assist.data_tools.cli import main as data_main
@@ -106,7 +106,7 @@ def test_all_six_commands_use_the_wrapper(name, capsys):
 @pytest.fixture()
 def toy_bytes():
     meta = toy_meta()
-    return toy_graph_bytes(meta), meta
+    return toy_model_bytes(meta=meta), meta
 
 
 def _run_folder(root: Path) -> Path:

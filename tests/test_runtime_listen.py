@@ -6,8 +6,7 @@ import subprocess
 import sys
 
 import pytest
-from geometry_toy import make_toy2_bundle
-from runtime_toy import bar_frame, toy_bundle  # noqa: F401  (fixture)
+from runtime_toy import TOY2, bar_frame, make_toy_bundle, toy_bundle  # noqa: F401  (fixture)
 
 from crossing_assist.actions import UNKNOWN, bin_center_x
 from crossing_assist.data_tools.images import save_rgb
@@ -69,7 +68,7 @@ def test_listener_puts_the_beacon_on_the_bars_strip_and_is_silent_on_flat(toy_bu
 
 
 def test_listener_reads_strips_with_the_frames_fov(tmp_path):
-    lis = Listener(Engine(make_toy2_bundle(tmp_path / "b")), seconds=0.5)
+    lis = Listener(Engine(make_toy_bundle(tmp_path / "b", TOY2)), seconds=0.5)
     for strip in (1, 3, 10, 12):
         lis.add(bar_frame(bin_center_x(strip), h=128, w=96), strip)    # portrait frames
         lis.add(bar_frame(bin_center_x(strip), h=72, w=96), strip)     # landscape frames

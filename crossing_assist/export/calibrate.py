@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from crossing_assist.bundle import Calibration, ConformalSpec, UncertaintySpec
+
 TEMP_RANGE = (0.05, 20.0)
 
 
@@ -190,13 +192,12 @@ class CalibrationResult:
     uncertainty_threshold: float
     portrait_uncertainty_threshold: float | None = None   # None: portrait frames use uncertainty_threshold
 
-    def to_json(self) -> dict:
-        unc = {"measure": self.measure, "threshold": self.uncertainty_threshold}
-        if self.portrait_uncertainty_threshold is not None:
-            unc["portrait_threshold"] = self.portrait_uncertainty_threshold
-        return {"temperature": self.temperature,
-                "conformal": {"coverage": self.coverage, "threshold": self.threshold, "n_frames": self.n_frames},
-                "uncertainty": unc}
+    def spec(self) -> Calibration:
+        """The bundle's typed ``calibration`` block."""
+        return Calibration(temperature=self.temperature,
+                           conformal=ConformalSpec(self.coverage, self.threshold, self.n_frames),
+                           uncertainty=UncertaintySpec(self.measure, self.uncertainty_threshold,
+                                                       self.portrait_uncertainty_threshold))
 
 
 def uncalibrated(n_actions: int, measure: str = "entropy") -> CalibrationResult:

@@ -32,13 +32,14 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
-import crossing_assist
 from crossing_assist.actions import get_space
 from crossing_assist.bundle import (
     INPUT_NAME,
-    SCHEMA_VERSION,
+    InputSpec,
+    McSpec,
     check_replaceable,
     check_session,
+    make_meta,
     parse_meta,
     read_bundle,
     write_bundle,
@@ -224,30 +225,23 @@ def _sha256(path: Path) -> str:
 def _meta(policy, ckpt: Path, spec: GraphSpec, calib: cal.CalibrationResult, precision: str,
           metrics: dict, cfg: ExportConfig) -> dict:
     c = policy.config
-    space = get_space(policy.n_actions)
-    geometry = _geometry(c, spec)
-    return {
-        "schema_version": SCHEMA_VERSION,
-        "model_file": "model.onnx",
-        "actions": {"n": space.n, "names": list(space.names), "bins": [list(g) for g in space.groups]},
-        "fov_deg": geometry.camera_fov_deg[0],
-        "input": {"layout": "NHWC", "dtype": "uint8", "color": "RGB", "size": list(spec.size),
-                  "mean": list(spec.mean), "std": list(spec.std), "resize": "bilinear, antialiased"},
-        "geometry": geometry.to_json(),
-        "mc": {"samples": spec.samples, "p": spec.p},
-        "calibration": calib.to_json(),
-        "precision": precision,
-        "training": {"backbone": c.get("backbone"), "head": c.get("head"),
-                     "weights_source": c.get("weights_source"), "licence": c.get("licence"),
-                     "data": c.get("data"), "counts": c.get("counts", {}),
-                     "majority_action": c.get("majority_action"), "checkpoint": str(ckpt),
-                     "checkpoint_sha256": _sha256(ckpt)},
-        "metrics": metrics,
-        "package_version": crossing_assist.__version__,
-        "provenance": {"command": " ".join(shlex.quote(a) for a in sys.argv) if sys.argv else "",
-                       "created": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
-                       "calib_data": cfg.calib_data, "calib_split": cfg.calib_split},
-    }
+    return make_meta(
+        n_actions=policy.n_actions,
+        input=InputSpec(size=spec.size, mean=spec.mean, std=spec.std, resize="bilinear, antialiased"),
+        geometry=_geometry(c, spec),
+        mc=McSpec(spec.samples, spec.p),
+        calibration=calib.spec(),
+        precision=precision,
+        training={"backbone": c.get("backbone"), "head": c.get("head"),
+                  "weights_source": c.get("weights_source"), "licence": c.get("licence"),
+                  "data": c.get("data"), "counts": c.get("counts", {}),
+                  "majority_action": c.get("majority_action"), "checkpoint": str(ckpt),
+                  "checkpoint_sha256": _sha256(ckpt)},
+        metrics=metrics,
+        provenance={"command": " ".join(shlex.quote(a) for a in sys.argv) if sys.argv else "",
+                    "created": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+                    "calib_data": cfg.calib_data, "calib_split": cfg.calib_split},
+    )
 
 
 def _measure(probs_out: dict, data: Labelled, threshold: float, n_actions: int, majority: int | None) -> dict:

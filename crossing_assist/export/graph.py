@@ -20,7 +20,6 @@ learners), also used for the PyTorch reference.
 from __future__ import annotations
 
 import copy
-import json
 import warnings
 from dataclasses import dataclass
 from typing import Any, Mapping
@@ -29,7 +28,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from crossing_assist.bundle import INPUT_NAME, OUTPUT_NAMES, SCHEMA_VERSION, embedded_meta
+from crossing_assist.bundle import INPUT_NAME, OUTPUT_NAMES, graph_metadata
 from crossing_assist.geometry import FITS, PAD_RGB
 from crossing_assist.models.mc import mc_summaries
 
@@ -135,7 +134,7 @@ def export_graph(policy: nn.Module, spec: GraphSpec, *, example_hw: tuple[int, i
 
 def set_metadata(model: Any, meta: Mapping[str, Any]) -> None:
     """Store the bundle facts in ``model.metadata_props`` (``bundle_json``, ``schema_version``)."""
-    props = {"bundle_json": json.dumps(embedded_meta(meta), sort_keys=True), "schema_version": str(SCHEMA_VERSION)}
+    props = graph_metadata(meta)
     keep = [p for p in model.metadata_props if p.key not in props]
     del model.metadata_props[:]
     for p in keep:
