@@ -68,7 +68,7 @@ class ActionsSpec:
     def of(cls, n: int) -> "ActionsSpec":
         """The spec of the ``n``-action space (names and bins from :mod:`crossing_assist.actions`)."""
         if isinstance(n, bool) or n not in VALID_SPACES:
-            raise BundleError(f"bundle: actions.n = {n!r} invalid; valid: 4, 8, 13")
+            raise BundleError(f"bundle: actions.n = {_short(n)} invalid; valid: 4, 8, 13")
         space = get_space(n)
         return cls(n=space.n, names=tuple(space.names), bins=tuple(tuple(g) for g in space.groups))
 
@@ -247,13 +247,13 @@ def _int(value: Any, name: str, lo: int, hi: int | None = None) -> int:
 
 def _choice(value: Any, name: str, valid: tuple) -> Any:
     if value not in valid:
-        raise BundleError(f"bundle.json: {name} = {value!r} unknown; valid: {', '.join(map(str, valid))}")
+        raise BundleError(f"bundle.json: {name} = {_short(value)} unknown; valid: {', '.join(map(str, valid))}")
     return value
 
 
 def _triple(value: Any, name: str, *, positive: bool) -> tuple[float, float, float]:
     if not isinstance(value, list) or len(value) != 3:
-        raise BundleError(f"bundle.json: {name} must be a list of 3 numbers (R, G, B), got {value!r}")
+        raise BundleError(f"bundle.json: {name} must be a list of 3 numbers (R, G, B), got {_short(value)}")
     lo = 0.0
     return tuple(_num(v, f"{name}[{i}]", lo, 1e6, lo_open=positive) for i, v in enumerate(value))  # type: ignore
 
@@ -261,11 +261,11 @@ def _triple(value: Any, name: str, *, positive: bool) -> tuple[float, float, flo
 def _parse_actions(d: Any) -> ActionsSpec:
     n = _get(d, "n", "actions")
     if isinstance(n, bool) or not isinstance(n, int) or n not in VALID_SPACES:
-        raise BundleError(f"bundle.json: actions.n = {n!r} invalid; valid: 4, 8, 13")
+        raise BundleError(f"bundle.json: actions.n = {_short(n)} invalid; valid: 4, 8, 13")
     space = get_space(n)
     names, bins = _get(d, "names", "actions"), _get(d, "bins", "actions")
     if names != list(space.names):
-        raise BundleError(f"bundle.json: actions.names {names!r} disagree with the {n}-action space "
+        raise BundleError(f"bundle.json: actions.names {_short(names)} disagree with the {n}-action space "
                           f"{list(space.names)!r}; re-export the bundle")
     if bins != [list(g) for g in space.groups]:
         raise BundleError(f"bundle.json: actions.bins disagree with the {n}-action space "
@@ -277,11 +277,11 @@ def _parse_input(d: Any) -> InputSpec:
     for key, want in (("layout", "NHWC"), ("dtype", "uint8"), ("color", "RGB")):
         got = _get(d, key, "input")
         if got != want:
-            raise BundleError(f"bundle.json: input.{key} = {got!r} unsupported; valid: {want!r}")
+            raise BundleError(f"bundle.json: input.{key} = {_short(got)} unsupported; valid: {want!r}")
     size = _get(d, "size", "input")
     if (not isinstance(size, list) or len(size) != 2
             or not all(isinstance(s, int) and not isinstance(s, bool) and 16 <= s <= 4096 for s in size)):
-        raise BundleError(f"bundle.json: input.size = {size!r} invalid; valid: [H, W] integers in 16..4096")
+        raise BundleError(f"bundle.json: input.size = {_short(size)} invalid; valid: [H, W] integers in 16..4096")
     return InputSpec(size=(size[0], size[1]), mean=_triple(_get(d, "mean", "input"), "input.mean", positive=False),
                      std=_triple(_get(d, "std", "input"), "input.std", positive=True),
                      resize=_str(d.get("resize", ""), "input.resize"))
@@ -316,7 +316,7 @@ def _parse_geometry(d: Any, fov_deg: float, version: int) -> Geometry:
     fit = _choice(_get(d, "fit", "geometry"), "geometry.fit", FITS)
     strips = d.get("strips", "frame")
     if strips != "frame":
-        raise BundleError(f"bundle.json: geometry.strips = {strips!r} unsupported; valid: 'frame'")
+        raise BundleError(f"bundle.json: geometry.strips = {_short(strips)} unsupported; valid: 'frame'")
     cam = _obj(_get(d, "camera_fov_deg", "geometry"), "geometry.camera_fov_deg")
     fovs = []
     for name in ("landscape", "portrait"):
@@ -330,7 +330,7 @@ def _parse_geometry(d: Any, fov_deg: float, version: int) -> Geometry:
         pad = _get(d, "pad_rgb", "geometry")
         if (not isinstance(pad, list) or len(pad) != 3
                 or not all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 255 for v in pad)):
-            raise BundleError(f"bundle.json: geometry.pad_rgb = {pad!r} must be three integers 0..255")
+            raise BundleError(f"bundle.json: geometry.pad_rgb = {_short(pad)} must be three integers 0..255")
     train = _num(d.get("train_fov_deg", fovs[0]), "geometry.train_fov_deg", 0.0, 180.0, lo_open=True, hi_open=True)
     return Geometry(fit=fit, pad_rgb=tuple(pad), camera_fov_deg=(fovs[0], fovs[1]), train_fov_deg=train)
 
@@ -354,7 +354,7 @@ def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_by
         raise BundleError("bundle.json: the top level must be a JSON object; re-export the bundle")
     version = _get(meta, "schema_version", "")
     if isinstance(version, bool) or not isinstance(version, int):
-        raise BundleError(f"bundle.json: schema_version = {version!r} must be an integer")
+        raise BundleError(f"bundle.json: schema_version = {_short(version)} must be an integer")
     if version not in READABLE_SCHEMAS:
         fix = "upgrade crossing_assist" if version > SCHEMA_VERSION else "re-export the bundle"
         raise BundleError(f"bundle.json: schema_version {version} unsupported (this package reads "
@@ -369,7 +369,7 @@ def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_by
     if need_bytes:
         sha, size = _get(meta, "model_sha256", ""), _get(meta, "model_size", "")
         if not isinstance(sha, str) or len(sha) != 64 or any(ch not in "0123456789abcdef" for ch in sha):
-            raise BundleError(f"bundle.json: model_sha256 = {sha!r} is not a lowercase hex SHA-256")
+            raise BundleError(f"bundle.json: model_sha256 = {_short(sha)} is not a lowercase hex SHA-256")
         size = _int(size, "model_size", MIN_ONNX_BYTES, MAX_ONNX_BYTES)
     fov = _num(_get(meta, "fov_deg", ""), "fov_deg", 0.0, 180.0, lo_open=True, hi_open=True)
     return Bundle(
