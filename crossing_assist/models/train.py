@@ -21,7 +21,7 @@ import csv
 import io
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -241,7 +241,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     ds = read_manifest(cfg.data)
     train_ds, val_ds = _check_sets(cfg, ds)
     policy, start = _build(cfg)
-    size = tuple(policy.config["input_size"])
+    size = policy.config.input_size
     variants = make_variants(cfg.mirror, cfg.yaw, cfg.field)
     cache = Path(cfg.cache_dir)
     fs = lambda d, v, name: compute_features(policy.backbone, start, d, size, v, cfg.fov_deg, cache,  # noqa: E731
@@ -264,10 +264,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     # baseline that is right on no crossing photo); all-unknown training data keeps unknown
     counts = np.bincount(tr.actions, minlength=cfg.actions)
     majority = int(counts[1:].argmax()) + 1 if counts[1:].any() else 0
-    policy.config["counts"] = {"train_split": int(len(train_ds)), "extra_train": n_extra,
-                               "train_samples": int(len(tr.actions)), "val": int(len(val_ds or ())),
-                               "holdout_frames": int(len(held.actions)) if held is not None else 0}
-    policy.config["majority_action"] = majority
+    sizes = {"train_split": int(len(train_ds)), "extra_train": n_extra,
+             "train_samples": int(len(tr.actions)), "val": int(len(val_ds or ())),
+             "holdout_frames": int(len(held.actions)) if held is not None else 0}
+    policy.config = replace(policy.config, counts=sizes, majority_action=majority)
     _train_mode(policy, start)
     opt = _optimizer(cfg, policy)
     first_epoch, best = 1, None
