@@ -169,3 +169,18 @@ def test_unfreeze_trains_the_last_blocks_and_only_them(tiny, tmp_path):
     assert same[:-2] == [True] * (len(blocks) - 2) and same[-2:] == [False, False]
     assert tuned.config.frozen_blocks == len(blocks) - 2
 
+
+def test_plot_training_writes_results_png_from_results_csv(tmp_path):
+    """models.plots.plot_training (what train() calls at the end); blank cells (no val set) are gaps."""
+    from crossing_assist.models.plots import plot_training
+    from crossing_assist.models.train import RESULT_FIELDS
+
+    rows = [{"epoch": e, "train_loss": 1.0 / e, "sel_accuracy": 0.1 * e, "sel_bin_mae": "", "sel_nll": "",
+             "val_accuracy": "", "val_bin_mae": "", "val_nll": "", "seconds": 0.1} for e in (1, 2, 3)]
+    with open(tmp_path / "results.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=RESULT_FIELDS)
+        w.writeheader()
+        w.writerows(rows)
+    path = plot_training(tmp_path)
+    assert path == tmp_path / "results.png" and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results.csv", "results.png"]   # no temp file left
