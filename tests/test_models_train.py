@@ -63,9 +63,9 @@ def test_run_folder_has_everything_and_best_loads(tiny, tmp_path):
     assert [int(r["epoch"]) for r in rows] == [1, 2]
     assert all(float(r["val_accuracy"]) >= 0 for r in rows)
     policy = load_policy(out / "weights" / "best.pt")
-    assert policy.config["input_size"] == [64, 64] and policy.n_actions == 13
+    assert policy.config.input_size == (64, 64) and policy.n_actions == 13
     # mirrored + yaw +-10 -> 6 variants of the 8 train frames
-    assert policy.config["counts"]["train_samples"] == (8 + 3) * 6 and policy.config["counts"]["extra_train"] == 3
+    assert policy.config.counts["train_samples"] == (8 + 3) * 6 and policy.config.counts["extra_train"] == 3
     logits = policy(torch.zeros(2, 3, 64, 64), samples=3, mc=False)
     assert logits.shape == (3, 2, 13)
 
@@ -149,7 +149,7 @@ def test_cache_is_reused_and_deeper_entries_derive_from_shallower(tiny, tmp_path
 
 def test_holdout_sources_are_masked_from_one_cache(tiny, tmp_path):
     out = train(_cfg(tiny, tmp_path / "run", epochs=1, holdout=("src:0",), select_on="holdout"))
-    counts = load_policy(out / "weights" / "best.pt").config["counts"]
+    counts = load_policy(out / "weights" / "best.pt").config.counts
     # train rows 0..7, sources i % 3: src:0 holds rows 0, 3, 6 -> 5 rows x 2 (mirror) train, 3 held-out frames
     assert counts["train_samples"] == 10 and counts["holdout_frames"] == 3
     assert len(list((tmp_path / "cache").iterdir())) == 2   # train split + val, no extra entry
@@ -167,4 +167,20 @@ def test_unfreeze_trains_the_last_blocks_and_only_them(tiny, tmp_path):
     same = [all(torch.equal(a, b) for a, b in zip(fa.state_dict().values(), ta.state_dict().values()))
             for fa, ta in blocks]
     assert same[:-2] == [True] * (len(blocks) - 2) and same[-2:] == [False, False]
-    assert tuned.config["frozen_blocks"] == len(blocks) - 2
+    assert tuned.config.frozen_blocks == len(blocks) - 2
+
+
+def test_plot_training_writes_results_png_from_results_csv(tmp_path):
+    """models.plots.plot_training (what train() calls at the end); blank cells (no val set) are gaps."""
+    from crossing_assist.models.plots import plot_training
+    from crossing_assist.models.train import RESULT_FIELDS
+
+    rows = [{"epoch": e, "train_loss": 1.0 / e, "sel_accuracy": 0.1 * e, "sel_bin_mae": "", "sel_nll": "",
+             "val_accuracy": "", "val_bin_mae": "", "val_nll": "", "seconds": 0.1} for e in (1, 2, 3)]
+    with open(tmp_path / "results.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=RESULT_FIELDS)
+        w.writeheader()
+        w.writerows(rows)
+    path = plot_training(tmp_path)
+    assert path == tmp_path / "results.png" and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results.csv", "results.png"]   # no temp file left

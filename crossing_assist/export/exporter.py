@@ -27,7 +27,7 @@ import time
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 import torch
@@ -49,7 +49,10 @@ from crossing_assist.errors import UserError
 from crossing_assist.export import calibrate as cal
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
 from crossing_assist.export.quantize import INT8_MODES, quantize_convs
-from crossing_assist.geometry import PAD_RGB, TRAIN_FOV_DEG, Geometry
+from crossing_assist.geometry import Geometry
+
+if TYPE_CHECKING:  # annotations only: models is imported where it is used (_load_policy)
+    from crossing_assist.models.policy import PolicyConfig
 
 PARITY_TOL = 1e-4
 
@@ -178,16 +181,15 @@ def _load_policy(run: str):
         raise ExportError(str(exc)) from None
 
 
-def _spec(config: dict, samples: int, p: float, temperature: float = 1.0) -> GraphSpec:
+def _spec(config: PolicyConfig, samples: int, p: float, temperature: float = 1.0) -> GraphSpec:
     """The graph of a policy config; a checkpoint from before the geometry contract (no
-    ``fit``) was trained on stretched frames and keeps ``stretch``."""
-    return GraphSpec(size=tuple(int(s) for s in config["input_size"]), mean=tuple(config["mean"]),
-                     std=tuple(config["std"]), samples=samples, p=p, temperature=temperature,
-                     fit=config.get("fit", "stretch"), pad_rgb=tuple(config.get("pad_rgb", PAD_RGB)))
+    ``fit``) was trained on stretched frames and keeps ``stretch`` (PolicyConfig's default)."""
+    return GraphSpec(size=config.input_size, mean=config.mean, std=config.std, samples=samples, p=p,
+                     temperature=temperature, fit=config.fit, pad_rgb=config.pad_rgb)
 
 
-def _geometry(config: dict, spec: GraphSpec) -> Geometry:
-    return Geometry(fit=spec.fit, pad_rgb=spec.pad_rgb, train_fov_deg=float(config.get("fov_deg", TRAIN_FOV_DEG)))
+def _geometry(config: PolicyConfig, spec: GraphSpec) -> Geometry:
+    return Geometry(fit=spec.fit, pad_rgb=spec.pad_rgb, train_fov_deg=config.fov_deg)
 
 
 def parity_check(policy, spec: GraphSpec, frames: np.ndarray) -> float:
@@ -232,10 +234,10 @@ def _meta(policy, ckpt: Path, spec: GraphSpec, calib: cal.CalibrationResult, pre
         mc=McSpec(spec.samples, spec.p),
         calibration=calib.spec(),
         precision=precision,
-        training={"backbone": c.get("backbone"), "head": c.get("head"),
-                  "weights_source": c.get("weights_source"), "licence": c.get("licence"),
-                  "data": c.get("data"), "counts": c.get("counts", {}),
-                  "majority_action": c.get("majority_action"), "checkpoint": str(ckpt),
+        training={"backbone": c.backbone, "head": c.head,
+                  "weights_source": c.weights_source, "licence": c.licence,
+                  "data": c.data, "counts": dict(c.counts),
+                  "majority_action": c.majority_action, "checkpoint": str(ckpt),
                   "checkpoint_sha256": _sha256(ckpt)},
         metrics=metrics,
         provenance={"command": " ".join(shlex.quote(a) for a in sys.argv) if sys.argv else "",
@@ -288,8 +290,8 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     torch.set_num_threads(max(1, cfg.threads))
     policy, ckpt = _load_policy(cfg.run)
     n = policy.n_actions
-    p = float(policy.config.get("p", 0.5)) if cfg.p is None else cfg.p
-    majority = policy.config.get("majority_action") or None   # 0 (unknown): runs whose baseline counted negatives
+    p = policy.config.p if cfg.p is None else cfg.p
+    majority = policy.config.majority_action or None   # 0 (unknown): runs whose baseline counted negatives
     data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress) if cfg.calib_data else None
     calib, metrics, notes = cal.uncalibrated(n, cfg.measure), {}, []
     if data is not None:

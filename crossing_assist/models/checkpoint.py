@@ -1,7 +1,7 @@
 """Checkpoints: a dict of plain types and tensors, saved atomically, loaded with weights_only.
 
 Layout: ``{"format": "crossing_assist.policy", "version": 1, "state_dict": {...},
-"config": {...plain JSON...}, "metrics": {...}, "epoch": int, ...extra}``. No pickled
+"config": {...PolicyConfig.to_dict(), plain JSON...}, "metrics": {...}, "epoch": int, ...extra}``. No pickled
 objects, so ``torch.load(weights_only=True)`` reads it and a checkpoint cannot run code.
 """
 
@@ -18,7 +18,7 @@ import torch
 from crossing_assist.errors import UserError
 
 from ..fileio import atomic_path
-from .policy import Policy
+from .policy import Policy, PolicyConfig
 
 FORMAT = "crossing_assist.policy"
 VERSION = 1
@@ -44,7 +44,7 @@ def save_checkpoint(path: str | os.PathLike, policy: Policy, extra: dict | None 
     extra = dict(extra or {})
     data = {"format": FORMAT, "version": VERSION,
             "state_dict": {k: v.detach().cpu().clone() for k, v in policy.state_dict().items()},
-            "config": _plain(policy.config, "config"),
+            "config": _plain(policy.config.to_dict(), "config"),
             "metrics": _plain(extra.pop("metrics", {}), "metrics"),
             "epoch": int(extra.pop("epoch", 0))}
     data.update(extra)
@@ -77,10 +77,11 @@ def load_policy(path: str | os.PathLike) -> Policy:
     """Rebuild the policy saved at ``path`` (eval mode). CheckpointError when it cannot."""
     data = load_checkpoint(path)
     try:
-        policy = Policy.from_config(data["config"])
+        config = PolicyConfig.from_dict(data["config"])
+        policy = Policy.from_config(config)
         policy.load_state_dict(data["state_dict"])
-        if data["config"].get("weights_source"):  # the weights are those the run started from
-            policy.backbone.facts = replace(policy.backbone.facts, weights_source=str(data["config"]["weights_source"]))
+        if config.weights_source:  # the weights are those the run started from
+            policy.backbone.facts = replace(policy.backbone.facts, weights_source=config.weights_source)
     except (KeyError, ValueError, RuntimeError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise CheckpointError(f"{path}: checkpoint does not fit its config: {first}") from None

@@ -96,13 +96,13 @@ def activation_maps(policy: Policy, images: list[np.ndarray], actions: np.ndarra
     """Per frame, the head's activation map of ``actions[i]`` (spatial: 1 x 12 column shares;
     thesis heads: h x w score / CAM map)."""
     policy.eval()
-    size = tuple(policy.config["input_size"])
-    if policy.config.get("fit", "stretch") == "letterbox":
+    size = policy.config.input_size
+    if policy.config.fit == "letterbox":
         fitted = [letterbox(i, size) for i in images]
         window = torch.tensor([content_window(i.shape[0], i.shape[1], size) for i in images], dtype=torch.float32)
     else:
         fitted, window = [resize_rgb(i, size) for i in images], None
-    x = torch.from_numpy(normalise(np.stack(fitted), policy.config["mean"], policy.config["std"]))
+    x = torch.from_numpy(normalise(np.stack(fitted), policy.config.mean, policy.config.std))
     feats = policy.backbone.forward_features(x)
     head = policy.head
     maps = head.column_maps(feats, window)[:, :, None, :] if hasattr(head, "column_maps") else head.score_maps(feats)
@@ -114,10 +114,10 @@ def _eval_checkpoint(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, 
     policy = load_policy(path)
     ck = load_checkpoint(path)
     c = policy.config
-    start = int(c.get("frozen_blocks", len(policy.backbone.blocks)))
-    fs = compute_features(policy.backbone, start, part, tuple(c["input_size"]), make_variants(cfg.tta_mirror),
-                          float(c["fov_deg"]), Path(cfg.cache_dir), progress=cfg.progress, desc=f"features {cfg.split}",
-                          fit=c.get("fit", "stretch"))
+    start = len(policy.backbone.blocks) if c.frozen_blocks is None else c.frozen_blocks
+    fs = compute_features(policy.backbone, start, part, c.input_size, make_variants(cfg.tta_mirror),
+                          c.fov_deg, Path(cfg.cache_dir), progress=cfg.progress, desc=f"features {cfg.split}",
+                          fit=c.fit)
     split = Split(torch.from_numpy(np.array(fs.feats)), fs.labels, fs.far_x, torch.from_numpy(np.asarray(fs.window)))
     probs = predict_split(policy, split, start, samples=cfg.samples)
     if cfg.tta_mirror:  # average each frame with its mirror image (actions mapped back)
@@ -125,8 +125,8 @@ def _eval_checkpoint(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, 
         back = [space.mirror_action(a) for a in range(policy.n_actions)]
         probs = 0.5 * (probs[0::2] + probs[1::2][:, back])
     info = {"source": "checkpoint", "checkpoint": str(path), "epoch": int(ck.get("epoch", 0)),
-            "samples": cfg.samples, "tta_mirror": cfg.tta_mirror, "majority_from": "train" if "majority_action" in c else "eval labels",
-            "backbone": c["backbone"], "head": c["head"]}
+            "samples": cfg.samples, "tta_mirror": cfg.tta_mirror, "majority_from": "train" if c.majority_action is not None else "eval labels",
+            "backbone": c.backbone, "head": c.head}
     return probs, info, policy
 
 
@@ -219,7 +219,7 @@ def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
     policy = None
     if cfg.run is not None:
         probs, info, policy = _eval_checkpoint(cfg, part)
-        n_actions, majority = policy.n_actions, policy.config.get("majority_action")
+        n_actions, majority = policy.n_actions, policy.config.majority_action
         default_out = _checkpoint_path(cfg.run).parent.parent / f"eval_{cfg.split}"
     else:
         probs, info, bundle = _eval_bundle(cfg, part)

@@ -1,10 +1,12 @@
-"""Evaluation plots: confusion matrix, reliability diagram, example sheet with activation maps.
+"""Plots: training curves (``results.png``), and for evaluation the confusion matrix, reliability
+diagram, example sheet with activation maps and risk-coverage curve.
 
 Every figure is written atomically (temp file + ``os.replace``) with matplotlib's Agg backend.
 """
 
 from __future__ import annotations
 
+import csv
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +29,26 @@ def _save(fig, path: Path) -> Path:
         fig.savefig(tmp, dpi=100)
     _plt().close(fig)
     return path
+
+
+def plot_training(out: str | Path) -> Path:
+    """``out/results.png`` from ``out/results.csv`` (a training run folder): train loss, and
+    selection/val accuracy per epoch (a blank cell is a gap). Returns the image's path."""
+    plt = _plt()
+    out = Path(out)
+    with open(out / "results.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    ep = [int(r["epoch"]) for r in rows]
+    num = lambda k: [float(r[k]) if r[k] else np.nan for r in rows]  # noqa: E731
+    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.5))
+    a.plot(ep, num("train_loss"))
+    a.set(xlabel="epoch", ylabel="train loss", title="loss")
+    for k, lab in (("sel_accuracy", "selection"), ("val_accuracy", "val")):
+        b.plot(ep, num(k), label=lab)
+    b.set(xlabel="epoch", ylabel="accuracy", title="accuracy")
+    b.legend()
+    fig.tight_layout()
+    return _save(fig, out / "results.png")
 
 
 def plot_confusion(conf: np.ndarray, names: list[str], path: Path, title: str = "") -> Path:

@@ -21,7 +21,7 @@ import csv
 import io
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +32,7 @@ from tqdm import tqdm
 
 from ..actions import UNKNOWN, get_space
 from ..data_tools.manifest import Dataset, atomic_write_text, read_manifest
-from ..fileio import atomic_path, sweep_orphans
+from ..fileio import sweep_orphans
 from .backbones import create_backbone
 from .cache import FeatureSet, compute_features
 from .checkpoint import load_checkpoint, save_checkpoint
@@ -41,6 +41,7 @@ from . import distributed
 from .data import make_variants
 from .heads import create_head
 from .metrics import compute_metrics
+from .plots import plot_training
 from .policy import Policy, policy_config
 
 RESULT_FIELDS = ("epoch", "train_loss", "sel_accuracy", "sel_bin_mae", "sel_nll",
@@ -241,7 +242,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     ds = read_manifest(cfg.data)
     train_ds, val_ds = _check_sets(cfg, ds)
     policy, start = _build(cfg)
-    size = tuple(policy.config["input_size"])
+    size = policy.config.input_size
     variants = make_variants(cfg.mirror, cfg.yaw, cfg.field)
     cache = Path(cfg.cache_dir)
     fs = lambda d, v, name: compute_features(policy.backbone, start, d, size, v, cfg.fov_deg, cache,  # noqa: E731
@@ -264,10 +265,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     # baseline that is right on no crossing photo); all-unknown training data keeps unknown
     counts = np.bincount(tr.actions, minlength=cfg.actions)
     majority = int(counts[1:].argmax()) + 1 if counts[1:].any() else 0
-    policy.config["counts"] = {"train_split": int(len(train_ds)), "extra_train": n_extra,
-                               "train_samples": int(len(tr.actions)), "val": int(len(val_ds or ())),
-                               "holdout_frames": int(len(held.actions)) if held is not None else 0}
-    policy.config["majority_action"] = majority
+    sizes = {"train_split": int(len(train_ds)), "extra_train": n_extra,
+             "train_samples": int(len(tr.actions)), "val": int(len(val_ds or ())),
+             "holdout_frames": int(len(held.actions)) if held is not None else 0}
+    policy.config = replace(policy.config, counts=sizes, majority_action=majority)
     _train_mode(policy, start)
     opt = _optimizer(cfg, policy)
     first_epoch, best = 1, None
@@ -309,7 +310,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
                                             "optimizer": opt.state_dict(), "best_score": best})
         bar.set_postfix(loss=row["train_loss"], acc=row["sel_accuracy"], mae=row["sel_bin_mae"])
     if ctx.main:
-        _plot_results(out)
+        plot_training(out)
     distributed.barrier(ctx)  # every rank returns once the run folder is complete
     return out
 
@@ -427,26 +428,3 @@ def _run_epoch_ddp(opt: torch.optim.Optimizer, tr: Split, cfg: TrainConfig, weig
         total += float(loss.detach()) * len(batch)
     return distributed.all_sum(ctx, total) / max(len(order), 1)
 
-
-def _plot_results(out: Path) -> None:
-    """results.png: train loss and selection/val accuracy per epoch."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    with open(out / "results.csv", newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    ep = [int(r["epoch"]) for r in rows]
-    num = lambda k: [float(r[k]) if r[k] else np.nan for r in rows]  # noqa: E731
-    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.5))
-    a.plot(ep, num("train_loss"))
-    a.set(xlabel="epoch", ylabel="train loss", title="loss")
-    for k, lab in (("sel_accuracy", "selection"), ("val_accuracy", "val")):
-        b.plot(ep, num(k), label=lab)
-    b.set(xlabel="epoch", ylabel="accuracy", title="accuracy")
-    b.legend()
-    fig.tight_layout()
-    with atomic_path(out / "results.png") as tmp:
-        fig.savefig(tmp, dpi=100)
-    plt.close(fig)
