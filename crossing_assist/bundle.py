@@ -31,6 +31,7 @@ from typing import Any, Mapping
 from crossing_assist import __version__
 from crossing_assist.actions import DEFAULT_FOV_DEG, VALID_SPACES, ActionSpace, get_space
 from crossing_assist.errors import UserError
+from crossing_assist.errors import short_repr as _short  # one cut-to-length repr for every error line
 from crossing_assist.geometry import FITS, Geometry, GeometryError, check_fov
 
 SCHEMA_VERSION = 2
@@ -210,15 +211,6 @@ def _get(d: Mapping[str, Any], key: str, where: str) -> Any:
     return d[key]
 
 
-def _short(value: Any, limit: int = 60) -> str:
-    """``repr(value)`` cut to ``limit`` characters (a 5000-digit number must not flood the line)."""
-    try:
-        text = repr(value)
-    except ValueError:  # an int too long for str() (over sys.get_int_max_str_digits)
-        return f"<{type(value).__name__} too long to show>"
-    return text if len(text) <= limit else text[:limit - 3] + "..."
-
-
 def _num(value: Any, name: str, lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise BundleError(f"bundle.json: {name} = {_short(value)} is not a finite number")
@@ -262,15 +254,16 @@ def _parse_actions(d: Any) -> ActionsSpec:
     n = _get(d, "n", "actions")
     if isinstance(n, bool) or not isinstance(n, int) or n not in VALID_SPACES:
         raise BundleError(f"bundle.json: actions.n = {_short(n)} invalid; valid: 4, 8, 13")
-    space = get_space(n)
+    spec = ActionsSpec.of(n)
+    want = spec.to_json()
     names, bins = _get(d, "names", "actions"), _get(d, "bins", "actions")
-    if names != list(space.names):
+    if names != want["names"]:
         raise BundleError(f"bundle.json: actions.names {_short(names)} disagree with the {n}-action space "
-                          f"{list(space.names)!r}; re-export the bundle")
-    if bins != [list(g) for g in space.groups]:
+                          f"{want['names']!r}; re-export the bundle")
+    if bins != want["bins"]:
         raise BundleError(f"bundle.json: actions.bins disagree with the {n}-action space "
-                          f"{[list(g) for g in space.groups]!r}; re-export the bundle")
-    return ActionsSpec(n=n, names=tuple(names), bins=tuple(tuple(g) for g in bins))
+                          f"{want['bins']!r}; re-export the bundle")
+    return spec
 
 
 def _parse_input(d: Any) -> InputSpec:

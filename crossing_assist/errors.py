@@ -47,6 +47,16 @@ def first_line(exc: BaseException) -> str:
     return type(exc).__name__
 
 
+def short_repr(value: object, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters, for an error line: a 5000-digit number or a
+    pasted list must not flood it, and a string's newlines show escaped."""
+    try:
+        text = repr(value)
+    except ValueError:  # an int too long for str() (over sys.get_int_max_str_digits)
+        return f"<{type(value).__name__} too long to show>"
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 def os_error_line(exc: OSError) -> str:
     """``<file>: <reason>`` for an OSError (the file name shortened when absurdly long)."""
     name = exc.filename if exc.filename is not None else ""

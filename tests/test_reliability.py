@@ -488,3 +488,17 @@ def test_sigterm_cleans_up_like_ctrl_c(tmp_path):
     _, err = proc.communicate(timeout=120)
     assert ready == "ready" and proc.returncode == 143, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_short_repr_keeps_an_error_line_short_and_on_one_line():
+    """The one cut-to-length repr (errors.short_repr) behind bundle.json and Label Studio errors:
+    the values the long fuzz found (a 2000-character list of huge ints, an id with a newline)."""
+    import sys as _sys
+
+    from crossing_assist.errors import short_repr
+
+    huge = [10 ** 400] * 5
+    assert len(short_repr(huge)) == 60 and short_repr(huge).endswith("...")
+    assert short_repr("a\nb") == "'a\\nb'" and "\n" not in short_repr("a\nb")
+    assert short_repr(7) == "7" and short_repr("x" * 100, 40).endswith("...")
+    assert short_repr(10 ** (_sys.get_int_max_str_digits() + 10)) == "<int too long to show>"

@@ -37,7 +37,7 @@ import numpy as np
 
 from crossing_assist.actions import N_BINS, UNKNOWN, format_label, parse_label
 from crossing_assist.data_tools.manifest import reading_csv
-from crossing_assist.errors import UserError
+from crossing_assist.errors import UserError, short_repr
 
 TIE_RULES = ("unknown", "drop")
 _UPLOAD_PREFIX = re.compile(r"^[0-9a-f]{8}-")
@@ -127,15 +127,6 @@ def read_votes_csv(path: Path, index: FrameIndex) -> list[tuple[str, str, int, s
     return votes
 
 
-def _short_id(tid: Any) -> str:
-    """A Label Studio task id for an error line: an int as is, a string quoted (newlines escaped)
-    and cut to 40 characters, anything else ``?``."""
-    if isinstance(tid, bool) or not isinstance(tid, (int, str)):
-        return "?"
-    text = repr(tid) if isinstance(tid, str) else str(tid) if abs(tid) < 10 ** 40 else "<long int>"
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
 def _ls_image_ref(url: str) -> str:
     if "?d=" in url:
         return urllib.parse.unquote(url.split("?d=", 1)[1])
@@ -192,7 +183,7 @@ def read_label_studio(path: Path, index: FrameIndex, *, image_key: str = "image"
     votes = []
     for k, task in enumerate(tasks):
         tid = task.get("id", "?") if isinstance(task, dict) else "?"
-        where = f"{path} task {k} (id {_short_id(tid)})"
+        where = f"{path} task {k} (id {short_repr(tid, 40) if isinstance(tid, (int, str)) and not isinstance(tid, bool) else '?'})"
         data = task.get("data") if isinstance(task, dict) else None
         url = data.get(image_key) if isinstance(data, dict) else None
         if not isinstance(url, str):
