@@ -77,14 +77,16 @@ def _why_skip() -> str | None:
 pytestmark = pytest.mark.skipif(_why_skip() is not None, reason=_why_skip() or "")
 
 
-def _tools():
+def _clip_tool():
+    """android_demo/tools/clip.py (Y4M clips for the fake camera); skips without onnx, which
+    builds the test bundles."""
     pytest.importorskip("onnx", reason="onnx is needed to make the test bundle (pip install -e '.[train]')")
     sys.path.insert(0, str(DEMO / "tools"))
     try:
         import clip
     finally:
         sys.path.pop(0)
-    return clip, toy_bundle
+    return clip
 
 
 def _build(tmp: Path, bundle: Path) -> Path:
@@ -110,9 +112,9 @@ def _drive(tmp: Path, www: Path, clip_path: Path, run_s: float, *extra: str) -> 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory) -> dict:
     """Build the app with the test bundle (schema-2 json), run the driver once, return its record."""
-    clip, mtb = _tools()
+    clip = _clip_tool()
     tmp = tmp_path_factory.mktemp("android_e2e")
-    bundle = mtb.make_toy_bundle(tmp / "bundle", mtb.APP_TOY, geometry=APP_GEOMETRY)
+    bundle = toy_bundle.make_toy_bundle(tmp / "bundle", toy_bundle.APP_TOY, geometry=APP_GEOMETRY)
     www = _build(tmp, bundle)
     frames, strips, frozen = clip.bar_clip(fps=FPS, flip_s=FLIP_S)
     clip.write_y4m(tmp / "clip.y4m", frames, FPS)
@@ -129,9 +131,9 @@ def portrait(tmp_path_factory) -> dict:
         pytest.skip("the default bundle or the sample clip is not in crossing_assist/assets")
     import cv2
 
-    clip, mtb = _tools()
+    clip = _clip_tool()
     tmp = tmp_path_factory.mktemp("android_e2e_portrait")
-    det = mtb.deterministic_copy(DEFAULT_BUNDLE, tmp / "bundle")
+    det = toy_bundle.deterministic_copy(DEFAULT_BUNDLE, tmp / "bundle")
     www = _build(tmp, det)
     cap = cv2.VideoCapture(str(SAMPLE_CLIP))
     frames = []
@@ -613,7 +615,7 @@ def test_default_bundle_on_the_sample_clip_agrees_with_python(tmp_path: Path) ->
         pytest.skip("the default bundle or the sample clip is not in crossing_assist/assets yet")
     import cv2
 
-    clip, _ = _tools()
+    clip = _clip_tool()
     cap = cv2.VideoCapture(str(SAMPLE_CLIP))
     fps = cap.get(cv2.CAP_PROP_FPS) or 15.0
     frames = []

@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 import pytest
-from runtime_toy import LANDSCAPE_FOV, PORTRAIT_FOV, TOY2, bar_frame, make_toy_bundle, toy_bundle, toy_meta, toy_model_bytes  # noqa: F401  (fixture)
+from runtime_toy import LANDSCAPE_FOV, PORTRAIT_FOV, TOY2, bar_frame, make_toy_bundle, toy_bundle  # noqa: F401  (fixture)
 
 from crossing_assist.actions import bin_center_x, get_space, heading_to_x, x_to_bin
 from crossing_assist.bundle import BundleError
@@ -165,11 +165,7 @@ def test_demo_summary_names_the_fov_on_a_bar_clip(tmp_path, toy2):
 
 
 def _two_thresholds(folder, landscape: float, portrait: float):
-    from crossing_assist.bundle import write_bundle
-
-    meta = toy_meta(TOY2)
-    meta["calibration"]["uncertainty"].update(threshold=landscape, portrait_threshold=portrait)
-    return write_bundle(folder, toy_model_bytes(TOY2, meta), meta)
+    return make_toy_bundle(folder, TOY2, threshold=landscape, portrait_threshold=portrait)
 
 
 def test_each_orientation_gets_its_own_gate_threshold(tmp_path, toy2):
@@ -195,10 +191,9 @@ def test_each_orientation_gets_its_own_gate_threshold(tmp_path, toy2):
 
 @pytest.mark.parametrize("bad", [-1.0, 0.0, "1.2", float("inf")])
 def test_a_bad_portrait_threshold_is_one_line(tmp_path, bad):
-    from crossing_assist.bundle import read_bundle, write_bundle
+    from crossing_assist.bundle import read_bundle
 
-    meta = toy_meta(TOY2)
-    folder = write_bundle(tmp_path / "b", toy_model_bytes(TOY2, meta), meta)
+    folder = make_toy_bundle(tmp_path / "b", TOY2)
     raw = json.loads((folder / "bundle.json").read_text())
     raw["calibration"]["uncertainty"]["portrait_threshold"] = bad
     (folder / "bundle.json").write_text(json.dumps(raw).replace("Infinity", "1e999"))

@@ -61,6 +61,7 @@ class Toy:
     drop_p: float = 0.05
     noise: float = 0.0
     threshold: float = 1.0          # the gate's entropy threshold (nats)
+    portrait_threshold: float | None = None  # the same for portrait frames (None: threshold)
     geometry: Geometry | None = None  # None: a schema-1 bundle
     name: str = "toy-bright-strip"
 
@@ -88,7 +89,7 @@ def toy_meta(toy: Toy = RUNTIME_TOY) -> dict:
         input=InputSpec(size=toy.size, mean=toy.mean, std=toy.std),
         geometry=toy.geometry,
         mc=McSpec(toy.samples, toy.drop_p),
-        calibration=Calibration(1.0, ConformalSpec(0.9, 0.05, 0), UncertaintySpec("entropy", toy.threshold)),
+        calibration=Calibration(1.0, ConformalSpec(0.9, 0.05, 0), UncertaintySpec("entropy", toy.threshold, toy.portrait_threshold)),
         training={"backbone": toy.name, "head": "none", "data": "none", "counts": {}},
         provenance={"command": "crossing_assist.testing.toy_bundle", "created": "test"},
     )
