@@ -101,13 +101,17 @@ class InputSpec:
 
 @dataclass(frozen=True)
 class McSpec:
-    """MC dropout: ``samples`` (T) head samples per frame with drop probability ``p``."""
+    """MC dropout: ``samples`` (T) head samples per frame with drop probability ``p``;
+    ``mirror``: the graph also runs the frame mirrored left-right (actions mapped back) and
+    summarises the 2T samples of both (mirror test-time augmentation, twice the backbone's cost).
+    Absent in bundle.json = False (bundles from before it)."""
 
     samples: int
     p: float
+    mirror: bool = False
 
     def to_json(self) -> dict:
-        return {"samples": self.samples, "p": self.p}
+        return {"samples": self.samples, "p": self.p, **({"mirror": True} if self.mirror else {})}
 
 
 @dataclass(frozen=True)
@@ -234,6 +238,12 @@ def _int(value: Any, name: str, lo: int, hi: int | None = None) -> int:
     if value < lo or (hi is not None and value > hi):
         valid = f"{lo}..{hi}" if hi is not None else f">= {lo}"
         raise BundleError(f"bundle.json: {name} = {_short(value)} is out of range; valid: {valid}")
+    return value
+
+
+def _bool(value: Any, name: str) -> bool:
+    if not isinstance(value, bool):
+        raise BundleError(f"bundle.json: {name} = {_short(value)} must be true or false")
     return value
 
 
@@ -373,7 +383,8 @@ def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_by
         fov_deg=fov,
         input=_parse_input(_get(meta, "input", "")),
         mc=McSpec(samples=_int(_get(mc, "samples", "mc"), "mc.samples", 1, 1024),
-                  p=_num(_get(mc, "p", "mc"), "mc.p", 0.0, 1.0, hi_open=True)),
+                  p=_num(_get(mc, "p", "mc"), "mc.p", 0.0, 1.0, hi_open=True),
+                  mirror=_bool(mc.get("mirror", False), "mc.mirror")),
         calibration=_parse_calibration(_get(meta, "calibration", "")),
         precision=_choice(_get(meta, "precision", ""), "precision", PRECISIONS),
         training=_obj(_get(meta, "training", ""), "training"),

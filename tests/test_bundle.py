@@ -105,6 +105,17 @@ def test_the_writer_writes_schema2_with_geometry_and_portrait_threshold():
     assert json.loads(B.graph_metadata(meta)["bundle_json"]) == meta
 
 
+def test_mirror_tta_is_written_only_when_on_and_read_back():
+    """``mc.mirror``: absent (older bundles, and mirror off) reads as False."""
+    from crossing_assist import bundle as B
+
+    off = B.make_meta(**_typed_parts())
+    assert "mirror" not in off["mc"] and B.parse_meta(off, need_bytes=False).mc.mirror is False
+    on = B.make_meta(**_typed_parts(mc=McSpec(16, 0.5, mirror=True)))
+    assert on["mc"] == {"samples": 16, "p": 0.5, "mirror": True}
+    assert B.parse_meta(on, need_bytes=False).mc == McSpec(16, 0.5, True)
+
+
 @pytest.mark.parametrize("over, words", [
     (dict(mc=McSpec(0, 0.5)), "mc.samples"), (dict(n_actions=5), "actions.n"), (dict(precision="fp16"), "precision"),
 ])
@@ -188,6 +199,7 @@ def test_invalid_json_text(bundle_dir):
         (lambda m: m["input"]["mean"].pop(), "input.mean must be a list of 3"),
         (lambda m: m["mc"].update(samples=0), "mc.samples = 0 is out of range"),
         (lambda m: m["mc"].update(p=1.0), r"mc.p = 1.0 is out of range"),
+        (lambda m: m["mc"].update(mirror=1), "mc.mirror = 1 must be true or false"),
         (lambda m: m["calibration"].update(temperature=-1), "calibration.temperature"),
         (lambda m: m["calibration"]["conformal"].update(coverage=1.0), "calibration.conformal.coverage"),
         (lambda m: m["calibration"]["conformal"].pop("threshold"),

@@ -207,3 +207,29 @@ def test_default_head_exports_random_and_exact():
     with torch.no_grad():
         want = BundleGraph(policy, det)(torch.from_numpy(x))[0].numpy()
     np.testing.assert_allclose(run(session(policy, det), x)["probs"], want, atol=1e-4)
+
+
+@pytest.mark.parametrize("hw", [(36, 48), (48, 48), (48, 36)])   # padding even on both sides (else the canvas
+def test_mirror_graph_averages_the_frame_and_its_mirror_image_with_actions_mapped_back(policy, hw):  # flip shifts 1 px)
+    """``mirror``: the deterministic graph's probs are the mean of the plain graph's on the frame
+    and on its mirror image (strip k -> 13 - k); so the mirrored frame gives the mirrored probs."""
+    det = GraphSpec(size=(24, 32), mean=MEAN, std=STD, samples=1, p=0.0, fit="letterbox")
+    plain, both = session(policy, det), session(policy, GraphSpec(**{**det.__dict__, "mirror": True}))
+    x = frames(2, *hw)
+    flipped = np.ascontiguousarray(x[:, :, ::-1])
+    perm = [0] + list(range(12, 0, -1))
+    want = (run(plain, x)["probs"] + run(plain, flipped)["probs"][:, perm]) / 2
+    got = run(both, x)["probs"]
+    np.testing.assert_allclose(got, want, atol=1e-5)
+    np.testing.assert_allclose(run(both, flipped)["probs"], got[:, perm], atol=1e-5)
+    assert np.abs(run(plain, x)["probs"] - got).max() > 1e-3   # the mirror really changed something
+
+
+def test_mirror_graph_summarises_both_sets_of_mc_samples(policy):
+    """2T samples: the votes are multiples of 1/(2T) and the outputs keep their shapes."""
+    spec = GraphSpec(size=(32, 32), mean=MEAN, std=STD, samples=4, p=0.5, mirror=True)
+    out = run(session(policy, spec), frames(3))
+    assert out["probs"].shape == (3, 13) and out["votes"].shape == (3, 13)
+    np.testing.assert_allclose(out["votes"].sum(1), 1.0, atol=1e-6)
+    np.testing.assert_allclose(out["votes"] * 8, np.round(out["votes"] * 8), atol=1e-5)
+    assert np.all(out["mutual_info"] >= 0) and np.all(np.isfinite(out["entropy"]))

@@ -177,6 +177,22 @@ def test_gate_scales_per_orientation(work, tmp_path):
     assert u.threshold_for("portrait") == u.portrait_threshold and u.threshold_for("landscape") == u.threshold
 
 
+def test_mirror_export_writes_the_flag_and_its_graph_is_mirror_equivariant(work, tmp_path):
+    """--mirror: bundle.json says so, and (deterministic graph, p = 0) the mirrored frame gets the
+    mirrored actions' probabilities (here 4 actions: left <-> right)."""
+    root, _ = work
+    cfg = ExportConfig(run=str(root / "run"), out=str(tmp_path / "m"), samples=1, p=0.0, calib_data=str(root / "data"),
+                       batch=8, parity_frames=4, progress=False, mirror=True)
+    export_bundle(cfg, log=lambda m: None)
+    b = read_bundle(tmp_path / "m")
+    assert b.mc.mirror is True and read_bundle(root / "bundle").mc.mirror is False
+    frame = np.random.default_rng(3).integers(0, 256, (40, 48, 3), dtype=np.uint8)
+    p, q = (predict_bundle(tmp_path / "m", [f])["probs"][0] for f in (frame, np.ascontiguousarray(frame[:, ::-1])))
+    perm = [b.space.mirror_action(a) for a in range(b.space.n)]
+    assert perm != list(range(b.space.n))
+    np.testing.assert_allclose(q, p[perm], atol=1e-5)
+
+
 def test_config_rejects_bad_options():
     with pytest.raises(ExportError, match="--gate-scale-portrait 0.0"):
         ExportConfig(run="r", out="o", gate_scale_portrait=0.0)

@@ -15,6 +15,7 @@ HELP = {
     "run": "run folder (uses weights/best.pt) or a .pt checkpoint",
     "out": "bundle folder to write (an existing bundle is replaced atomically; anything else is refused)",
     "samples": "MC dropout samples T folded into the batch",
+    "mirror": "mirror test-time augmentation in the graph: each frame also runs flipped left-right (actions mapped back) and both sets of samples are summarised together; twice the backbone's cost",
     "p": "drop probability of the sampled layers (default: the checkpoint's, 0.5 in the thesis)",
     "calib_data": "dataset folder (manifest.csv) with labelled frames to calibrate on",
     "calib_split": "split of --calib-data to calibrate on (all of it; held-out coverage by folds of sources)",

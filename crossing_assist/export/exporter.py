@@ -69,6 +69,7 @@ class ExportConfig:
     out: str
     samples: int = 16
     p: float | None = None          # None: the checkpoint's own p (0.5 by default)
+    mirror: bool = False            # mirror test-time augmentation in the graph (twice the backbone's cost)
     calib_data: str | None = None   # dataset folder (manifest.csv) with labelled frames
     calib_split: str = "val"
     calib_folds: int = 5            # folds (whole sources) for the held-out coverage measurement
@@ -181,11 +182,11 @@ def _load_policy(run: str):
         raise ExportError(str(exc)) from None
 
 
-def _spec(config: PolicyConfig, samples: int, p: float, temperature: float = 1.0) -> GraphSpec:
+def _spec(config: PolicyConfig, samples: int, p: float, temperature: float = 1.0, mirror: bool = False) -> GraphSpec:
     """The graph of a policy config; a checkpoint from before the geometry contract (no
     ``fit``) was trained on stretched frames and keeps ``stretch`` (PolicyConfig's default)."""
     return GraphSpec(size=config.input_size, mean=config.mean, std=config.std, samples=samples, p=p,
-                     temperature=temperature, fit=config.fit, pad_rgb=config.pad_rgb)
+                     temperature=temperature, fit=config.fit, pad_rgb=config.pad_rgb, mirror=mirror)
 
 
 def _geometry(config: PolicyConfig, spec: GraphSpec) -> Geometry:
@@ -231,7 +232,7 @@ def _meta(policy, ckpt: Path, spec: GraphSpec, calib: cal.CalibrationResult, pre
         n_actions=policy.n_actions,
         input=InputSpec(size=spec.size, mean=spec.mean, std=spec.std, resize="bilinear, antialiased"),
         geometry=_geometry(c, spec),
-        mc=McSpec(spec.samples, spec.p),
+        mc=McSpec(spec.samples, spec.p, spec.mirror),
         calibration=calib.spec(),
         precision=precision,
         training={"backbone": c.backbone, "head": c.head,
@@ -297,7 +298,7 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     if data is not None:
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(cfg.seed)
-            logits = torch_logits(BundleGraph(policy, _spec(policy.config, cfg.samples, p)), data.images,
+            logits = torch_logits(BundleGraph(policy, _spec(policy.config, cfg.samples, p, mirror=cfg.mirror)), data.images,
                                   cfg.batch, cfg.progress)
         folds = cal.source_folds(data.sources, cfg.calib_folds)
         cross = cal.cross_fit(logits, data.actions, folds, cfg.coverage, data.sources)
@@ -310,7 +311,7 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     else:
         temperature = 1.0
         notes.append("not calibrated: no --calib-data (temperature 1, every action in every conformal set)")
-    spec = _spec(policy.config, cfg.samples, p, temperature)
+    spec = _spec(policy.config, cfg.samples, p, temperature, cfg.mirror)
     t0 = time.time()
     model = export_graph(policy, spec)
     log(f"exported the graph in {time.time() - t0:.1f} s")

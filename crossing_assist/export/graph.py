@@ -10,6 +10,8 @@ Layout of :class:`BundleGraph` (docs/contracts.md section 3):
          once; the T dropout samples are folded into the batch inside the head with explicit
          ``rand_like(x) >= p`` masks (exported as RandomUniformLike, which onnxruntime's graph
          optimiser keeps, unlike Dropout nodes)
+      -> (``mirror``: the same for the frames flipped left-right, their actions mapped back
+         (strip k -> 13 - k), so T samples of each: logits [2T, N, A])
       -> logits [T, N, A] / temperature -> per-sample softmax
       -> probs [N, A] (mean), entropy [N], mutual_info [N], variance [N, A], votes [N, A]
 
@@ -28,6 +30,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from crossing_assist.actions import get_space
 from crossing_assist.bundle import INPUT_NAME, OUTPUT_NAMES, graph_metadata
 from crossing_assist.geometry import FITS, PAD_RGB
 from crossing_assist.models.mc import mc_summaries
@@ -40,7 +43,8 @@ MAX_SIDE = 8192
 class GraphSpec:
     """What the graph bakes in. ``size`` = (H, W) the policy sees; ``mean``/``std`` per RGB
     channel on the 0..1 scale; ``samples`` = T; ``p`` = drop probability of the sampled layers
-    (0 = deterministic); ``temperature`` divides the logits (> 0)."""
+    (0 = deterministic); ``temperature`` divides the logits (> 0); ``mirror``: mirror
+    test-time augmentation (the frame and its mirror image, 2T samples summarised together)."""
 
     size: tuple[int, int]
     mean: tuple[float, float, float]
@@ -50,6 +54,7 @@ class GraphSpec:
     temperature: float = 1.0
     fit: str = "letterbox"
     pad_rgb: tuple[int, int, int] = PAD_RGB
+    mirror: bool = False
 
     def __post_init__(self) -> None:
         if self.fit not in FITS:
@@ -77,6 +82,9 @@ class BundleGraph(nn.Module):
         self.register_buffer("mean", torch.tensor(spec.mean, dtype=torch.float32).view(1, 3, 1, 1))
         self.register_buffer("std", torch.tensor(spec.std, dtype=torch.float32).view(1, 3, 1, 1))
         self.register_buffer("pad", torch.tensor(spec.pad_rgb, dtype=torch.float32).view(1, 3, 1, 1) / 255.0)
+        if spec.mirror:   # action a of the mirrored frame is action mirrored[a] of the frame
+            space = get_space(self.policy.n_actions)
+            self.register_buffer("mirrored", torch.tensor([space.mirror_action(a) for a in range(space.n)]))
 
     def preprocess(self, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """uint8 [N, H, W, 3] RGB -> (normalised float [N, 3, h, w] at ``spec.size``, the
@@ -101,7 +109,13 @@ class BundleGraph(nn.Module):
     def logits(self, frames: torch.Tensor) -> torch.Tensor:
         """Raw (untempered) logits [T, N, A] of the T samples."""
         x, window = self.preprocess(frames)
-        return self.policy(x, samples=self.spec.samples, mc=self.spec.p > 0, window=window)
+        if not self.spec.mirror:
+            return self.policy(x, samples=self.spec.samples, mc=self.spec.p > 0, window=window)
+        # the letterbox is centred, so the mirrored frame's window is the mirror of the window
+        n = x.shape[0]
+        both = self.policy(torch.cat([x, x.flip(-1)]), samples=self.spec.samples, mc=self.spec.p > 0,
+                           window=torch.cat([window, 1.0 - window.flip(-1)]))
+        return torch.cat([both[:, :n], both[:, n:].index_select(-1, self.mirrored)])
 
     def forward(self, frames: torch.Tensor) -> tuple[torch.Tensor, ...]:
         return mc_summaries(self.logits(frames), self.spec.temperature)
