@@ -19,6 +19,10 @@ PTL=${PTL:-../shared/data/ptl}
 DATA=${DATA:-runs/data/ptl}                       # PTL as a dataset (manifest.csv)
 OUT=${OUT:-crossing_assist/assets/default_bundle}
 SAMPLES=${SAMPLES:-16}
+MIRROR=${MIRROR:-1}                             # mirror test-time augmentation in the graph (0: off)
+MIRROR_ARGS=()
+GATE_JSON=gate.json
+if [ "$MIRROR" = 1 ]; then MIRROR_ARGS=(--mirror); GATE_JSON=gate_mirror.json; fi
 MAX_INT8_DROP=${MAX_INT8_DROP:-0.01}
 MAX_INT8_SLOWDOWN=${MAX_INT8_SLOWDOWN:-1.10}   # int8 latency / fp32 latency, one frame, this machine
 
@@ -36,15 +40,15 @@ fi
 # never on photographers the model trained on.
 CV_DIR=${CV_DIR:-$RUN/cv}
 if [ -z "${GATE_SCALE:-}" ]; then
-    if [ -f "$CV_DIR/gate.json" ]; then
-        GATE_SCALE=$("$PY" -c "import json,sys; print(json.load(open(sys.argv[1]))['scale'])" "$CV_DIR/gate.json")
+    if [ -f "$CV_DIR/$GATE_JSON" ]; then
+        GATE_SCALE=$("$PY" -c "import json,sys; print(json.load(open(sys.argv[1]))['scale'])" "$CV_DIR/$GATE_JSON")
     else
         GATE_SCALE=1.0
-        echo "no $CV_DIR/gate.json (run scripts/choose_gate.py $CV_DIR): gate threshold as fitted" >&2
+        echo "no $CV_DIR/$GATE_JSON (run scripts/choose_gate.py $CV_DIR ${MIRROR_ARGS[*]}): gate threshold as fitted" >&2
     fi
 fi
-if [ -z "${GATE_SCALE_PORTRAIT:-}" ] && [ -f "$CV_DIR/gate.json" ]; then
-    GATE_SCALE_PORTRAIT=$("$PY" -c "import json,sys; print(json.load(open(sys.argv[1])).get('portrait', {}).get('scale', ''))" "$CV_DIR/gate.json")
+if [ -z "${GATE_SCALE_PORTRAIT:-}" ] && [ -f "$CV_DIR/$GATE_JSON" ]; then
+    GATE_SCALE_PORTRAIT=$("$PY" -c "import json,sys; print(json.load(open(sys.argv[1])).get('portrait', {}).get('scale', ''))" "$CV_DIR/$GATE_JSON")
 fi
 PORTRAIT_ARGS=()
 if [ -n "${GATE_SCALE_PORTRAIT:-}" ]; then PORTRAIT_ARGS=(--gate-scale-portrait "$GATE_SCALE_PORTRAIT"); fi
@@ -58,7 +62,7 @@ trap 'rm -rf "$TMP"' EXIT
 # activations), then int8 weights only (fp32 compute), else fp32.
 SRC=""
 for MODE in static weights; do
-    "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/$MODE" --samples "$SAMPLES" \
+    "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/$MODE" --samples "$SAMPLES" "${MIRROR_ARGS[@]}" \
         --calib-data "$DATA" --calib-split val --int8 --int8-mode "$MODE" --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" --quiet
     KEEP=$("$PY" - "$TMP/$MODE/bundle.json" "$MAX_INT8_DROP" "$MAX_INT8_SLOWDOWN" <<'PYEOF'
 import json, sys
@@ -75,20 +79,20 @@ PYEOF
 done
 if [ -z "$SRC" ]; then
     echo "shipping fp32" >&2
-    "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/fp32" --samples "$SAMPLES" \
+    "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/fp32" --samples "$SAMPLES" "${MIRROR_ARGS[@]}" \
         --calib-data "$DATA" --calib-split val --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" --quiet
     SRC="$TMP/fp32"
 fi
 
 # Replace the embedded bundle in one rename (write_bundle validates and swaps atomically).
 # bundle.json (and the graph's copy) also carry the leave-one-photographer-out figures.
-"$PY" - "$SRC" "$OUT" "$CV_DIR" <<'PYEOF'
+"$PY" - "$SRC" "$OUT" "$CV_DIR" "$GATE_JSON" <<'PYEOF'
 import json, sys
 from pathlib import Path
 import onnx
 from crossing_assist.bundle import read_bundle, write_bundle
 from crossing_assist.export.graph import model_bytes, set_metadata
-src, out, cv = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
+src, out, cv, gate_json = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3]), sys.argv[4]
 b = read_bundle(src)
 meta = json.loads((src / "bundle.json").read_text())
 if (cv / "cv.json").is_file():
@@ -96,8 +100,8 @@ if (cv / "cv.json").is_file():
     meta["metrics"]["leave_one_photographer_out"] = {
         "epochs": c["config"]["epochs"], "folds": c["folds"],
         **{k: c[k] for k in ("accuracy", "bin_mae", "far_x_error", "majority_accuracy")}}
-if (cv / "gate.json").is_file():
-    g = json.loads((cv / "gate.json").read_text())
+if (cv / gate_json).is_file():
+    g = json.loads((cv / gate_json).read_text())
     def summary(g):
         return {k: g[k] for k in ("scale", "targets_met", "folds")} | {
             "at_scale": {k: v for k, v in g["at_scale"].items() if k != "per_fold"},

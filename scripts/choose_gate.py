@@ -12,7 +12,8 @@ is the largest beacon-on rate with confidently wrong <= 0.5 % and silence on no-
 >= 98 % (else the point nearest those targets). A portrait strip is 0.56 of a landscape one, so
 the same angular doubt spreads over more strips and one landscape-fitted threshold silences
 portrait frames: hence a scale per orientation. Writes ``CV/gate.json`` and
-``CV/gate_risk_coverage.png``; ``scripts/build_default_bundle.sh`` exports with
+``CV/gate_risk_coverage.png`` (``--mirror``: the folds' bundles with mirror test-time
+augmentation, ``CV/gate_mirror.json``); ``scripts/build_default_bundle.sh`` exports with
 ``--gate-scale m*_landscape --gate-scale-portrait m*_portrait``.
 
     .venv/bin/python scripts/choose_gate.py runs/default/cv --ptl runs/data/ptl --neg runs/data/neg \
@@ -46,25 +47,42 @@ def _subset(ds, rows, out: Path) -> Path:
     return out
 
 
-def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, portrait: int) -> dict:
-    """The fold's held-out curves: ``{"landscape": {...}, "portrait": {...}}`` (portrait only
-    with ``portrait`` > 0 windows a photo); each cached in the fold folder once listened to."""
+def fold_bundle(fold: Path, source: str, ptl, mirror: bool = False) -> Path:
+    """The fold's model exported as a bundle (once), calibrated on PTL val without ``source``;
+    ``mirror``: with mirror test-time augmentation (folder ``bundle_mirror``)."""
     from crossing_assist.export.exporter import ExportConfig, export_bundle
-    from crossing_assist.runtime.engine import Engine
 
-    bundle = fold / "bundle"
+    bundle = fold / ("bundle_mirror" if mirror else "bundle")
     if not (bundle / "bundle.json").is_file():
         cal = _subset(ptl, [r for r in ptl.rows if r.split == "val" and r.source != source], fold / "calib_data")
         export_bundle(ExportConfig(run=str(fold), out=str(bundle), calib_data=str(cal), calib_split="val",
-                                   progress=False, threads=1), log=lambda s: print(f"  {s}", file=sys.stderr))
+                                   progress=False, threads=1, mirror=mirror), log=lambda s: print(f"  {s}", file=sys.stderr))
+    return bundle
+
+
+def held_out_rows(ptl, neg, source: str, used: set[str], n_frames: int, seed: int) -> tuple[list, list]:
+    """``n_frames`` photos of ``source`` that its fold never trained on (its train-split photos)
+    and half as many no-crossing views no model trained on; the same draw for every script."""
     rng = np.random.default_rng(seed)
     pos = [r for r in ptl.rows if r.split == "train" and r.source == source]
     negs = [r for r in neg.rows if r.source == source and r.image not in used]
     pos = [pos[i] for i in sorted(rng.choice(len(pos), min(n_frames, len(pos)), replace=False))]
     negs = [negs[i] for i in sorted(rng.choice(len(negs), min(n_frames // 2, len(negs)), replace=False))]
+    return pos, negs
+
+
+def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, portrait: int,
+               mirror: bool = False) -> dict:
+    """The fold's held-out curves: ``{"landscape": {...}, "portrait": {...}}`` (portrait only
+    with ``portrait`` > 0 windows a photo); each cached in the fold folder once listened to."""
+    from crossing_assist.runtime.engine import Engine
+
+    bundle = fold_bundle(fold, source, ptl, mirror)
+    pos, negs = held_out_rows(ptl, neg, source, used, n_frames, seed)
     engine = None
     out = {}
-    for view, cache in (("landscape", "gate_curve.json"), ("portrait", f"gate_curve_portrait{portrait}.json")):
+    tag = "_mirror" if mirror else ""
+    for view, cache in (("landscape", f"gate_curve{tag}.json"), ("portrait", f"gate_curve{tag}_portrait{portrait}.json")):
         done = fold / cache
         if view == "portrait" and not portrait:
             continue
@@ -122,6 +140,7 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=200, help="held-out photos per fold (half as many negatives)")
     ap.add_argument("--portrait", type=int, default=3, help="3:4 portrait windows a photo (0: landscape only)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--mirror", action="store_true", help="the folds' bundles with mirror test-time augmentation")
     a = ap.parse_args(argv)
     import yaml
 
@@ -138,7 +157,7 @@ def main(argv=None) -> int:
             continue
         source = args["holdout"][0]
         print(f"fold {source}: export + listen", file=sys.stderr, flush=True)
-        folds.append(fold_curve(fold, source, ptl, neg, used, a.frames, a.seed, a.portrait))
+        folds.append(fold_curve(fold, source, ptl, neg, used, a.frames, a.seed, a.portrait, a.mirror))
     if not folds:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
@@ -151,13 +170,13 @@ def main(argv=None) -> int:
         one = next(c for c in curve if c["scale"] == 1.0)
         result[view] = {"scale": best["scale"], "targets_met": met, "at_scale": best, "at_fitted_threshold": one,
                         "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
-        suffix = "" if view == "landscape" else f"_{view}"
+        suffix = ("_mirror" if a.mirror else "") + ("" if view == "landscape" else f"_{view}")
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
                            a.cv / f"gate_risk_coverage{suffix}.png", f"held out, {view}: gate threshold x scale")
         print(f"{view}: fitted threshold (scale 1): {fmt(one)}")
         print(f"{view}: chosen scale {best['scale']:g} ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
     # landscape stays at the top level (what build_default_bundle.sh and older readers take)
-    (a.cv / "gate.json").write_text(json.dumps({**result["landscape"], **({"portrait": result["portrait"]} if "portrait" in result else {})},
+    (a.cv / ("gate_mirror.json" if a.mirror else "gate.json")).write_text(json.dumps({**result["landscape"], **({"portrait": result["portrait"]} if "portrait" in result else {})},
                                                indent=1))
     return 0
 

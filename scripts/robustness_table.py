@@ -1,0 +1,146 @@
+"""How each field condition moves the held-out figures: the leave-one-photographer-out folds'
+bundles on their unseen photographer's photos, clean and under each corruption, roll and
+portrait window, measured as the user meets them.
+
+For each finished fold of a ``crossing-train --cv source`` run (``CV/fold-<source>``): its bundle
+(exported once by :mod:`choose_gate`'s ``fold_bundle``, calibrated without that photographer),
+the same held-out draw as ``choose_gate.py`` (photos of the photographer the fold never saw, and
+no-crossing views no model trained on), each rendered under one condition at a time:
+``clean``, every corruption of :mod:`crossing_assist.data_tools.corrupt` (the training's field
+views use them all), ``roll`` (10..15 degrees either way) and ``portrait`` (a 3:4 window at a
+random offset; a goal outside it lies in the edge strip). Each view is played as a 1 s still
+clip through the runtime (:class:`~crossing_assist.runtime.listen.Listener`, the bundle's own
+gate thresholds). Per condition, pooled over folds: the model's accuracy and bin MAE (argmax of
+the clip's first frame), beacon on, confidently wrong and silence on no-crossing views; the
+change against ``clean`` beside each. Writes ``CV/robustness[_mirror].json`` and prints a
+markdown table.
+
+    .venv/bin/python scripts/robustness_table.py runs/default/cv [--mirror] [--frames 100]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from choose_gate import fold_bundle, held_out_rows  # noqa: E402  (a sibling script)
+
+from crossing_assist.data_tools.augment import crop_window, roll  # noqa: E402
+from crossing_assist.data_tools.corrupt import CORRUPTIONS, corrupt  # noqa: E402
+from crossing_assist.data_tools.images import flag_value, load_frame  # noqa: E402
+from crossing_assist.data_tools.manifest import read_manifest  # noqa: E402
+from crossing_assist.runtime.listen import Listener, summarise  # noqa: E402
+
+CONDITIONS = ("clean", *CORRUPTIONS, "roll", "portrait")
+
+
+def render(condition: str, img: np.ndarray, far_x: float | None, far_y: float, label: int,
+           rng: np.random.Generator) -> tuple[np.ndarray, int]:
+    """``img`` as seen under ``condition``: (view, its label)."""
+    if condition == "clean":
+        return img, label
+    if condition == "roll":
+        return roll(img, far_x, far_y, label, float(rng.choice([-1, 1]) * rng.uniform(10, 15)))[::2]
+    if condition == "portrait":
+        view, _, lab = crop_window(img, far_x, label, 3 / 4, float(rng.random()))
+        return view, lab
+    return corrupt(img, condition, rng), label
+
+
+def fold_table(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, mirror: bool) -> dict:
+    """Per condition, the fold's rates (cached in the fold folder once measured)."""
+    from crossing_assist.runtime.engine import Engine
+
+    done = fold / f"robustness{'_mirror' if mirror else ''}_{n_frames}.json"
+    if done.is_file():
+        return json.loads(done.read_text())
+    engine = Engine(fold_bundle(fold, source, ptl, mirror), threads=1)
+    pos, negs = held_out_rows(ptl, neg, source, used, n_frames, seed)
+    images = [(ds, r, load_frame(ds.image_path(r), r.flags)) for ds, rows in ((ptl, pos), (neg, negs)) for r in rows]
+    out = {"source": source}
+    for c, condition in enumerate(CONDITIONS):
+        rng = np.random.default_rng([seed, c])
+        lis = Listener(engine)
+        for ds, r, img in images:
+            far_y = float(flag_value(r.flags, "far_y") or 0.5)
+            view, label = render(condition, img, r.far_x, far_y, r.label, rng)
+            lis.add(view, label)
+        labels = np.asarray(lis.labels)
+        first = np.asarray([clip[0].action if clip[0].ok else -1 for clip in lis.clips])
+        known = labels != 0
+        err = np.abs(first[known] - labels[known])
+        out[condition] = {"accuracy": float((err == 0).mean()), "bin_mae": float(err.mean()), **summarise(lis.heard())}
+        print(f"  {source} {condition}: accuracy {out[condition]['accuracy']:.3f}, beacon on "
+              f"{out[condition]['beacon_on']:.3f}, wrong {out[condition]['confidently_wrong']:.4f}", file=sys.stderr, flush=True)
+    done.write_text(json.dumps(out, indent=1))
+    return out
+
+
+def pool(folds: list[dict]) -> dict:
+    """Per condition: each rate weighted by its fold's frame count."""
+    out = {}
+    for condition in CONDITIONS:
+        rows = [f[condition] for f in folds]
+        row = {}
+        for key, count in (("accuracy", "frames_with_crossing"), ("bin_mae", "frames_with_crossing"),
+                           ("beacon_on", "frames_with_crossing"), ("confidently_wrong", "frames_with_crossing"),
+                           ("silence_no_crossing", "frames_without_crossing")):
+            n = sum(r[count] for r in rows)
+            row[key] = sum((r[key] or 0) * r[count] for r in rows) / n if n else None
+        row["accuracy_per_fold"] = {f["source"]: f[condition]["accuracy"] for f in folds}
+        out[condition] = row
+    return out
+
+
+def markdown(table: dict) -> str:
+    clean = table["clean"]
+    lines = ["| condition | accuracy | bin MAE | beacon on | confidently wrong | silence, no crossing |",
+             "|---|---|---|---|---|---|"]
+    for condition, r in table.items():
+        d = "" if condition == "clean" else f" ({100 * (r['accuracy'] - clean['accuracy']):+.1f})"
+        lines.append(f"| {condition} | {r['accuracy']:.3f}{d} | {r['bin_mae']:.3f} | {100 * r['beacon_on']:.1f} % | "
+                     f"{100 * r['confidently_wrong']:.2f} % | {100 * r['silence_no_crossing']:.1f} % |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("cv", type=Path, help="the --cv source run folder (fold-* inside)")
+    ap.add_argument("--ptl", default="runs/data/ptl")
+    ap.add_argument("--neg", default="runs/data/neg")
+    ap.add_argument("--used-neg", default="runs/data/neg_half", help="negatives the models trained on (excluded)")
+    ap.add_argument("--frames", type=int, default=100, help="held-out photos per fold (half as many negatives)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--mirror", action="store_true", help="the folds' bundles with mirror test-time augmentation")
+    a = ap.parse_args(argv)
+    import yaml
+
+    from crossing_assist.models.crossval import _fold_metrics
+
+    ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
+    used = {r.image for r in read_manifest(a.used_neg).rows}
+    folds = []
+    for fold in sorted(a.cv.glob("fold-*")):
+        args = yaml.safe_load((fold / "args.yaml").read_text()) if (fold / "args.yaml").is_file() else None
+        if not args or _fold_metrics(fold, int(args["epochs"])) is None:
+            print(f"{fold.name}: not finished, left out", file=sys.stderr)
+            continue
+        print(f"fold {args['holdout'][0]}", file=sys.stderr, flush=True)
+        folds.append(fold_table(fold, args["holdout"][0], ptl, neg, used, a.frames, a.seed, a.mirror))
+    if not folds:
+        print(f"error: no finished fold in {a.cv}", file=sys.stderr)
+        return 2
+    table = pool(folds)
+    (a.cv / f"robustness{'_mirror' if a.mirror else ''}.json").write_text(
+        json.dumps({"frames_per_fold": a.frames, "folds": [f["source"] for f in folds], "conditions": table}, indent=1))
+    print(markdown(table))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
