@@ -131,31 +131,43 @@ def choose(curve: list[dict], max_wrong: float = 0.005, min_silence: float = 0.9
     return min(curve, key=lambda c: (excess(c), -c["beacon_on"])), False
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def held_out_parser(description: str, frames: int) -> argparse.ArgumentParser:
+    """The options every held-out script over a ``--cv source`` run shares."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("cv", type=Path, help="the --cv source run folder (fold-* inside)")
     ap.add_argument("--ptl", default="runs/data/ptl")
     ap.add_argument("--neg", default="runs/data/neg")
     ap.add_argument("--used-neg", default="runs/data/neg_half", help="negatives the models trained on (excluded)")
-    ap.add_argument("--frames", type=int, default=200, help="held-out photos per fold (half as many negatives)")
-    ap.add_argument("--portrait", type=int, default=3, help="3:4 portrait windows a photo (0: landscape only)")
+    ap.add_argument("--frames", type=int, default=frames, help="held-out photos per fold (half as many negatives)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--mirror", action="store_true", help="the folds' bundles with mirror test-time augmentation")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def finished_folds(cv: Path):
+    """``(fold folder, held-out source)`` of each finished fold (a CV still running: those done so far)."""
     import yaml
 
     from crossing_assist.models.crossval import _fold_metrics
+
+    for fold in sorted(cv.glob("fold-*")):
+        args = yaml.safe_load((fold / "args.yaml").read_text()) if (fold / "args.yaml").is_file() else None
+        if not args or _fold_metrics(fold, int(args["epochs"])) is None:
+            print(f"{fold.name}: not finished, left out", file=sys.stderr)
+            continue
+        yield fold, args["holdout"][0]
+
+
+def main(argv=None) -> int:
+    ap = held_out_parser(__doc__.split("\n\n")[0], frames=200)
+    ap.add_argument("--portrait", type=int, default=3, help="3:4 portrait windows a photo (0: landscape only)")
+    a = ap.parse_args(argv)
     from crossing_assist.models.plots import plot_risk_coverage
 
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}   # same names: neg_half links neg's images
     folds = []
-    for fold in sorted(a.cv.glob("fold-*")):   # the finished folds (a CV still running: those done so far)
-        args = yaml.safe_load((fold / "args.yaml").read_text()) if (fold / "args.yaml").is_file() else None
-        if not args or _fold_metrics(fold, int(args["epochs"])) is None:
-            print(f"{fold.name}: not finished, left out", file=sys.stderr)
-            continue
-        source = args["holdout"][0]
+    for fold, source in finished_folds(a.cv):
         print(f"fold {source}: export + listen", file=sys.stderr, flush=True)
         folds.append(fold_curve(fold, source, ptl, neg, used, a.frames, a.seed, a.portrait, a.mirror))
     if not folds:

@@ -20,7 +20,6 @@ markdown table.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -28,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from choose_gate import fold_bundle, held_out_rows  # noqa: E402  (a sibling script)
+from choose_gate import finished_folds, fold_bundle, held_out_parser, held_out_rows  # noqa: E402  (a sibling script)
 
 from crossing_assist.data_tools.augment import crop_window, roll  # noqa: E402
 from crossing_assist.data_tools.corrupt import CORRUPTIONS, corrupt  # noqa: E402
@@ -109,29 +108,13 @@ def markdown(table: dict) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("cv", type=Path, help="the --cv source run folder (fold-* inside)")
-    ap.add_argument("--ptl", default="runs/data/ptl")
-    ap.add_argument("--neg", default="runs/data/neg")
-    ap.add_argument("--used-neg", default="runs/data/neg_half", help="negatives the models trained on (excluded)")
-    ap.add_argument("--frames", type=int, default=100, help="held-out photos per fold (half as many negatives)")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--mirror", action="store_true", help="the folds' bundles with mirror test-time augmentation")
-    a = ap.parse_args(argv)
-    import yaml
-
-    from crossing_assist.models.crossval import _fold_metrics
-
+    a = held_out_parser(__doc__.split("\n\n")[0], frames=100).parse_args(argv)
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}
     folds = []
-    for fold in sorted(a.cv.glob("fold-*")):
-        args = yaml.safe_load((fold / "args.yaml").read_text()) if (fold / "args.yaml").is_file() else None
-        if not args or _fold_metrics(fold, int(args["epochs"])) is None:
-            print(f"{fold.name}: not finished, left out", file=sys.stderr)
-            continue
-        print(f"fold {args['holdout'][0]}", file=sys.stderr, flush=True)
-        folds.append(fold_table(fold, args["holdout"][0], ptl, neg, used, a.frames, a.seed, a.mirror))
+    for fold, source in finished_folds(a.cv):
+        print(f"fold {source}", file=sys.stderr, flush=True)
+        folds.append(fold_table(fold, source, ptl, neg, used, a.frames, a.seed, a.mirror))
     if not folds:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
