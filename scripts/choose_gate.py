@@ -47,12 +47,17 @@ def _subset(ds, rows, out: Path) -> Path:
     return out
 
 
+def tag(mirror: bool) -> str:
+    """File-name suffix of what was measured with the folds' mirror-TTA bundles."""
+    return "_mirror" if mirror else ""
+
+
 def fold_bundle(fold: Path, source: str, ptl, mirror: bool = False) -> Path:
     """The fold's model exported as a bundle (once), calibrated on PTL val without ``source``;
     ``mirror``: with mirror test-time augmentation (folder ``bundle_mirror``)."""
     from crossing_assist.export.exporter import ExportConfig, export_bundle
 
-    bundle = fold / ("bundle_mirror" if mirror else "bundle")
+    bundle = fold / f"bundle{tag(mirror)}"
     if not (bundle / "bundle.json").is_file():
         cal = _subset(ptl, [r for r in ptl.rows if r.split == "val" and r.source != source], fold / "calib_data")
         export_bundle(ExportConfig(run=str(fold), out=str(bundle), calib_data=str(cal), calib_split="val",
@@ -81,8 +86,8 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     pos, negs = held_out_rows(ptl, neg, source, used, n_frames, seed)
     engine = None
     out = {}
-    tag = "_mirror" if mirror else ""
-    for view, cache in (("landscape", f"gate_curve{tag}.json"), ("portrait", f"gate_curve{tag}_portrait{portrait}.json")):
+    for view, cache in (("landscape", f"gate_curve{tag(mirror)}.json"),
+                        ("portrait", f"gate_curve{tag(mirror)}_portrait{portrait}.json")):
         done = fold / cache
         if view == "portrait" and not portrait:
             continue
@@ -182,13 +187,13 @@ def main(argv=None) -> int:
         one = next(c for c in curve if c["scale"] == 1.0)
         result[view] = {"scale": best["scale"], "targets_met": met, "at_scale": best, "at_fitted_threshold": one,
                         "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
-        suffix = ("_mirror" if a.mirror else "") + ("" if view == "landscape" else f"_{view}")
+        suffix = tag(a.mirror) + ("" if view == "landscape" else f"_{view}")
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
                            a.cv / f"gate_risk_coverage{suffix}.png", f"held out, {view}: gate threshold x scale")
         print(f"{view}: fitted threshold (scale 1): {fmt(one)}")
         print(f"{view}: chosen scale {best['scale']:g} ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
     # landscape stays at the top level (what build_default_bundle.sh and older readers take)
-    (a.cv / ("gate_mirror.json" if a.mirror else "gate.json")).write_text(json.dumps({**result["landscape"], **({"portrait": result["portrait"]} if "portrait" in result else {})},
+    (a.cv / f"gate{tag(a.mirror)}.json").write_text(json.dumps({**result["landscape"], **({"portrait": result["portrait"]} if "portrait" in result else {})},
                                                indent=1))
     return 0
 

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from choose_gate import finished_folds, fold_bundle, held_out_parser, held_out_rows  # noqa: E402  (a sibling script)
+from choose_gate import finished_folds, fold_bundle, held_out_parser, held_out_rows, tag  # noqa: E402  (a sibling script)
 
 from crossing_assist.data_tools.augment import crop_window, roll  # noqa: E402
 from crossing_assist.data_tools.corrupt import CORRUPTIONS, corrupt  # noqa: E402
@@ -44,7 +44,8 @@ def render(condition: str, img: np.ndarray, far_x: float | None, far_y: float, l
     if condition == "clean":
         return img, label
     if condition == "roll":
-        return roll(img, far_x, far_y, label, float(rng.choice([-1, 1]) * rng.uniform(10, 15)))[::2]
+        view, _, lab = roll(img, far_x, far_y, label, float(rng.choice([-1, 1]) * rng.uniform(10, 15)))
+        return view, lab
     if condition == "portrait":
         view, _, lab = crop_window(img, far_x, label, 3 / 4, float(rng.random()))
         return view, lab
@@ -55,7 +56,7 @@ def fold_table(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     """Per condition, the fold's rates (cached in the fold folder once measured)."""
     from crossing_assist.runtime.engine import Engine
 
-    done = fold / f"robustness{'_mirror' if mirror else ''}_{n_frames}.json"
+    done = fold / f"robustness{tag(mirror)}_{n_frames}.json"
     if done.is_file():
         return json.loads(done.read_text())
     engine = Engine(fold_bundle(fold, source, ptl, mirror), threads=1)
@@ -119,7 +120,7 @@ def main(argv=None) -> int:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
     table = pool(folds)
-    (a.cv / f"robustness{'_mirror' if a.mirror else ''}.json").write_text(
+    (a.cv / f"robustness{tag(a.mirror)}.json").write_text(
         json.dumps({"frames_per_fold": a.frames, "folds": [f["source"] for f in folds], "conditions": table}, indent=1))
     print(markdown(table))
     return 0
