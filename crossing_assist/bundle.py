@@ -8,10 +8,13 @@ never leaves half a bundle. :func:`check_session` compares an opened onnxruntime
 in, never imported here) with the json: input name and dtype, output names, action count and
 the facts embedded in the graph's metadata.
 
-Schema (version 2; version 1 is still read), see docs/contracts.md section 3. Version 2 adds
-``geometry`` (:class:`crossing_assist.geometry.Geometry`: how the graph fits a frame onto its
+Schema (version 3; versions 1 and 2 are still read), see docs/contracts.md section 3. Version 2
+adds ``geometry`` (:class:`crossing_assist.geometry.Geometry`: how the graph fits a frame onto its
 canvas, and the default camera field of view per orientation); a version-1 bundle reads as
-``fit = stretch`` with ``fov_deg`` for both orientations. Two fields depend on the model bytes and
+``fit = stretch`` with ``fov_deg`` for both orientations. Version 3 adds ``geometry.view_crop``
+(letterbox bundles, absent = false; the consumer crops the frame's rows to the training camera's view before
+the graph, :func:`crossing_assist.geometry.view_rows`); a version-2 bundle reads as no crop.
+Readers that predate a version refuse it, so no consumer silently skips the crop. Two fields depend on the model bytes and
 are filled in by :func:`write_bundle`: ``model_sha256`` and ``model_size`` (bytes). They are the
 only fields left out of the copy embedded in the ONNX metadata (``bundle_json``).
 """
@@ -34,8 +37,8 @@ from crossing_assist.errors import UserError
 from crossing_assist.errors import short_repr as _short  # one cut-to-length repr for every error line
 from crossing_assist.geometry import FITS, Geometry, GeometryError, check_fov
 
-SCHEMA_VERSION = 2
-READABLE_SCHEMAS = (1, 2)
+SCHEMA_VERSION = 3
+READABLE_SCHEMAS = (1, 2, 3)
 BUNDLE_JSON = "bundle.json"
 MODEL_FILE = "model.onnx"
 INPUT_NAME = "frames"
@@ -194,6 +197,11 @@ class Bundle:
         the frame's orientation. Raises GeometryError outside 20..170 degrees."""
         return self.geometry.camera_fov(width, height, override)
 
+    def view(self, frame, fov_deg: float):
+        """What of an H x W x 3 frame (horizontal FOV ``fov_deg``) goes into the graph: its rows
+        cropped to the training camera's view when ``geometry.view_crop`` (schema 3), else all."""
+        return self.geometry.view(frame, fov_deg, self.input.size)
+
     @property
     def model_path(self) -> Path:
         return self.dir / self.model_file
@@ -335,7 +343,9 @@ def _parse_geometry(d: Any, fov_deg: float, version: int) -> Geometry:
                 or not all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 255 for v in pad)):
             raise BundleError(f"bundle.json: geometry.pad_rgb = {_short(pad)} must be three integers 0..255")
     train = _num(d.get("train_fov_deg", fovs[0]), "geometry.train_fov_deg", 0.0, 180.0, lo_open=True, hi_open=True)
-    return Geometry(fit=fit, pad_rgb=tuple(pad), camera_fov_deg=(fovs[0], fovs[1]), train_fov_deg=train)
+    crop = fit == "letterbox" and version >= 3 and _bool(d.get("view_crop", False), "geometry.view_crop")
+    return Geometry(fit=fit, pad_rgb=tuple(pad), camera_fov_deg=(fovs[0], fovs[1]), train_fov_deg=train,
+                    view_crop=crop)
 
 
 def _str(value: Any, name: str) -> str:

@@ -14,11 +14,21 @@ strip: an edge strip means "at or beyond that edge of the view".
 
 Headings use the horizontal field of view of the camera that took the frame in its present
 orientation (:func:`camera_fov`), never a constant.
+
+The *view crop* (``Geometry.view_crop``, bundle schema 3) keeps the model's angular scale: the
+canvas shows the training camera's view (``train_fov_deg`` across its width, 4:3), so a frame
+from a camera of horizontal FOV ``f`` first loses the rows above and below what that canvas can
+show at the training photos' pixels per degree (:func:`view_rows`), then is letterboxed. A phone
+held in portrait (3:4, ~53 deg across) keeps its middle ~3:3 at the training scale instead of
+being shrunk to 3/4 of it with sky and feet added; a 4:3 landscape frame at the training FOV, a
+16:9 video frame, or a narrower camera lose nothing. Columns are never cropped: the 12 strips
+span the whole frame.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +46,20 @@ PAD_RGB = (124, 116, 104)              # ImageNet mean in uint8: normalises to ~
 MAX_ASPECT = 8.0                       # frames more elongated than 8:1 are refused
 
 
+def view_rows(height: int, width: int, fov_deg: float, canvas: tuple[int, int],
+              train_fov_deg: float = TRAIN_FOV_DEG) -> tuple[int, int]:
+    """The rows of a ``height x width`` frame (horizontal FOV ``fov_deg``) that the canvas shows
+    at the training camera's angular scale: ``(top, rows)``, centred.
+
+    ``rows = min(height, max(1, floor(width * H * tan(train / 2) / (W * tan(fov / 2)) + 0.5)))``
+    for the canvas (H, W); ``top = (height - rows) // 2``. The phone app computes the same
+    (android_demo/www/js/geometry.js); the shared test vectors hold both to it."""
+    ch, cw = canvas
+    t = math.tan(math.radians(train_fov_deg) / 2) / math.tan(math.radians(fov_deg) / 2)
+    rows = min(int(height), max(1, math.floor(width * ch * t / cw + 0.5)))
+    return (int(height) - rows) // 2, rows
+
+
 class GeometryError(ValueError):
     """A frame or field of view the geometry cannot use (one line, says what is valid)."""
 
@@ -46,13 +70,15 @@ class Geometry:
 
     ``fit``: ``letterbox`` (scale to fit, centre, pad with ``pad_rgb``) or ``stretch`` (schema 1:
     resize to the canvas whatever the aspect); ``camera_fov_deg``: default horizontal FOV per
-    orientation; ``train_fov_deg``: the FOV assumed for the training photos.
+    orientation; ``train_fov_deg``: the FOV assumed for the training photos; ``view_crop``
+    (schema 3): crop the rows beyond the training camera's view before fitting (:func:`view_rows`).
     """
 
     fit: str = "letterbox"
     pad_rgb: tuple[int, int, int] = PAD_RGB
     camera_fov_deg: tuple[float, float] = (CAMERA_FOV_DEG["landscape"], CAMERA_FOV_DEG["portrait"])
     train_fov_deg: float = TRAIN_FOV_DEG
+    view_crop: bool = False
 
     def to_json(self) -> dict:
         d = {"fit": self.fit, "strips": "frame",
@@ -60,7 +86,16 @@ class Geometry:
              "train_fov_deg": self.train_fov_deg}
         if self.fit == "letterbox":
             d["pad_rgb"] = list(self.pad_rgb)
+            d["view_crop"] = self.view_crop
         return d
+
+    def view(self, frame: np.ndarray, fov_deg: float, canvas: tuple[int, int]) -> np.ndarray:
+        """The part of an H x W x C frame (horizontal FOV ``fov_deg``) the graph should see:
+        its :func:`view_rows` with ``view_crop``, else the whole frame (a view, not a copy)."""
+        if not self.view_crop:
+            return frame
+        top, rows = view_rows(frame.shape[0], frame.shape[1], fov_deg, canvas, self.train_fov_deg)
+        return frame[top:top + rows]
 
     def camera_fov(self, width: int, height: int, override: float | None = None) -> float:
         """Horizontal FOV (degrees) for a ``width x height`` frame: ``override`` if given, else

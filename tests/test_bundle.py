@@ -184,7 +184,7 @@ def test_invalid_json_text(bundle_dir):
 @pytest.mark.parametrize(
     "edit, match",
     [
-        (lambda m: m.update(schema_version=3), "schema_version 3 unsupported.*upgrade"),
+        (lambda m: m.update(schema_version=4), "schema_version 4 unsupported.*upgrade"),
         (lambda m: m.update(schema_version=0), "schema_version 0 unsupported.*re-export"),
         (lambda m: m.pop("fov_deg"), "missing field 'fov_deg'"),
         (lambda m: m["actions"].update(n=5), "actions.n = 5 invalid; valid: 4, 8, 13"),

@@ -86,7 +86,7 @@ def test_graph_metadata_carries_the_bundle_facts(work):
     bundle, sess = open_session(root / "bundle")
     props = sess.get_modelmeta().custom_metadata_map
     assert json.loads(props["bundle_json"]) == embedded_meta(bundle.raw)
-    assert props["schema_version"] == "2"
+    assert props["schema_version"] == "3" and bundle.geometry.view_crop == (bundle.geometry.fit == "letterbox")
 
 
 def test_predict_bundle_is_random_and_well_formed(work):

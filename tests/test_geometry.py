@@ -90,11 +90,15 @@ def _err(meta) -> str:
 
 def test_schema2_geometry_parses():
     b = parse_meta(toy_meta(TOY2), need_bytes=False)
-    assert b.schema_version == 2 and b.geometry.fit == "stretch"
+    assert b.schema_version == 3 and b.geometry.fit == "stretch" and not b.geometry.view_crop
     assert b.geometry.camera_fov_deg == (LANDSCAPE_FOV, PORTRAIT_FOV) and b.geometry.train_fov_deg == 67.0
     lb = toy_meta(TOY2)
     lb["geometry"].update(fit="letterbox", pad_rgb=[1, 2, 3])
     assert parse_meta(lb, need_bytes=False).geometry.pad_rgb == (1, 2, 3)
+    assert not parse_meta(lb, need_bytes=False).geometry.view_crop          # absent: no crop
+    lb["geometry"]["view_crop"] = True
+    assert parse_meta(lb, need_bytes=False).geometry.view_crop
+    assert not parse_meta(lb | {"schema_version": 2}, need_bytes=False).geometry.view_crop   # schema 2: never
 
 
 @pytest.mark.parametrize("edit, words", [
@@ -110,6 +114,7 @@ def test_schema2_geometry_parses():
     (lambda g: g["camera_fov_deg"].pop("portrait"), "portrait"),
     (lambda g: g.update(camera_fov_deg=67.0), "camera_fov_deg"),
     (lambda g: g.update(strips="canvas"), "strips"),
+    (lambda g: g.update(fit="letterbox", pad_rgb=[1, 2, 3], view_crop="yes"), "view_crop"),
 ])
 def test_schema2_geometry_errors_are_one_line(edit, words):
     meta = toy_meta(TOY2)
@@ -117,11 +122,12 @@ def test_schema2_geometry_errors_are_one_line(edit, words):
     assert words in _err(meta)
 
 
-def test_schema2_without_geometry_is_refused_and_schema3_unsupported():
+def test_schema2_without_geometry_is_refused_and_schema4_unsupported():
     meta = toy_meta(TOY2)
     del meta["geometry"]
     assert "geometry" in _err(meta)
-    assert "unsupported" in _err(toy_meta(TOY2) | {"schema_version": 3})
+    assert "geometry" in _err(meta | {"schema_version": 2})
+    assert "unsupported" in _err(toy_meta(TOY2) | {"schema_version": 4})
 
 
 def test_schema1_reads_as_stretch_with_one_fov(tmp_path):
@@ -158,3 +164,48 @@ def test_edited_geometry_in_bundle_json_is_caught_against_the_graph(tmp_path, ed
         Engine(folder)
     msg = str(e.value)
     assert "\n" not in msg and f"'{key}'" in msg and "re-export" in msg
+
+
+# ----------------------------------------------------------------------------- the view crop (schema 3)
+
+
+def test_view_rows_keeps_the_training_cameras_angular_scale():
+    """Rows beyond what the 4:3 canvas shows at the training photos' pixels per degree go;
+    columns never do. Canvas 168 x 224, training camera 67 deg across."""
+    from crossing_assist.geometry import view_rows
+
+    canvas = (168, 224)
+    assert view_rows(480, 640, 67.0, canvas) == (0, 480)             # the training camera: nothing
+    assert view_rows(720, 1280, 67.0, canvas) == (0, 720)            # 16:9 video: already shorter
+    assert view_rows(640, 480, 40.0, canvas) == (0, 640)             # a narrower camera (a 3:4 window)
+    top, rows = view_rows(640, 480, 53.0, canvas)                    # a phone held in portrait
+    assert rows == 478 and top == 81                                 # its middle ~3:3
+    top, rows = view_rows(480, 640, 100.0, canvas)                   # a wide-angle lens: a band
+    assert rows == round(640 * 0.75 * np.tan(np.radians(33.5)) / np.tan(np.radians(50))) and top == (480 - rows) // 2
+    assert view_rows(9, 8, 169.0, canvas) == (4, 1)                  # never below one row
+
+
+def test_geometry_view_crops_only_when_the_bundle_says_so():
+    frame = np.arange(640 * 480 * 3, dtype=np.uint32).reshape(640, 480, 3)
+    on = Geometry(view_crop=True).view(frame, 53.0, (168, 224))
+    assert on.shape == (478, 480, 3) and np.array_equal(on, frame[81:559])
+    assert Geometry().view(frame, 53.0, (168, 224)) is frame
+
+
+@pytest.mark.parametrize("crop", [True, False])
+def test_engine_crops_a_portrait_frame_to_the_training_view(tmp_path, crop):
+    """The toy reads the brightest strip, averaged over rows: a bright bar above the portrait
+    view (strip 3) beats a dimmer one inside it (strip 9) only when the frame is not cropped."""
+    from crossing_assist.runtime.engine import Engine
+    from crossing_assist.testing.toy_bundle import Toy
+
+    toy = Toy(samples=1, drop_p=0.0, geometry=Geometry(fit="letterbox", camera_fov_deg=(67.0, 53.0),
+                                                       train_fov_deg=67.0, view_crop=crop))
+    folder = make_toy_bundle(tmp_path / "b", toy)
+    assert read_bundle(folder).geometry.view_crop is crop
+    frame = np.zeros((120, 60, 3), np.uint8)                          # portrait: keeps rows 40..79
+    frame[:40, 10:15] = 255                                           # strip 3, above the view
+    frame[40:80, 45:50] = 200                                         # strip 10, in view
+    pred = Engine(folder).predict(frame)
+    assert pred.ok and pred.orientation == "portrait" and pred.fov_deg == 53.0
+    assert pred.action == (10 if crop else 3)

@@ -41,11 +41,11 @@ def test_runtime_toy_samples_vary_and_the_deterministic_copy_does_not(tmp_path):
     assert det.predict(frame).mutual_info == pytest.approx(0.0, abs=1e-6)
 
 
-def test_toy_geometry_makes_a_schema2_bundle_and_bad_toys_are_refused(tmp_path):
+def test_toy_geometry_makes_a_schema3_bundle_and_bad_toys_are_refused(tmp_path):
     from crossing_assist.geometry import Geometry
 
     b = read_bundle(make_toy_bundle(tmp_path / "b", geometry=Geometry(fit="stretch", camera_fov_deg=(70.0, 50.0))))
-    assert b.schema_version == 2 and b.camera_fov(480, 640) == 50.0
+    assert b.schema_version == 3 and b.camera_fov(480, 640) == 50.0
     assert read_bundle(make_toy_bundle(tmp_path / "c")).schema_version == 1
     with pytest.raises(ValueError, match="multiple of 12"):
         Toy(size=(24, 50))

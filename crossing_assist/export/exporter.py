@@ -190,7 +190,8 @@ def _spec(config: PolicyConfig, samples: int, p: float, temperature: float = 1.0
 
 
 def _geometry(config: PolicyConfig, spec: GraphSpec) -> Geometry:
-    return Geometry(fit=spec.fit, pad_rgb=spec.pad_rgb, train_fov_deg=config.fov_deg)
+    """Letterboxed models see the training camera's view: consumers crop rows beyond it (schema 3)."""
+    return Geometry(fit=spec.fit, pad_rgb=spec.pad_rgb, train_fov_deg=config.fov_deg, view_crop=spec.fit == "letterbox")
 
 
 def parity_check(policy, spec: GraphSpec, frames: np.ndarray) -> float:

@@ -104,11 +104,14 @@ class Engine:
         return frame[None]
 
     def predict(self, frame_rgb: np.ndarray) -> Prediction:
-        """Run one H x W x 3 uint8 RGB frame; failures come back as ``Prediction(ok=False)``."""
+        """Run one H x W x 3 uint8 RGB frame (its rows cropped to the training camera's view
+        first when the bundle says so, :meth:`Bundle.view`); failures come back as
+        ``Prediction(ok=False)``."""
         t0 = self._clock()
         try:
             x = self._check_frame(frame_rgb)
-            outs = inference.run(self.session, x)
+            fov = self.camera_fov(frame_rgb.shape[1], frame_rgb.shape[0])
+            outs = inference.run(self.session, self.bundle.view(x[0], fov)[None])
             probs, ent, mi, var, votes = (np.asarray(outs[k], dtype=np.float64)[0] for k in
                                           ("probs", "entropy", "mutual_info", "variance", "votes"))
             if probs.shape != (self.space.n,) or not np.all(np.isfinite(probs)):
@@ -116,7 +119,6 @@ class Engine:
                                  if probs.shape == (self.space.n,) else
                                  f"model returned probs of shape {probs.shape}; expected ({self.space.n},)")
             action = int(np.argmax(probs))
-            fov = self.camera_fov(frame_rgb.shape[1], frame_rgb.shape[0])
             unc = measure_value(self.measure, float(ent), float(mi), var, probs)
             if not math.isfinite(unc):
                 raise ValueError(f"model returned a non-finite {self.measure}")
