@@ -60,6 +60,12 @@ def view_rows(height: int, width: int, fov_deg: float, canvas: tuple[int, int],
     return (int(height) - rows) // 2, rows
 
 
+def window_fov(fraction: float, fov_deg: float) -> float:
+    """Horizontal FOV (degrees) of a window covering ``fraction`` of the width of a frame whose
+    horizontal FOV is ``fov_deg`` (pinhole, centred or not: the tangents scale)."""
+    return math.degrees(2 * math.atan(fraction * math.tan(math.radians(fov_deg) / 2)))
+
+
 class GeometryError(ValueError):
     """A frame or field of view the geometry cannot use (one line, says what is valid)."""
 

@@ -227,3 +227,31 @@ def test_import_ptl_keeps_far_y_and_negatives_follow(tmp_path):
     assert r.returncode == 0, r.stderr
     neg = read_manifest(tmp_path / "neg").rows
     assert len(neg) == 2 and {x.source for x in neg} == {"ptl:p0", "ptl:p1"}
+
+
+def test_phone_views_are_what_a_portrait_phone_sees_and_the_view_crop_recovers_the_photo():
+    """A phone held in portrait (3:4, 53 deg across) where a 4:3 photo (67 deg) was taken sees a
+    window ~0.75 of the photo's width at the same scale, taller than the photo: the rows the
+    photo lacks are repeated edges, and the bundle's view crop cuts them off again (to a row)."""
+    from crossing_assist.data_tools.augment import phone_views, portrait_sets
+    from crossing_assist.geometry import view_rows, window_fov
+
+    rng = np.random.default_rng(0)
+    photo = rng.integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    views = phone_views(photo, 0.1, x_to_bin(0.1), 3, fov_deg=53.0, train_fov_deg=67.0)
+    cw = round(640 * np.tan(np.radians(26.5)) / np.tan(np.radians(33.5)))
+    assert cw == 482
+    for (frame, x, b, inside), x0 in zip(views, (0, (640 - cw) // 2, 640 - cw)):
+        assert frame.shape == (round(cw * 4 / 3), cw, 3)
+        top, rows = view_rows(frame.shape[0], cw, 53.0, (168, 224), 67.0)
+        assert abs(rows - 480) <= 2                                   # the photo's rows, give or take one
+        pad = (frame.shape[0] - 480) // 2
+        assert np.array_equal(frame[pad:pad + 480], photo[:, x0:x0 + cw])
+        assert inside == (x0 <= 0.1 * 640 < x0 + cw) and b == (x_to_bin(x) if inside else 1)
+    with pytest.raises(ValueError, match="wider than the photo"):
+        phone_views(photo, 0.5, 6, 1, fov_deg=90.0, train_fov_deg=67.0)
+    sets = portrait_sets(photo, 0.5, 6, 2, portrait_fov_deg=53.0, train_fov_deg=67.0)
+    assert [len(v) for v in sets.values()] == [2, 2]
+    assert sets["portrait"][0][4] == 53.0
+    assert sets["portrait_window"][0][4] == pytest.approx(window_fov(360 / 640, 67.0)) and sets["portrait_window"][0][0].shape == (480, 360, 3)
+    assert window_fov(360 / 640, 67.0) == pytest.approx(40.9, abs=0.1)

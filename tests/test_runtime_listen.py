@@ -99,11 +99,13 @@ def test_crossing_eval_bundle_writes_listen_numbers_and_risk_coverage(tmp_path, 
     assert r.returncode == 0, r.stderr
     assert "landscape (heard, 6 + 3 no-crossing frames)" in r.stdout
     assert "portrait (heard, 12 + 6 no-crossing frames)" in r.stdout
+    assert "portrait_window (heard, 12 + 6 no-crossing frames)" in r.stdout
     m = json.loads((out / "metrics.json").read_text())
     lis = m["listen"]
-    land, port = lis["landscape"], lis["portrait"]
+    land, port, win = lis["landscape"], lis["portrait"], lis["portrait_window"]
     assert land["frames_with_crossing"] == 6 and land["frames_without_crossing"] == 3
     assert port["frames_with_crossing"] == 12 and port["frames_without_crossing"] == 6
+    assert win["frames_with_crossing"] == 12 and win["bundle_threshold"] == port["bundle_threshold"]
     assert land["accuracy"] == 1.0 and land["beacon_on"] == 1.0 and land["confidently_wrong"] == 0.0
     assert land["silence_no_crossing"] == 1.0 and land["beacon_on_goal_in_view"] == 1.0
     assert port["silence_no_crossing"] == 1.0 and 0 < port["beacon_on"] <= 1.0
@@ -112,7 +114,8 @@ def test_crossing_eval_bundle_writes_listen_numbers_and_risk_coverage(tmp_path, 
         thresholds = [c["threshold"] for c in view["risk_coverage"]]
         assert thresholds == sorted(thresholds) and view["bundle_threshold"] in thresholds
         assert view["best_threshold_here"] is None or view["best_threshold_here"]["threshold"] in thresholds
-    assert (out / "risk_coverage.png").stat().st_size > 0 and (out / "risk_coverage_portrait.png").stat().st_size > 0
+    for png in ("risk_coverage.png", "risk_coverage_portrait.png", "risk_coverage_portrait_window.png"):
+        assert (out / png).stat().st_size > 0
 
 
 def test_crossing_eval_bad_listen_options_are_one_line(tmp_path, toy_bundle):  # noqa: F811

@@ -265,3 +265,47 @@ def portrait_views(image: np.ndarray, far_x: float | None, label: int, n: int = 
         inside = far_x is not None and b != UNKNOWN and 0.0 <= (far_x * w - x0) / cw < 1.0
         out.append((win, x if inside else None, b, inside))
     return out
+
+
+def phone_views(image: np.ndarray, far_x: float | None, label: int, n: int = 3, *, fov_deg: float,
+                train_fov_deg: float, aspect: float = 3 / 4) -> list[tuple[np.ndarray, float | None, int, bool]]:
+    """What ``n`` phones of ``aspect`` (3:4 portrait by default) and horizontal FOV ``fov_deg``
+    would see from where a landscape photo (``train_fov_deg`` across) was taken, at offsets spread
+    from its left to its right edge: a window of the photo's width ``tan(fov/2) / tan(train/2)``,
+    grown to ``aspect`` with its edge rows repeated above and below (rows the photo does not have,
+    which a bundle's view crop (:func:`crossing_assist.geometry.view_rows`) removes again); or, for
+    a wider aspect, its middle rows. Same tuples as :func:`portrait_views`."""
+    h, w = _check_image(image).shape[:2]
+    frac = math.tan(math.radians(fov_deg) / 2) / math.tan(math.radians(train_fov_deg) / 2)
+    if not 0.0 < frac <= 1.0:
+        raise ValueError(f"Invalid phone FOV {fov_deg} deg: wider than the photo's {train_fov_deg} deg")
+    cw = max(1, int(round(frac * w)))
+    fh = max(1, int(round(cw / aspect)))
+    out = []
+    for win, x, b, inside in portrait_views(image, far_x, label, n, aspect=cw / h):
+        if fh > h:
+            top = (fh - h) // 2
+            win = cv2.copyMakeBorder(win, top, fh - h - top, 0, 0, cv2.BORDER_REPLICATE)
+        else:
+            win = np.ascontiguousarray(win[(h - fh) // 2:(h - fh) // 2 + fh])
+        out.append((win, x, b, inside))
+    return out
+
+
+#: The portrait views a photo is evaluated under (:func:`portrait_sets`).
+PORTRAIT_SETS = ("portrait", "portrait_window")
+
+
+def portrait_sets(image: np.ndarray, far_x: float | None, label: int, n: int, *, portrait_fov_deg: float,
+                  train_fov_deg: float) -> dict[str, list[tuple[np.ndarray, float | None, int, bool, float]]]:
+    """A landscape photo's portrait views, each with its camera's horizontal FOV:
+    ``portrait``: what a phone held in portrait (3:4, ``portrait_fov_deg`` across) sees from the
+    same spot (:func:`phone_views`); ``portrait_window``: 3:4 windows of the photo
+    (:func:`portrait_views`), i.e. a narrower camera, whose FOV is the window's own."""
+    from crossing_assist.geometry import window_fov
+
+    h, w = _check_image(image).shape[:2]
+    win_fov = window_fov(max(1, int(round(0.75 * h))) / w, train_fov_deg)
+    phone = phone_views(image, far_x, label, n, fov_deg=portrait_fov_deg, train_fov_deg=train_fov_deg)
+    return {"portrait": [v + (portrait_fov_deg,) for v in phone],
+            "portrait_window": [v + (win_fov,) for v in portrait_views(image, far_x, label, n)]}

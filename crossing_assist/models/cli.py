@@ -152,7 +152,9 @@ def eval_parser() -> argparse.ArgumentParser:
     p.add_argument("--actions", type=int, help="score a 13-action model as 4 or 8 actions (probabilities summed per action)")
     p.add_argument("--no-listen", dest="listen", action="store_false",
                    help="bundles: skip playing frames through the runtime (beacon-on, confidently wrong, silence)")
-    p.add_argument("--portrait", type=int, default=3, help="bundles: 3:4 portrait windows per photo (0 = none)")
+    p.add_argument("--portrait", type=int, default=3,
+                   help="bundles: portrait views per photo (0 = none): a phone held in portrait at the bundle's "
+                        "portrait FOV, and 3:4 windows of the photo (a narrower camera)")
     p.add_argument("--negatives", help="bundles: dataset of no-crossing frames (its SPLIT rows), for the silence rate")
     p.add_argument("--clip-seconds", type=float, default=1.0, help="bundles: each photo plays as a still clip this long")
     p.add_argument("--threads", type=int, default=1)
@@ -179,11 +181,11 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         out, m = evaluate(cfg)
         print(f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f}), "
               f"bin MAE {m['bin_mae']:.3f} -> {out / 'metrics.json'}")
-        for name in ("landscape", "portrait"):
+        for name in ("landscape", "portrait", "portrait_window"):
             v = m.get("listen", {}).get(name)
             if v:
                 f = lambda x, p=".3f": "n/a" if x is None else format(x, p)  # noqa: E731
-                print(f"{name:>9} (heard, {v['frames_with_crossing']} + {v['frames_without_crossing']} no-crossing "
+                print(f"{name:>15} (heard, {v['frames_with_crossing']} + {v['frames_without_crossing']} no-crossing "
                       f"frames): accuracy {f(v['accuracy'])}, bin MAE {f(v['bin_mae'])}, far-x error "
                       f"{f(v['far_x_error'], '.4f')}, beacon on {f(v['beacon_on'])} (goal in view "
                       f"{f(v['beacon_on_goal_in_view'])}), confidently wrong {f(v['confidently_wrong'], '.4f')}, "

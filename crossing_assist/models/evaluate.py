@@ -44,7 +44,7 @@ class EvalConfig:
     tta_mirror: bool = False
     actions: int | None = None      # score a 13-action model in a coarser space (4 or 8)
     listen: bool = True             # bundles: play each frame through the runtime (what the user hears)
-    portrait: int = 3               # bundles: 3:4 portrait windows per photo, reported beside landscape
+    portrait: int = 3               # bundles: portrait views per photo (phone and 3:4 window), beside landscape
     negatives: str | None = None    # a dataset of no-crossing frames (its SPLIT rows) for the silence rate
     clip_seconds: float = 1.0       # each photo is played as a still clip this long at 10 fps
     threads: int = 2
@@ -153,28 +153,30 @@ def _bundle_conformal(bundle, probs: np.ndarray, labels: np.ndarray) -> dict:
 GATE_SCALES = tuple(2.0 ** (j / 8) for j in range(-16, 17))
 
 
-def _views(cfg: EvalConfig, part: Dataset) -> dict[str, list[tuple[np.ndarray, float | None, int, bool]]]:
-    """The frames a user's phone would give: each photo as taken (landscape) and, with
-    ``cfg.portrait``, its portrait windows; no-crossing frames from ``cfg.negatives`` in both."""
-    from ..data_tools.augment import portrait_views
+def _views(cfg: EvalConfig, part: Dataset, geometry) -> dict[str, list[tuple[np.ndarray, float | None, int, bool, float | None]]]:
+    """The frames a user's phone would give, each with its camera FOV (None = the bundle's
+    default): each photo as taken (landscape) and, with ``cfg.portrait``, its portrait views
+    (:func:`~crossing_assist.data_tools.augment.portrait_sets`: a phone held in portrait at the
+    bundle's portrait FOV, and 3:4 windows); no-crossing frames from ``cfg.negatives`` in all."""
+    from ..data_tools.augment import PORTRAIT_SETS, portrait_sets
 
     rows = [(part, r) for r in part.rows]
     if cfg.negatives:
         neg = read_manifest(cfg.negatives).split(cfg.split)
         rows += [(neg, r) for r in neg.rows if r.label == 0]
-    views: dict[str, list] = {"landscape": []}
-    if cfg.portrait:
-        views["portrait"] = []
+    views: dict[str, list] = {"landscape": [], **({k: [] for k in PORTRAIT_SETS} if cfg.portrait else {})}
     for ds, r in rows:
         img = load_frame(ds.image_path(r), r.flags)
-        views["landscape"].append((img, r.far_x, r.label, r.label != 0))
+        views["landscape"].append((img, r.far_x, r.label, r.label != 0, None))
         if cfg.portrait:
-            views["portrait"] += portrait_views(img, r.far_x, r.label, cfg.portrait)
+            for name, vs in portrait_sets(img, r.far_x, r.label, cfg.portrait, portrait_fov_deg=
+                                          geometry.camera_fov_deg[1], train_fov_deg=geometry.train_fov_deg).items():
+                views[name] += vs
     return views
 
 
 def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
-    """What the user hears, per view (landscape / portrait): the runtime's decisions on every
+    """What the user hears, per view (landscape / portrait / portrait_window): the runtime's decisions on every
     frame played as a still clip, the model's own accuracy on the same frames, and the
     risk-coverage curve of the view's gate threshold (its frames + no-crossing frames)."""
     from tqdm import tqdm
@@ -187,21 +189,21 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
     engine = Engine(cfg.bundle, threads=cfg.threads)
     space = engine.space
     result: dict = {"clip_seconds": cfg.clip_seconds, "fps": 10.0}
-    for name, frames in _views(cfg, _split(cfg)).items():
+    for name, frames in _views(cfg, _split(cfg), engine.bundle.geometry).items():
         lis = Listener(engine, cfg.clip_seconds, 10.0)
-        for img, _, lab, _ in tqdm(frames, desc=f"listen {name}", disable=not cfg.progress, unit="frame"):
-            lis.add(img, lab)
-        known = np.asarray([lab != 0 for _, _, lab, _ in frames])
+        for img, _, lab, _, fov in tqdm(frames, desc=f"listen {name}", disable=not cfg.progress, unit="frame"):
+            lis.add(img, lab, fov)
+        known = np.asarray([lab != 0 for _, _, lab, _, _ in frames])
         probs = np.stack([c[0].probs if c[0].ok else np.full(space.n, 1 / space.n) for c in lis.clips])
-        labels = space.bins_to_actions(np.asarray([lab for _, _, lab, _ in frames]))
-        far_x = np.asarray([np.nan if fx is None else fx for _, fx, _, _ in frames], float)
+        labels = space.bins_to_actions(np.asarray([lab for _, _, lab, _, _ in frames]))
+        far_x = np.asarray([np.nan if fx is None else fx for _, fx, _, _, _ in frames], float)
         m = compute_metrics(probs[known], labels[known], space.n, far_x[known]) if known.any() else {}
         heard = lis.heard()
         entry = {k: m.get(k) for k in ("n", "accuracy", "bin_mae", "far_x_error", "majority_accuracy")}
         entry.update(summarise(heard))
-        inside = [h for h, (_, _, _, ins) in zip(heard, frames) if ins]
+        inside = [h for h, (_, _, _, ins, _) in zip(heard, frames) if ins]
         entry["beacon_on_goal_in_view"] = float(np.mean([h.on for h in inside])) if inside else None
-        t0 = float(engine.decision_config(name).threshold)   # the view's (orientation's) gate threshold
+        t0 = float(engine.decision_config(name.split("_")[0]).threshold)   # the view's orientation's gate threshold
         curve = lis.risk_coverage([t0 * m for m in GATE_SCALES])
         entry.update(bundle_threshold=t0, risk_coverage=curve, best_threshold_here=choose_threshold(curve))
         plot_risk_coverage(curve, t0, out / ("risk_coverage.png" if name == "landscape" else f"risk_coverage_{name}.png"),

@@ -84,10 +84,10 @@ class Engine:
         self.conformal_threshold = self.bundle.calibration.conformal.threshold
         self._clock: Callable[[], float] = time.perf_counter
 
-    def camera_fov(self, width: int, height: int) -> float:
-        """Horizontal FOV (degrees) for a ``width x height`` frame: the override, else the
-        bundle's default for the frame's orientation."""
-        return self.bundle.camera_fov(width, height, self.fov_override)
+    def camera_fov(self, width: int, height: int, fov_deg: float | None = None) -> float:
+        """Horizontal FOV (degrees) for a ``width x height`` frame: ``fov_deg`` (this frame's),
+        else the engine's override, else the bundle's default for the frame's orientation."""
+        return self.bundle.camera_fov(width, height, self.fov_override if fov_deg is None else fov_deg)
 
     def decision_config(self, orientation: str = "landscape", **overrides) -> DecisionConfig:
         """The decision logic's config for this bundle and frames of ``orientation``: actions,
@@ -103,14 +103,14 @@ class Engine:
         check_frame_shape(frame.shape[0], frame.shape[1])   # e.g. 1 x N or 1:10: never a heading
         return frame[None]
 
-    def predict(self, frame_rgb: np.ndarray) -> Prediction:
+    def predict(self, frame_rgb: np.ndarray, fov_deg: float | None = None) -> Prediction:
         """Run one H x W x 3 uint8 RGB frame (its rows cropped to the training camera's view
         first when the bundle says so, :meth:`Bundle.view`); failures come back as
-        ``Prediction(ok=False)``."""
+        ``Prediction(ok=False)``. ``fov_deg``: this frame's camera FOV (:meth:`camera_fov`)."""
         t0 = self._clock()
         try:
             x = self._check_frame(frame_rgb)
-            fov = self.camera_fov(frame_rgb.shape[1], frame_rgb.shape[0])
+            fov = self.camera_fov(frame_rgb.shape[1], frame_rgb.shape[0], fov_deg)
             outs = inference.run(self.session, self.bundle.view(x[0], fov)[None])
             probs, ent, mi, var, votes = (np.asarray(outs[k], dtype=np.float64)[0] for k in
                                           ("probs", "entropy", "mutual_info", "variance", "votes"))

@@ -38,9 +38,11 @@ class Heard:
     strip: int
 
 
-def play_still(engine: Engine, frame: np.ndarray, seconds: float = 1.0, fps: float = 10.0) -> list[Prediction]:
-    """The engine's predictions for ``frame`` held still for ``seconds`` at ``fps``."""
-    return [engine.predict(frame) for _ in range(max(1, int(round(seconds * fps))))]
+def play_still(engine: Engine, frame: np.ndarray, seconds: float = 1.0, fps: float = 10.0,
+               fov_deg: float | None = None) -> list[Prediction]:
+    """The engine's predictions for ``frame`` (camera FOV ``fov_deg``, None = the engine's) held
+    still for ``seconds`` at ``fps``."""
+    return [engine.predict(frame, fov_deg) for _ in range(max(1, int(round(seconds * fps))))]
 
 
 def decide_still(preds: Sequence[Prediction], cfg: DecisionConfig, fps: float = 10.0) -> Heard | None:
@@ -89,8 +91,8 @@ class Listener:
         self.clips: list[list[Prediction]] = []
         self.labels: list[int] = []
 
-    def add(self, frame: np.ndarray, label: int) -> None:
-        self.clips.append(play_still(self.engine, frame, self.seconds, self.fps))
+    def add(self, frame: np.ndarray, label: int, fov_deg: float | None = None) -> None:
+        self.clips.append(play_still(self.engine, frame, self.seconds, self.fps, fov_deg))
         self.labels.append(int(label))
 
     def heard(self, threshold: float | None = None, idx: Sequence[int] | None = None) -> list[Heard]:
