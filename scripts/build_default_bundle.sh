@@ -86,32 +86,4 @@ fi
 
 # Replace the embedded bundle in one rename (write_bundle validates and swaps atomically).
 # bundle.json (and the graph's copy) also carry the leave-one-photographer-out figures.
-"$PY" - "$SRC" "$OUT" "$CV_DIR" "$GATE_JSON" <<'PYEOF'
-import json, sys
-from pathlib import Path
-import onnx
-from crossing_assist.bundle import read_bundle, write_bundle
-from crossing_assist.export.graph import model_bytes, set_metadata
-src, out, cv, gate_json = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3]), sys.argv[4]
-b = read_bundle(src)
-meta = json.loads((src / "bundle.json").read_text())
-if (cv / "cv.json").is_file():
-    c = json.loads((cv / "cv.json").read_text())
-    meta["metrics"]["leave_one_photographer_out"] = {
-        "epochs": c["config"]["epochs"], "folds": c["folds"],
-        **{k: c[k] for k in ("accuracy", "bin_mae", "far_x_error", "majority_accuracy")}}
-if (cv / gate_json).is_file():
-    g = json.loads((cv / gate_json).read_text())
-    def summary(g):
-        return {k: g[k] for k in ("scale", "targets_met", "folds")} | {
-            "at_scale": {k: v for k, v in g["at_scale"].items() if k != "per_fold"},
-            "at_fitted_threshold": {k: v for k, v in g["at_fitted_threshold"].items() if k != "per_fold"}}
-    meta["metrics"]["gate_held_out"] = summary(g) | ({"portrait": summary(g["portrait"])} if "portrait" in g else {})
-model = onnx.load_model_from_string(b.model_path.read_bytes())
-set_metadata(model, meta)
-write_bundle(out, model_bytes(model), meta)
-b = read_bundle(out)
-full, cross = b.metrics["full_split"], b.metrics["cross_fit"]
-print(f"default bundle written: {out} ({b.model_size / 1e6:.1f} MB, {b.precision}, val accuracy "
-      f"{full['accuracy']:.3f}, held-out coverage {cross['coverage']:.3f} at target {b.calibration.conformal.coverage})")
-PYEOF
+"$PY" scripts/stamp_bundle.py "$SRC" "$OUT" --cv "$CV_DIR" --gate-json "$GATE_JSON"

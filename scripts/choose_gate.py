@@ -5,9 +5,11 @@ For each fold of a leave-one-photographer-out run (``crossing-train --cv source`
 held-out photographer; play the held-out photographer's unseen photos (their train-split
 photos, which the fold never saw) and unseen no-crossing views (the ``negatives`` rows that no
 model trained on) through the runtime (:mod:`crossing_assist.runtime.listen`), as taken
-(landscape) and as 3:4 portrait windows cut from them (``--portrait`` windows a photo; a goal
-outside the window lies in the edge strip); sweep the gate threshold as a multiple ``m`` of the
-bundle's own fitted threshold. Per orientation the folds' rates are pooled per ``m``, and ``m*``
+(landscape) and in portrait (``--portrait`` views a photo, :func:`portrait_sets`): ``portrait``,
+what a phone held in portrait at the bundle's portrait FOV sees from the same spot (the user's
+case, which sets the portrait threshold), and ``portrait_window``, 3:4 windows of the photo (a
+narrower camera, reported only); a goal out of view lies in the edge strip. Sweep the gate
+threshold as a multiple ``m`` of the bundle's own fitted threshold. Per orientation the folds' rates are pooled per ``m``, and ``m*``
 is the largest beacon-on rate with confidently wrong <= 0.5 % and silence on no-crossing frames
 >= 98 % (else the point nearest those targets). A portrait strip is 0.56 of a landscape one, so
 the same angular doubt spreads over more strips and one landscape-fitted threshold silences
@@ -30,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from crossing_assist.data_tools.augment import portrait_views
+from crossing_assist.data_tools.augment import PORTRAIT_SETS, portrait_sets
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest, write_manifest
 from crossing_assist.runtime.listen import Listener, summarise
@@ -78,30 +80,30 @@ def held_out_rows(ptl, neg, source: str, used: set[str], n_frames: int, seed: in
 
 def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, portrait: int,
                mirror: bool = False) -> dict:
-    """The fold's held-out curves: ``{"landscape": {...}, "portrait": {...}}`` (portrait only
-    with ``portrait`` > 0 windows a photo); each cached in the fold folder once listened to."""
+    """The fold's held-out curves: ``{"landscape": {...}, "portrait": {...}, "portrait_window": {...}}``
+    (the portrait ones only with ``portrait`` > 0 views a photo); each cached in the fold folder
+    once listened to."""
     from crossing_assist.runtime.engine import Engine
 
     bundle = fold_bundle(fold, source, ptl, mirror)
     pos, negs = held_out_rows(ptl, neg, source, used, n_frames, seed)
     engine = None
     out = {}
-    for view, cache in (("landscape", f"gate_curve{tag(mirror)}.json"),
-                        ("portrait", f"gate_curve{tag(mirror)}_portrait{portrait}.json")):
-        done = fold / cache
-        if view == "portrait" and not portrait:
-            continue
+    for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
+        done = fold / f"gate_curve{tag(mirror)}{'' if view == 'landscape' else f'_{view}{portrait}'}.json"
         if done.is_file():   # listened to already (the fold does not change once finished)
             out[view] = json.loads(done.read_text())
             continue
         engine = engine or Engine(bundle, threads=1)
+        geo = engine.bundle.geometry
         lis = Listener(engine)
         for ds, rows in ((ptl, pos), (neg, negs)):
             for r in rows:
                 img = load_frame(ds.image_path(r), r.flags)
-                for win, _, lab, _ in (portrait_views(img, r.far_x, r.label, portrait) if view == "portrait"
-                                       else [(img, r.far_x, r.label, True)]):
-                    lis.add(win, lab)
+                for win, _, lab, _, fov in ([(img, r.far_x, r.label, True, None)] if view == "landscape" else
+                                            portrait_sets(img, r.far_x, r.label, portrait, portrait_fov_deg=
+                                                          geo.camera_fov_deg[1], train_fov_deg=geo.train_fov_deg)[view]):
+                    lis.add(win, lab, fov)
         t0 = engine.decision_config().threshold
         n_pos = sum(lab != 0 for lab in lis.labels)
         result = {"source": source, "view": view, "threshold": t0, "frames": n_pos,
@@ -165,7 +167,7 @@ def finished_folds(cv: Path):
 
 def main(argv=None) -> int:
     ap = held_out_parser(__doc__.split("\n\n")[0], frames=200)
-    ap.add_argument("--portrait", type=int, default=3, help="3:4 portrait windows a photo (0: landscape only)")
+    ap.add_argument("--portrait", type=int, default=3, help="portrait views a photo, of each kind (0: landscape only)")
     a = ap.parse_args(argv)
     from crossing_assist.models.plots import plot_risk_coverage
 
@@ -193,8 +195,8 @@ def main(argv=None) -> int:
         print(f"{view}: fitted threshold (scale 1): {fmt(one)}")
         print(f"{view}: chosen scale {best['scale']:g} ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
     # landscape stays at the top level (what build_default_bundle.sh and older readers take)
-    (a.cv / f"gate{tag(a.mirror)}.json").write_text(json.dumps({**result["landscape"], **({"portrait": result["portrait"]} if "portrait" in result else {})},
-                                               indent=1))
+    portrait = {k: result[k] for k in PORTRAIT_SETS if k in result}   # "portrait" sets the portrait threshold
+    (a.cv / f"gate{tag(a.mirror)}.json").write_text(json.dumps({**result["landscape"], **portrait}, indent=1))
     return 0
 
 

@@ -1,14 +1,16 @@
 """How each field condition moves the held-out figures: the leave-one-photographer-out folds'
 bundles on their unseen photographer's photos, clean and under each corruption, roll and
-portrait window, measured as the user meets them.
+portrait, measured as the user meets them.
 
 For each finished fold of a ``crossing-train --cv source`` run (``CV/fold-<source>``): its bundle
 (exported once by :mod:`choose_gate`'s ``fold_bundle``, calibrated without that photographer),
 the same held-out draw as ``choose_gate.py`` (photos of the photographer the fold never saw, and
 no-crossing views no model trained on), each rendered under one condition at a time:
 ``clean``, every corruption of :mod:`crossing_assist.data_tools.corrupt` (the training's field
-views use them all), ``roll`` (10..15 degrees either way) and ``portrait`` (a 3:4 window at a
-random offset; a goal outside it lies in the edge strip). Each view is played as a 1 s still
+views use them all), ``roll`` (10..15 degrees either way), ``portrait`` (what a phone held in
+portrait at the bundle's portrait FOV sees from the same spot) and ``portrait_window`` (a 3:4
+window of the photo, a narrower camera), each at one of three offsets
+(:func:`~crossing_assist.data_tools.augment.portrait_sets`; a goal out of view lies in the edge strip). Each view is played as a 1 s still
 clip through the runtime (:class:`~crossing_assist.runtime.listen.Listener`, the bundle's own
 gate thresholds). Per condition, pooled over folds: the model's accuracy and bin MAE (argmax of
 the clip's first frame), beacon on, confidently wrong and silence on no-crossing views; the
@@ -29,27 +31,29 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from choose_gate import finished_folds, fold_bundle, held_out_parser, held_out_rows, tag  # noqa: E402  (a sibling script)
 
-from crossing_assist.data_tools.augment import crop_window, roll  # noqa: E402
+from crossing_assist.data_tools.augment import PORTRAIT_SETS, portrait_sets, roll  # noqa: E402
 from crossing_assist.data_tools.corrupt import CORRUPTIONS, corrupt  # noqa: E402
 from crossing_assist.data_tools.images import flag_value, load_frame  # noqa: E402
 from crossing_assist.data_tools.manifest import read_manifest  # noqa: E402
 from crossing_assist.runtime.listen import Listener, summarise  # noqa: E402
 
-CONDITIONS = ("clean", *CORRUPTIONS, "roll", "portrait")
+CONDITIONS = ("clean", *CORRUPTIONS, "roll", *PORTRAIT_SETS)
 
 
 def render(condition: str, img: np.ndarray, far_x: float | None, far_y: float, label: int,
-           rng: np.random.Generator) -> tuple[np.ndarray, int]:
-    """``img`` as seen under ``condition``: (view, its label)."""
+           rng: np.random.Generator, geometry) -> tuple[np.ndarray, int, float | None]:
+    """``img`` as seen under ``condition``: (view, its label, its camera FOV or None = the bundle's)."""
     if condition == "clean":
-        return img, label
+        return img, label, None
     if condition == "roll":
         view, _, lab = roll(img, far_x, far_y, label, float(rng.choice([-1, 1]) * rng.uniform(10, 15)))
-        return view, lab
-    if condition == "portrait":
-        view, _, lab = crop_window(img, far_x, label, 3 / 4, float(rng.random()))
-        return view, lab
-    return corrupt(img, condition, rng), label
+        return view, lab, None
+    if condition in PORTRAIT_SETS:
+        views = portrait_sets(img, far_x, label, 3, portrait_fov_deg=geometry.camera_fov_deg[1],
+                              train_fov_deg=geometry.train_fov_deg)[condition]
+        view, _, lab, _, fov = views[int(rng.integers(len(views)))]
+        return view, lab, fov
+    return corrupt(img, condition, rng), label, None
 
 
 def fold_table(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, mirror: bool) -> dict:
@@ -68,8 +72,8 @@ def fold_table(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
         lis = Listener(engine)
         for ds, r, img in images:
             far_y = float(flag_value(r.flags, "far_y") or 0.5)
-            view, label = render(condition, img, r.far_x, far_y, r.label, rng)
-            lis.add(view, label)
+            view, label, fov = render(condition, img, r.far_x, far_y, r.label, rng, engine.bundle.geometry)
+            lis.add(view, label, fov)
         labels = np.asarray(lis.labels)
         first = np.asarray([clip[0].action if clip[0].ok else -1 for clip in lis.clips])
         known = labels != 0

@@ -1,0 +1,98 @@
+"""Stamp a bundle's held-out figures (and, on request, held-out gate scales and the current
+geometry schema) into its bundle.json and the graph's embedded copy, writing a new bundle
+atomically. The graph itself is left as it is.
+
+    .venv/bin/python scripts/stamp_bundle.py SRC OUT --cv runs/default/cv --gate-json gate_mirror.json
+        [--rescale-gate] [--view-crop]
+
+* Always: ``metrics.leave_one_photographer_out`` from ``CV/cv.json`` and ``metrics.gate_held_out``
+  from ``CV/GATE_JSON`` (scripts/choose_gate.py), where present.
+* ``--rescale-gate``: the gate thresholds become the bundle's fitted threshold times the scales in
+  ``GATE_JSON`` (landscape, and portrait where chosen). The fitted threshold is read back from
+  the bundle's own record (its landscape threshold over its recorded held-out scale), so a
+  shipped bundle takes new held-out scales without a re-export.
+* ``--view-crop``: upgrade a letterbox bundle to the current schema with ``geometry.view_crop``
+  (consumers crop rows beyond the training camera's view, crossing_assist/geometry.py): right for
+  models trained on windows of the training photos at their own scale, as the default is.
+The change is recorded in ``provenance.stamped``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import onnx
+
+from crossing_assist.bundle import SCHEMA_VERSION, read_bundle, write_bundle
+from crossing_assist.export.graph import model_bytes, set_metadata
+
+
+def summary(g: dict) -> dict:
+    return {k: g[k] for k in ("scale", "targets_met", "folds")} | {
+        "at_scale": {k: v for k, v in g["at_scale"].items() if k != "per_fold"},
+        "at_fitted_threshold": {k: v for k, v in g["at_fitted_threshold"].items() if k != "per_fold"}}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("src", type=Path)
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--cv", type=Path, required=True, help="the --cv source run folder")
+    ap.add_argument("--gate-json", default="gate.json", help="choose_gate.py's result in CV")
+    ap.add_argument("--rescale-gate", action="store_true", help="thresholds = fitted x the held-out scales")
+    ap.add_argument("--view-crop", action="store_true", help="current schema, geometry.view_crop true")
+    a = ap.parse_args(argv)
+    b = read_bundle(a.src)
+    meta = json.loads((a.src / "bundle.json").read_text())
+    old_gate = meta["metrics"].get("gate_held_out")
+    if (a.cv / "cv.json").is_file():
+        c = json.loads((a.cv / "cv.json").read_text())
+        meta["metrics"]["leave_one_photographer_out"] = {
+            "epochs": c["config"]["epochs"], "folds": c["folds"],
+            **{k: c[k] for k in ("accuracy", "bin_mae", "far_x_error", "majority_accuracy")}}
+    stamped = []
+    gate_path = a.cv / a.gate_json
+    if gate_path.is_file():
+        g = json.loads(gate_path.read_text())
+        meta["metrics"]["gate_held_out"] = summary(g) | ({"portrait": summary(g["portrait"])} if "portrait" in g else {})
+        if a.rescale_gate:
+            if not old_gate:
+                print(f"error: {a.src} records no held-out gate scale; re-export it instead", file=sys.stderr)
+                return 2
+            unc = meta["calibration"]["uncertainty"]
+            fitted = unc["threshold"] / old_gate["scale"]
+            unc["threshold"] = fitted * g["scale"]
+            if "portrait" in g:
+                unc["portrait_threshold"] = fitted * g["portrait"]["scale"]
+            stamped.append(f"gate thresholds = fitted {fitted:.4f} x held-out scales {g['scale']:.4f} (landscape), "
+                           f"{g.get('portrait', {}).get('scale', 'unchanged')} (portrait)")
+    elif a.rescale_gate:
+        print(f"error: {gate_path} not found (run scripts/choose_gate.py {a.cv})", file=sys.stderr)
+        return 2
+    if a.view_crop:
+        if b.geometry.fit != "letterbox":
+            print(f"error: {a.src} is not letterboxed (geometry.fit = {b.geometry.fit}); no view crop", file=sys.stderr)
+            return 2
+        meta["schema_version"] = SCHEMA_VERSION
+        meta["geometry"]["view_crop"] = True
+        stamped.append(f"schema {SCHEMA_VERSION}, geometry.view_crop")
+    if stamped:
+        meta["provenance"]["stamped"] = {"what": stamped, "by": "scripts/stamp_bundle.py " + " ".join(sys.argv[1:] if argv is None else argv),
+                                         "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    model = onnx.load_model_from_string(b.model_path.read_bytes())
+    set_metadata(model, meta)
+    write_bundle(a.out, model_bytes(model), meta)
+    b = read_bundle(a.out)
+    full, cross = b.metrics["full_split"], b.metrics["cross_fit"]
+    print(f"bundle written: {a.out} ({b.model_size / 1e6:.1f} MB, {b.precision}, schema {b.schema_version}, val accuracy "
+          f"{full['accuracy']:.3f}, held-out coverage {cross['coverage']:.3f} at target {b.calibration.conformal.coverage}"
+          + "".join(f"; {s}" for s in stamped) + ")")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
