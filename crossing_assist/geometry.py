@@ -51,11 +51,14 @@ def view_rows(height: int, width: int, fov_deg: float, canvas: tuple[int, int],
     """The rows of a ``height x width`` frame (horizontal FOV ``fov_deg``) that the canvas shows
     at the training camera's angular scale: ``(top, rows)``, centred.
 
-    ``rows = min(height, max(1, floor(width * H * tan(train / 2) / (W * tan(fov / 2)) + 0.5)))``
-    for the canvas (H, W); ``top = (height - rows) // 2``. The phone app computes the same
-    (android_demo/www/js/geometry.js); the shared test vectors hold both to it."""
+    ``rows = min(height, max(1, floor(width * H * t / W + 0.5)))`` for the canvas (H, W), with
+    ``t = max(1, tan(train / 2) / tan(fov / 2))``; ``top = (height - rows) // 2``. A camera wider
+    than the training one (``t`` would be < 1) cannot reach the training scale without losing
+    columns, so its frame is fitted by its width and keeps the rows the canvas shows at that
+    scale. The phone app computes the same (android_demo/www/js/geometry.js); the shared test
+    vectors hold both to it."""
     ch, cw = canvas
-    t = math.tan(math.radians(train_fov_deg) / 2) / math.tan(math.radians(fov_deg) / 2)
+    t = max(1.0, math.tan(math.radians(train_fov_deg) / 2) / math.tan(math.radians(fov_deg) / 2))
     rows = min(int(height), max(1, math.floor(width * ch * t / cw + 0.5)))
     return (int(height) - rows) // 2, rows
 

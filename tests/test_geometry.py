@@ -170,8 +170,9 @@ def test_edited_geometry_in_bundle_json_is_caught_against_the_graph(tmp_path, ed
 
 
 def test_view_rows_keeps_the_training_cameras_angular_scale():
-    """Rows beyond what the 4:3 canvas shows at the training photos' pixels per degree go;
-    columns never do. Canvas 168 x 224, training camera 67 deg across."""
+    """Rows beyond what the 4:3 canvas shows at the training photos' pixels per degree (or, for a
+    camera wider than the training one, at the scale that fits its width) go; columns never do.
+    Canvas 168 x 224, training camera 67 deg across."""
     from crossing_assist.geometry import view_rows
 
     canvas = (168, 224)
@@ -180,9 +181,9 @@ def test_view_rows_keeps_the_training_cameras_angular_scale():
     assert view_rows(640, 480, 40.0, canvas) == (0, 640)             # a narrower camera (a 3:4 window)
     top, rows = view_rows(640, 480, 53.0, canvas)                    # a phone held in portrait
     assert rows == 478 and top == 81                                 # its middle ~3:3
-    top, rows = view_rows(480, 640, 100.0, canvas)                   # a wide-angle lens: a band
-    assert rows == round(640 * 0.75 * np.tan(np.radians(33.5)) / np.tan(np.radians(50))) and top == (480 - rows) // 2
-    assert view_rows(9, 8, 169.0, canvas) == (4, 1)                  # never below one row
+    assert view_rows(480, 640, 100.0, canvas) == (0, 480)            # a wide-angle lens, 4:3: fitted by width
+    assert view_rows(640, 480, 100.0, canvas) == (140, 360)          # ... held in portrait: a 4:3 band
+    assert view_rows(64, 1, 67.0, canvas) == (31, 1)                 # never below one row
 
 
 def test_geometry_view_crops_only_when_the_bundle_says_so():
