@@ -24,7 +24,7 @@ import numpy as np
 from crossing_assist.actions import UNKNOWN, format_label, x_to_bin
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import ManifestError, atomic_write_text, read_manifest
-from crossing_assist.geometry import TRAIN_FOV_DEG
+from crossing_assist.geometry import TRAIN_FOV_DEG, window_fov
 
 
 @dataclass(frozen=True)
@@ -38,12 +38,6 @@ class PhotoClipConfig:
     aspect: float = 3 / 4          # width / height of the phone's frame
     height: int = 320              # output frame height (px)
     fov_deg: float = TRAIN_FOV_DEG # horizontal FOV of the photos' camera
-
-
-def window_fov(photo_aspect: float, aspect: float, fov_deg: float) -> float:
-    """Horizontal FOV of a full-height window of ``aspect`` cut from a photo of ``photo_aspect``."""
-    frac = min(1.0, aspect / photo_aspect)
-    return math.degrees(2 * math.atan(frac * math.tan(math.radians(fov_deg) / 2)))
 
 
 def make_photo_clip(cfg: PhotoClipConfig) -> tuple[Path, Path, float]:
@@ -80,7 +74,7 @@ def make_photo_clip(cfg: PhotoClipConfig) -> tuple[Path, Path, float]:
                                     "a window cannot be wider than what the camera saw")
             photo = cv2.resize(photo, (max(w, int(round(pw * h / ph))), h), interpolation=cv2.INTER_AREA)
             pw = photo.shape[1]
-            fov = window_fov(pw / h, w / h, cfg.fov_deg)
+            fov = window_fov(min(1.0, w / pw), cfg.fov_deg)   # a full-height window of the photo
             fovs.append(fov)
             f_px = (pw / 2) / math.tan(math.radians(cfg.fov_deg) / 2)   # the photo camera's focal length
             goal_px = r.far_x * pw
