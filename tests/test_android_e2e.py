@@ -11,7 +11,10 @@ built copy of the app on 127.0.0.1:
   then a good start, long press, and a reload with the server stopped (offline);
 * portrait (390 x 844 screen, 180 x 240 camera): the real default bundle with its MC-dropout
   noise made constant (so onnxruntime-web 1.30 and Python's onnxruntime must agree number for
-  number) on the sample clip cut to portrait.
+  number) on the sample clip cut to portrait;
+* portrait with the view crop (bundle schema 3, ``geometry.view_crop``): a tiny test bundle
+  whose letterbox geometry crops the frame's rows to the training camera's view, on a clip whose
+  kept rows and cut-off rows point to different strips (the app must crop as Engine.predict).
 
 The tests below judge what they recorded, against the Python runtime on the same frames.
 
@@ -37,13 +40,15 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from crossing_assist.geometry import Geometry, orientation
+from crossing_assist import inference
+from crossing_assist.geometry import Geometry, orientation, view_rows
 from crossing_assist.runtime.decide import Decider, Observation
-from crossing_assist.runtime.engine import Engine
+from crossing_assist.runtime.engine import Engine, measure_value
 from crossing_assist.runtime.status import STATUS_STOP, status_message
 from crossing_assist.testing import toy_bundle
 
@@ -61,6 +66,11 @@ SAMPLE_CLIP = REPO / "crossing_assist" / "assets" / "sample_clip.mp4"
 #: The test bundle's geometry: distinct default FOVs per orientation, so the tests see which one
 #: the app chose; the toy graph resizes whatever it gets to its canvas, hence ``fit: stretch``.
 APP_GEOMETRY = Geometry(fit="stretch", camera_fov_deg=(67.0, 53.0), train_fov_deg=67.0)
+#: The view-crop run's bundle geometry (schema 3): letterbox with the view crop on. The toy graph
+#: resizes whatever rows it is given, which is all the crop needs; its (24, 48) canvas at 53 deg
+#: keeps about half of a 3:4 portrait frame's rows.
+CROP_GEOMETRY = Geometry(fit="letterbox", camera_fov_deg=(67.0, 53.0), train_fov_deg=67.0, view_crop=True)
+CROP_CAMERA = (180, 240)  # width x height: a phone held in portrait
 
 
 def _why_skip() -> str | None:
@@ -189,14 +199,15 @@ def _obs(pred) -> Observation:
 
 def test_shared_vectors_pass_in_the_browser(run: dict) -> None:
     """The app's own self-test button replays the Python runtime's vectors in the page: the
-    decisions, the live-loop guards, the status sentences and the orientation -> FOV choice."""
+    decisions, the live-loop guards, the status sentences, the orientation -> FOV choice and the
+    view crop's rows."""
     if not run["vectors"]:
         pytest.skip("android_demo/test_vectors.json is missing")
     v = run["result"]["vectors"]
     want = json.loads((DEMO / "test_vectors.json").read_text())
     assert v["steps"] == sum(len(sc["steps"]) for sc in want["scenarios"]), v
     n_other = (len(want["guards"]["same_frame"]) + len(want["guards"]["fresh"]) + len(want["guards"]["watchdog"]["ops"])
-               + len(want["status"]) + len(want["geometry"]["fov_choice"]))
+               + len(want["status"]) + len(want["geometry"]["fov_choice"]) + len(want["geometry"]["view_rows"]["cases"]))
     assert v["checks"] >= n_other, v
     assert v["failures"] == [] and v["nFailures"] == 0, v
     assert run["result"]["vectors_text"].startswith("Decision logic OK"), run["result"]["vectors_text"]
@@ -213,10 +224,10 @@ def test_model_outputs_match_onnxruntime_on_the_same_frames(run: dict) -> None:
     assert worst <= 1e-5, f"largest difference {worst}"
 
 
-def _assert_same_decisions(engine: Engine, steps, tol_deg: float = 1e-4) -> set:
+def _assert_same_decisions(engine: Engine, steps, tol_deg: float = 1e-4, predict=None) -> set:
     space = engine.space
     gates = set()
-    for entry, d in _python_decisions(engine, steps):
+    for entry, d in _python_decisions(engine, steps, predict):
         app = entry["decision"]
         top2 = np.sort(space.bin_probs_to_action_probs(np.asarray(d["belief"])))[-2:]
         if top2[1] - top2[0] < 1e-6:
@@ -578,8 +589,29 @@ def test_portrait_uses_the_portrait_fov_and_decides_as_python(portrait: dict) ->
     assert {e["fov_deg"] for e in fovs} == {portrait["geometry"]["camera_fov_deg"]["portrait"]}
     unc = portrait["engine"].bundle.calibration.uncertainty   # the portrait gate threshold, when the bundle has one
     assert {e["threshold"] for e in fovs} == {unc.threshold_for("portrait")}
-    int8 = portrait["engine"].bundle.precision == "int8"   # see the parity test's tolerance
-    _assert_same_decisions(portrait["engine"], _app_steps(portrait, least=10), tol_deg=0.5 if int8 else 1e-3)
+    engine, steps = portrait["engine"], _app_steps(portrait, least=10)
+    if engine.bundle.precision != "int8":
+        _assert_same_decisions(engine, steps, tol_deg=1e-3)
+        return
+    # int8: the two runtimes' kernels differ by up to 0.05 in probability (the parity test), which
+    # can flip a gate near its threshold (seen with the view crop on). The decision logic is held
+    # exactly on the app's own outputs; the Python engine's outputs agree on stop/go and side on
+    # >= 90% of the frames.
+    outputs = {id(rgb): entry["outputs"] for entry, rgb in steps}
+
+    def app_outputs(rgb):
+        o = outputs[id(rgb)]
+        probs = np.asarray(o["probs"], np.float64)
+        unc = measure_value(engine.measure, o["entropy"], o["mutual_info"], np.asarray(o["variance"]), probs)
+        return SimpleNamespace(observation=lambda: Observation(probs, unc))
+
+    _assert_same_decisions(engine, steps, tol_deg=1e-6, predict=app_outputs)
+    agree = 0
+    for entry, d in _python_decisions(engine, steps):
+        a = entry["decision"]
+        same_side = d["stop"] or a["stop"] or math.copysign(1, d["heading_deg"]) == math.copysign(1, a["heading_deg"])
+        agree += (d["stop"] == a["stop"]) and same_side
+    assert agree >= 0.9 * len(steps), f"{agree}/{len(steps)} decisions agree"
 
 
 def test_portrait_screen_control_fills_the_screen(portrait: dict) -> None:
@@ -595,6 +627,62 @@ def test_onnxruntime_versions_are_recorded() -> None:
 
     web = json.loads((DEMO / "package.json").read_text())["devDependencies"]["onnxruntime-web"]
     assert re.fullmatch(r"\d+\.\d+\.\d+", web) and onnxruntime.__version__
+
+
+# ----------------------------------------------------------------------------- portrait, view crop
+
+@pytest.fixture(scope="module")
+def portrait_crop(tmp_path_factory) -> dict:
+    """A schema-3 test bundle with the view crop, a portrait camera (180 x 240) whose clip holds
+    one bar in the rows the crop keeps and a brighter one in the rows it cuts off."""
+    clip = _clip_tool()
+    tmp = tmp_path_factory.mktemp("android_e2e_crop")
+    bundle = toy_bundle.make_toy_bundle(tmp / "bundle", toy_bundle.APP_TOY, geometry=CROP_GEOMETRY)
+    engine = Engine(bundle)
+    assert engine.bundle.schema_version == 3 and engine.bundle.geometry.view_crop
+    w, h = CROP_CAMERA
+    keep = view_rows(h, w, engine.camera_fov(w, h), engine.bundle.input.size, CROP_GEOMETRY.train_fov_deg)
+    frames, strips = clip.view_crop_clip(w, h, keep)
+    clip.write_y4m(tmp / "clip.y4m", frames, 10)
+    www = _build(tmp, bundle)
+    result = _drive(tmp, www, tmp / "clip.y4m", 5.0, "--phases", "short", "--viewport", "390x844")
+    return {"result": result, "engine": engine, "keep": keep}
+
+
+def test_view_crop_the_app_keeps_the_rows_python_keeps(portrait_crop: dict) -> None:
+    """Each portrait frame's FOV is the portrait default (decided on the whole frame), and the
+    rows the app gave the graph are view_rows of that frame: [top, rows], a real crop."""
+    engine = portrait_crop["engine"]
+    g = engine.bundle.geometry
+    frames = [e for e in portrait_crop["result"]["trace"] if e["kind"] == "frame"]
+    assert len(frames) >= 20, len(frames)
+    for e in frames:
+        assert e["height"] > e["width"] and e["fov_deg"] == g.camera_fov_deg[1], e
+        want = view_rows(e["height"], e["width"], e["fov_deg"], engine.bundle.input.size, g.train_fov_deg)
+        assert e["view_rows"] == list(want), (e["width"], e["height"], e["view_rows"], want)
+        assert 0 < e["view_rows"][1] < e["height"]
+    assert {tuple(e["view_rows"]) for e in frames} == {portrait_crop["keep"]}   # the camera's 180 x 240
+
+
+def test_view_crop_outputs_and_decisions_match_the_python_engine(portrait_crop: dict) -> None:
+    """The same portrait frames through Engine.predict (which crops them itself) and through the
+    app: outputs within 1e-5, every decision the same. The crop matters: the whole frame through
+    the same graph points elsewhere on nearly every frame (the clip's cut-off rows hold a
+    brighter bar at another strip)."""
+    engine = portrait_crop["engine"]
+    steps = _app_steps_in_order(portrait_crop, least=20)
+    worst, elsewhere = 0.0, 0
+    for entry, rgb in steps:
+        pred = engine.predict(rgb)
+        assert pred.ok, pred.error
+        app_probs = np.asarray(entry["outputs"]["probs"])
+        worst = max(worst, float(np.abs(app_probs - pred.probs).max()), abs(entry["outputs"]["entropy"] - pred.entropy))
+        whole = np.asarray(inference.run(engine.session, rgb[None])["probs"])[0]
+        elsewhere += int(np.argmax(whole)) != int(np.argmax(app_probs))
+    assert worst <= 1e-5, f"largest difference {worst}"
+    assert elsewhere >= 0.9 * len(steps), f"the uncropped frame pointed elsewhere on only {elsewhere}/{len(steps)}"
+    gates = _assert_same_decisions(engine, steps)
+    assert "learner" in gates, gates
 
 
 # ----------------------------------------------------------------------------- the shipped bundle

@@ -142,6 +142,34 @@ def test_js_decider_matches_python_on_random_scenarios(tmp_path: Path) -> None:
     assert 0 < stops < 450  # the scenarios exercise both beacon and stop
 
 
+def test_js_view_rows_matches_python_on_random_frames(tmp_path: Path) -> None:
+    """geometry.js viewRows against crossing_assist.geometry.view_rows (the view crop, schema 3) on
+    random frame sizes, FOVs, canvases and training FOVs: the same integers, every time."""
+    from crossing_assist.geometry import view_rows
+
+    rng = np.random.default_rng(11)
+    cases = []
+    for _ in range(3000):
+        w, h = (int(v) for v in rng.integers(1, 4097, size=2))
+        fov, train = (float(v) for v in rng.uniform(20.0, 170.0, size=2))
+        if rng.uniform() < 0.3:
+            fov, train = float(rng.integers(20, 171)), float(rng.integers(20, 171))   # whole degrees too
+        canvas = [int(v) for v in rng.integers(16, 4097, size=2)]
+        cases.append([h, w, fov, canvas, train, list(view_rows(h, w, fov, tuple(canvas), train))])
+    path = tmp_path / "cases.json"
+    path.write_text(json.dumps(cases))
+    bad = json.loads(run_node(f"""
+        import {{ readFileSync }} from 'node:fs';
+        import {{ viewRows }} from '{js_module("geometry.js")}';
+        const cases = JSON.parse(readFileSync({json.dumps(str(path))}, 'utf8'));
+        const bad = cases.filter(([h, w, fov, canvas, train, want]) =>
+          JSON.stringify(viewRows(h, w, fov, canvas, train)) !== JSON.stringify(want));
+        console.log(JSON.stringify(bad));
+    """))
+    assert bad == []
+    assert 0 < sum(c[5][1] < c[0] for c in cases) < len(cases)   # both cropped and whole frames
+
+
 # ----------------------------------------------------------------------------- build step
 
 NO_NPM = not (DEMO / "node_modules" / "onnxruntime-web" / "dist").is_dir()

@@ -14,7 +14,7 @@ from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
 from crossing_assist.runtime.gate import GateConfig
 from crossing_assist.runtime.live import is_fresh, same_frame
 from crossing_assist.runtime.camera import camera_fov, gate_threshold
-from crossing_assist.testing.vectors import FRAME_SIZES, GEOMETRY_V2, build_vectors, main
+from crossing_assist.testing.vectors import FRAME_SIZES, GEOMETRY_V2, VIEW_CANVASES, build_vectors, main
 
 VECTORS = Path(__file__).resolve().parents[1] / "android_demo" / "test_vectors.json"
 
@@ -92,7 +92,7 @@ def test_vectors_replay_from_json_alone(stored):
 
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == 3
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == 4
     assert "decision steps" in capsys.readouterr().out
 
 
@@ -104,6 +104,31 @@ def test_geometry_scenarios_cover_both_orientations_and_several_aspects(stored):
     assert {67.0, 53.0, 60.0, 90.0} <= fovs
     refused = [c for c in stored["geometry"]["fov_choice"] if c["fov_deg"] is None]
     assert refused and all(c["override"] is not None and not 20 <= c["override"] <= 170 for c in refused)
+
+
+def test_view_crop_vectors_cover_orientations_aspects_and_fovs(stored):
+    """Version 4: the view crop's rows for portrait and landscape frames of several aspects, the
+    orientation's default FOV and overrides, every canvas; each case replays from its JSON alone
+    with the formula in docs (the integers a port must reproduce exactly)."""
+    from crossing_assist.geometry import view_rows
+
+    section = stored["geometry"]["view_rows"]
+    assert section["geometry"]["view_crop"] is True and section["geometry"]["fit"] == "letterbox"
+    cases = section["cases"]
+    frames = {tuple(c["frame"]) for c in cases}
+    assert set(FRAME_SIZES) <= frames
+    assert set(VIEW_CANVASES) <= {tuple(c["canvas"]) for c in cases}
+    defaults = {(c["frame"][1] > c["frame"][0], c["fov_deg"]) for c in cases if c["override"] is None}
+    assert defaults == {(False, 67.0), (True, 53.0)}            # each orientation's default FOV
+    assert {60.0, 100.0, 20.0, 170.0} <= {c["override"] for c in cases}
+    cropped = {(c["frame"][1] > c["frame"][0]) for c in cases if c["rows"] < c["frame"][1]}
+    assert cropped == {True, False}                             # portrait and landscape frames lose rows
+    for c in cases:
+        w, h = c["frame"]
+        assert [c["top"], c["rows"]] == list(view_rows(h, w, c["fov_deg"], tuple(c["canvas"]), c["train_fov_deg"]))
+        t = max(1.0, math.tan(math.radians(c["train_fov_deg"]) / 2) / math.tan(math.radians(c["fov_deg"]) / 2))
+        assert c["rows"] == min(h, max(1, math.floor(w * c["canvas"][0] * t / c["canvas"][1] + 0.5)))
+        assert c["top"] == (h - c["rows"]) // 2
 
 
 def test_fov_rule_matches_the_geometry_module():

@@ -142,9 +142,13 @@ test('bundle.json validation accepts a good bundle and names the bad field', () 
   v1.schema_version = 1;
   delete v1.geometry;
   assert.deepEqual(parseBundleMeta(v1).geometry,
-    { fit: 'stretch', pad_rgb: null, strips: 'frame', camera_fov_deg: { landscape: 90, portrait: 90 }, train_fov_deg: 90 });
+    { fit: 'stretch', pad_rgb: null, strips: 'frame', camera_fov_deg: { landscape: 90, portrait: 90 }, train_fov_deg: 90,
+      view_crop: false });
   const bad = [
-    [(m) => { m.schema_version = 3; }, /schema_version 3 unsupported/],
+    [(m) => { m.schema_version = 4; }, /schema_version 4 unsupported \(this app reads 1, 2, 3\); update the app/],
+    [(m) => { m.schema_version = 3; m.geometry.view_crop = 'yes'; }, /geometry.view_crop = "yes" must be true or false/],
+    [(m) => { m.schema_version = 3; m.geometry.view_crop = null; }, /geometry.view_crop = null/],
+    [(m) => { m.geometry.train_fov_deg = 180; }, /train_fov_deg = 180 is out of range/],
     [(m) => { delete m.geometry; }, /missing field 'geometry'/],
     [(m) => { m.geometry.fit = 'crop'; }, /geometry.fit/],
     [(m) => { m.geometry.camera_fov_deg.portrait = 10; }, /camera_fov_deg.portrait = 10 is out of range/],
@@ -161,6 +165,63 @@ test('bundle.json validation accepts a good bundle and names the bad field', () 
     mutate(m);
     assert.throws(() => parseBundleMeta(m), (err) => err instanceof BundleError && msg.test(err.message));
   }
+});
+
+test('bundle.json schema 3: view_crop is read for letterbox bundles only, absent = false', () => {
+  const crop = (change) => {
+    const m = validMeta();
+    change(m);
+    return parseBundleMeta(m).geometry.view_crop;
+  };
+  assert.equal(crop((m) => { m.schema_version = 3; }), false); // absent: no crop
+  assert.equal(crop((m) => { m.schema_version = 3; m.geometry.view_crop = true; }), true);
+  assert.equal(crop((m) => { m.schema_version = 3; m.geometry.view_crop = false; }), false);
+  assert.equal(crop((m) => { m.geometry.view_crop = true; }), false); // schema 2: never (as Python)
+  assert.equal(crop((m) => { m.schema_version = 3; m.geometry.fit = 'stretch'; m.geometry.view_crop = 'x'; }), false);
+  const noTrain = validMeta();
+  delete noTrain.geometry.train_fov_deg; // optional, as in Python: the landscape FOV
+  assert.equal(parseBundleMeta(noTrain).geometry.train_fov_deg, 67);
+});
+
+test('viewRows: the training camera keeps everything; portrait loses sky and feet; never columns', async () => {
+  const { frameView, viewRows } = await import('../www/js/geometry.js');
+  const canvas = [168, 224];
+  assert.deepEqual(viewRows(480, 640, 67, canvas, 67), [0, 480]); // the training camera itself
+  assert.deepEqual(viewRows(720, 1280, 67, canvas, 67), [0, 720]); // 16:9: already shorter
+  assert.deepEqual(viewRows(640, 480, 40, canvas, 67), [0, 640]); // a narrower camera
+  const [top, rows] = viewRows(640, 480, 53, canvas, 67); // a phone held in portrait
+  assert.ok(rows < 640 && rows > 400 && top === Math.floor((640 - rows) / 2), `${top} ${rows}`);
+  assert.deepEqual(viewRows(480, 640, 100, canvas, 67), [0, 480]); // a wide-angle lens, 4:3: fitted by width
+  assert.deepEqual(viewRows(640, 480, 100, canvas, 67), [140, 360]); // ... held in portrait: a 4:3 band
+  assert.deepEqual(viewRows(64, 1, 67, canvas, 67), [31, 1]); // never below one row
+  // frameView: the middle rows' bytes, as a view of the same buffer; off: the frame itself
+  const w = 4;
+  const h = 10;
+  const rgb = Uint8Array.from({ length: w * h * 3 }, (_, i) => Math.floor(i / (w * 3))); // byte = its row
+  const geometry = { view_crop: true, train_fov_deg: 67 };
+  const v = frameView({ rgb, width: w, height: h }, geometry, 90, [16, 16]);
+  const [t, r] = viewRows(h, w, 90, [16, 16], 67);
+  assert.ok(r < h, `${r}`);
+  assert.deepEqual([v.top, v.rows, v.height, v.width], [t, r, r, w]);
+  assert.equal(v.rgb.length, r * w * 3);
+  assert.equal(v.rgb.buffer, rgb.buffer);
+  assert.deepEqual([v.rgb[0], v.rgb[v.rgb.length - 1]], [t, t + r - 1]);
+  const off = frameView({ rgb, width: w, height: h }, { ...geometry, view_crop: false }, 90, [16, 16]);
+  assert.ok(off.rgb === rgb && off.height === h && off.top === 0 && off.rows === h);
+});
+
+test('the shared vectors hold the view crop, and a wrong viewRows is caught', { skip: noVectors }, () => {
+  const v = loadVectors();
+  const cases = v.geometry.view_rows.cases;
+  const shapes = new Set(cases.map((c) => `${c.frame[0]}x${c.frame[1]}`));
+  assert.ok(cases.length > 500 && shapes.has('480x640') && shapes.has('1280x720') && shapes.has('1080x2400'));
+  assert.ok(cases.some((c) => c.override === null) && cases.some((c) => c.override === 60));
+  assert.ok(cases.some((c) => c.rows < c.frame[1]) && cases.some((c) => c.rows === c.frame[1]));
+  const row = cases.find((c) => c.rows > 2 && c.rows < c.frame[1]);
+  row.rows -= 1;
+  const r = replayVectors(v);
+  assert.equal(r.nFailures, 1);
+  assert.equal(r.failures[0].scenario, 'geometry.view_rows');
 });
 
 test('actions: headings of the 4-action space and the pan law', () => {

@@ -95,3 +95,25 @@ def bar_clip(width: int = 160, height: int = 120, fps: int = 10, *, noise: int =
     n_frozen = 2 * fps
     return (frames + [frozen] * n_frozen, strips + [10.0] * n_frozen,
             [False] * len(frames) + [True] * n_frozen)
+
+
+def view_crop_clip(width: int, height: int, keep: tuple[int, int], fps: int = 10, seconds: int = 8, *,
+                   noise: int = 3, seed: int = 0) -> tuple[list[np.ndarray], list[tuple[int, int]]]:
+    """A clip for the view crop (bundle schema 3): in the rows ``keep`` = (top, rows) the graph
+    should see, a grey bar (200) at one strip; in the rows above and below them, a brighter bar
+    (255) at another strip. A model that sees only the kept rows finds the first strip; one that
+    sees the whole frame the second (it covers as many rows and is brighter). The two strips
+    swap every 3 s. Returns the frames and each frame's (kept strip, outer strip), 1..12."""
+    rng = np.random.default_rng(seed)
+    top, rows = keep
+    if not 0 < rows < height:
+        raise ValueError(f"Invalid keep {keep}: the rows kept must leave some of the {height} rows out")
+    frames, strips = [], []
+    for i in range(seconds * fps):
+        inner, outer = (4, 9) if (i // (3 * fps)) % 2 == 0 else (9, 4)
+        f = bar_frame(width, height, outer, grey=110, bar=(255, 255, 255))
+        f[top:top + rows] = bar_frame(width, rows, inner, grey=110, bar=(200, 200, 200))
+        f = f.astype(np.int16) + rng.integers(-noise, noise + 1, size=f.shape, dtype=np.int16)
+        frames.append(np.clip(f, 0, 255).astype(np.uint8))
+        strips.append((inner, outer))
+    return frames, strips

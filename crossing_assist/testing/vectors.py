@@ -34,6 +34,15 @@ Version 3: each geometry scenario also carries the bundle's ``calibration.uncert
 (``threshold``, optional ``portrait_threshold``); each step's gate threshold is its frame's
 orientation's (:func:`~crossing_assist.runtime.camera.gate_threshold`), and a change of FOV *or*
 threshold starts a fresh Decider.
+
+Version 4: ``geometry.view_rows``, the view crop of bundle schema 3 (``geometry.view_crop``):
+for frames of every :data:`FRAME_SIZES` size (and a few extreme ones), the bundle's default FOV
+of the frame's orientation or an override, several canvases (``input.size``) and training FOVs,
+the FOV the frame gets (:func:`~crossing_assist.runtime.camera.camera_fov` of
+:data:`GEOMETRY_V3`) and the rows the graph sees, ``[top, rows]`` of
+:func:`crossing_assist.geometry.view_rows` (integers: a port must agree exactly; wide cameras,
+whose frames are fitted by their width, included). Its own cases,
+no generator: the vectors above are those of version 3.
 """
 
 from __future__ import annotations
@@ -50,7 +59,7 @@ import numpy as np
 
 from crossing_assist.actions import DEFAULT_FOV_DEG, get_space, heading_to_pan
 from crossing_assist.fileio import atomic_write_text
-from crossing_assist.geometry import FOV_RANGE_DEG, orientation
+from crossing_assist.geometry import FOV_RANGE_DEG, orientation, view_rows
 from crossing_assist.runtime.beacon import BeaconConfig, itd_seconds, pan_gains
 from crossing_assist.runtime.belief import entropy
 from crossing_assist.runtime.camera import camera_fov, gate_threshold, geometry_of
@@ -61,7 +70,7 @@ from crossing_assist.runtime.status import status_message
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 3
+VERSION = 4
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -149,6 +158,11 @@ def _scenarios(rng: np.random.Generator) -> list[tuple[str, DecisionConfig, list
 FRAME_SIZES = ((640, 480), (480, 640), (1280, 720), (720, 1280), (480, 480), (360, 720), (720, 360), (1080, 2400))
 GEOMETRY_V2 = {"fit": "letterbox", "pad_rgb": [124, 116, 104], "strips": "frame",
                "camera_fov_deg": {"landscape": 67.0, "portrait": 53.0}, "train_fov_deg": 67.0}
+#: Schema 3's geometry: the same with the view crop on.
+GEOMETRY_V3 = {**GEOMETRY_V2, "view_crop": True}
+#: Canvases (input.size, [H, W]) for the view-crop vectors: the default bundle's 3:4, square, the
+#: phone app toy's 1:2, and a tall one.
+VIEW_CANVASES = ((168, 224), (224, 224), (24, 48), (320, 240))
 
 
 def _geometry_scenarios(rng: np.random.Generator) -> list[tuple]:
@@ -208,6 +222,29 @@ def _fov_choices() -> list[dict]:
                 except ValueError:
                     row["fov_deg"] = None  # refused: the runtime plays the stop cue
                 cases.append(row)
+    return cases
+
+
+def _view_rows() -> list[dict]:
+    """The view crop (schema 3): frame size x FOV (the orientation's default or an override)
+    x canvas x training FOV -> the FOV the frame gets and the rows the graph sees."""
+    cases = []
+    sizes = FRAME_SIZES + ((9, 8), (8, 9), (640, 1), (1, 640), (1920, 1080), (1080, 1920), (3000, 4000))
+    for w, h in sizes:
+        for override in (None, 40.0, 53.0, 60.0, 67.0, 100.0, 20.0, 170.0):
+            fov = camera_fov(GEOMETRY_V3, w, h, override)
+            for canvas in VIEW_CANVASES:
+                for train in (67.0, 53.0, 90.0):
+                    top, rows = view_rows(h, w, fov, canvas, train)
+                    cases.append({"frame": [w, h], "override": override, "fov_deg": fov, "canvas": list(canvas),
+                                  "train_fov_deg": train, "top": top, "rows": rows})
+    # Values the formula itself is sensitive to: a half-way rounding and fractional degrees.
+    for w, h, fov, canvas, train in ((640, 480, 67.0, (168, 224), 67.0), (642, 600, 67.0, (168, 224), 67.0),
+                                     (480, 640, 53.3, (168, 224), 66.7), (720, 1280, 52.25, (168, 224), 67.0),
+                                     (3, 100, 169.9, (16, 4096), 20.1), (4096, 4096, 20.0, (4096, 16), 170.0)):
+        top, rows = view_rows(h, w, fov, canvas, train)
+        cases.append({"frame": [w, h], "override": fov, "fov_deg": camera_fov(GEOMETRY_V3, w, h, fov),
+                      "canvas": list(canvas), "train_fov_deg": train, "top": top, "rows": rows})
     return cases
 
 
@@ -303,7 +340,8 @@ def build_vectors(seed: int = 20240601) -> dict:
         "actions": {str(n): [list(g) for g in get_space(n).groups] for n in (4, 8, 13)},
         "guards": _guards(rng),
         "status": _status_vectors(),
-        "geometry": {"fov_range_deg": list(FOV_RANGE_DEG), "fov_choice": _fov_choices()},
+        "geometry": {"fov_range_deg": list(FOV_RANGE_DEG), "fov_choice": _fov_choices(),
+                     "view_rows": {"geometry": GEOMETRY_V3, "cases": _view_rows()}},
     }
 
 

@@ -14,19 +14,21 @@
 //   starts afresh (no stale heading) and the screen wake lock is requested again;
 // * the field of view comes from the frame's orientation (portrait / landscape): the user's
 //   setting for it, else the bundle's default (geometry.js); a new FOV starts a fresh Decider,
-//   and an invalid one stops.
+//   and an invalid one stops;
+// * a bundle with geometry.view_crop (schema 3) sees only the frame's middle rows at the training
+//   camera's angular scale (geometry.js viewRows, from the whole frame's FOV), as Engine.predict.
 //
 // The whole screen above the helper bar is one control: tap to start; while guiding, a double
 // tap or a long press ends guidance (a single tap only says how), and a tap resumes lost audio.
 //
-// URL flags: ?test=1 keeps a trace of every step (and copies of the frames the model saw) in
-// window.crossingAssist for the end-to-end test; ?bundle=URL loads another bundle folder;
-// ?gyro=1 ticks "Use the gyroscope"; ?threads=N sets the WASM threads; ?tutorial_speed=K plays
-// the tutorial K times faster.
+// URL flags: ?test=1 keeps a trace of every step (and copies of the camera frames, before any
+// view crop) in window.crossingAssist for the end-to-end test; ?bundle=URL loads another bundle
+// folder; ?gyro=1 ticks "Use the gyroscope"; ?threads=N sets the WASM threads;
+// ?tutorial_speed=K plays the tutorial K times faster.
 
 import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
-import { cameraFov, FovError, gateThreshold, orientation, zoomedFov } from './geometry.js';
+import { cameraFov, FovError, frameView, gateThreshold, orientation, zoomedFov } from './geometry.js';
 import { Haptics } from './haptics.js';
 import { isFresh, sameFrame, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
 import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs } from './logic.js';
@@ -219,12 +221,16 @@ async function step(frame, captured, dt) {
     record({ kind: 'fov', t: captured, fov_deg: cam.fov, orientation: cam.orientation, threshold,
       width: frame.width, height: frame.height });
   }
-  view.camera(`${cam.orientation} ${frame.width}×${frame.height}, field of view ${cam.fov.toFixed(1)}° (${cam.source})`);
+  // The view crop (schema 3): the graph sees the rows the training camera would have seen at
+  // this frame's FOV; the FOV, orientation and threshold above are the whole frame's.
+  const seen = frameView(frame, app.meta.geometry, cam.fov, app.meta.input.size);
+  const crop = seen.rows < frame.height ? `, rows ${seen.top}–${seen.top + seen.rows} seen` : '';
+  view.camera(`${cam.orientation} ${frame.width}×${frame.height}, field of view ${cam.fov.toFixed(1)}° (${cam.source})${crop}`);
   let outputs = null;
   let obs;
   const t0 = performance.now();
   try {
-    outputs = await app.model.run(frame.rgb, frame.height, frame.width);
+    outputs = await app.model.run(seen.rgb, seen.height, seen.width);
     obs = observationFromOutputs(outputs, app.decider.cfg.measure);
   } catch (err) {
     console.error(err);
@@ -243,7 +249,8 @@ async function step(frame, captured, dt) {
   }
   app.frameId = (app.frameId || 0) + 1; // unique over restarts (seq restarts with the camera)
   record({ kind: 'frame', id: app.frameId, t: captured, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, obs, decision: d,
-    fov_deg: cam.fov, width: frame.width, height: frame.height, outputs: outputs && plain(outputs) });
+    fov_deg: cam.fov, width: frame.width, height: frame.height, view_rows: [seen.top, seen.rows],
+    outputs: outputs && plain(outputs) });
   if (TEST) {
     app.frames.push({ id: app.frameId, seq: frame.seq, width: frame.width, height: frame.height, rgb: frame.rgb.slice() });
     if (app.frames.length > MAX_FRAMES) app.frames.shift();

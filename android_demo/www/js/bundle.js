@@ -1,4 +1,4 @@
-// bundle.json (schemas 1 and 2, docs/contracts.md section 3) validation, ported from
+// bundle.json (schemas 1, 2 and 3, docs/contracts.md section 3) validation, ported from
 // crossing_assist/bundle.py: the phone refuses a bundle the Python runtime would refuse, with
 // one line naming the field and the fix. Pure (no DOM): runs in Node (build step, tests) and
 // in the browser.
@@ -6,8 +6,8 @@
 import { DEFAULT_FOV_DEG, spaceGroups, spaceNames } from './actions.js';
 import { FOV_RANGE_DEG } from './geometry.js';
 
-export const SCHEMA_VERSION = 2;
-export const SCHEMA_VERSIONS = [1, 2];
+export const SCHEMA_VERSION = 3;
+export const SCHEMA_VERSIONS = [1, 2, 3];
 export const FITS = ['letterbox', 'stretch'];
 export const INPUT_NAME = 'frames';
 export const OUTPUT_NAMES = ['probs', 'entropy', 'mutual_info', 'variance', 'votes'];
@@ -46,6 +46,11 @@ function int(value, name, lo, hi = Infinity) {
   if (!Number.isInteger(value) || value < lo || value > hi) {
     throw new BundleError(`bundle.json: ${name} = ${JSON.stringify(value)} must be an integer in ${lo}..${hi === Infinity ? '' : hi}`);
   }
+  return value;
+}
+
+function bool(value, name) {
+  if (typeof value !== 'boolean') throw new BundleError(`bundle.json: ${name} = ${JSON.stringify(value)} must be true or false`);
   return value;
 }
 
@@ -107,14 +112,17 @@ function parseCalibration(d) {
 }
 
 /**
- * The geometry block (schema 2), or schema 1's implied one: fit 'stretch' and one field of
- * view (fov_deg) for both orientations. Returns {fit, pad_rgb, strips, camera_fov_deg:
- * {landscape, portrait}, train_fov_deg}.
+ * The geometry block (schema 2; schema 3 adds view_crop), or schema 1's implied one: fit
+ * 'stretch' and one field of view (fov_deg) for both orientations. Returns {fit, pad_rgb,
+ * strips, camera_fov_deg: {landscape, portrait}, train_fov_deg, view_crop}. view_crop (crop the
+ * frame's rows to the training camera's view, geometry.js viewRows) is read only for a letterbox
+ * bundle of schema >= 3 (absent = false), as crossing_assist/bundle.py reads it; train_fov_deg
+ * is optional (default: the landscape FOV) in (0, 180).
  */
 export function parseGeometry(meta, version, fovDeg) {
   if (version < 2) {
     return { fit: 'stretch', pad_rgb: null, strips: 'frame', camera_fov_deg: { landscape: fovDeg, portrait: fovDeg },
-      train_fov_deg: fovDeg };
+      train_fov_deg: fovDeg, view_crop: false };
   }
   const g = get(meta, 'geometry', '');
   const fit = get(g, 'fit', 'geometry');
@@ -132,8 +140,10 @@ export function parseGeometry(meta, version, fovDeg) {
   const [lo, hi] = FOV_RANGE_DEG;
   const camera = {};
   for (const o of ['landscape', 'portrait']) camera[o] = num(get(fovs, o, 'geometry.camera_fov_deg'), `geometry.camera_fov_deg.${o}`, lo, hi);
-  const train = num(get(g, 'train_fov_deg', 'geometry'), 'geometry.train_fov_deg', lo, hi);
-  return { fit, pad_rgb: pad, strips, camera_fov_deg: camera, train_fov_deg: train };
+  const train = num(g.train_fov_deg === undefined ? camera.landscape : g.train_fov_deg, 'geometry.train_fov_deg', 0, 180,
+    { loOpen: true, hiOpen: true });
+  const crop = fit === 'letterbox' && version >= 3 && bool(g.view_crop === undefined ? false : g.view_crop, 'geometry.view_crop');
+  return { fit, pad_rgb: pad, strips, camera_fov_deg: camera, train_fov_deg: train, view_crop: crop };
 }
 
 /**
@@ -146,7 +156,7 @@ export function parseBundleMeta(meta) {
   if (!Number.isInteger(version)) throw new BundleError(`bundle.json: schema_version = ${JSON.stringify(version)} must be an integer`);
   if (!SCHEMA_VERSIONS.includes(version)) {
     const fix = version > SCHEMA_VERSION ? 'update the app' : 're-export the bundle';
-    throw new BundleError(`bundle.json: schema_version ${version} unsupported (this app reads ${SCHEMA_VERSIONS.join(' and ')}); ${fix}`);
+    throw new BundleError(`bundle.json: schema_version ${version} unsupported (this app reads ${SCHEMA_VERSIONS.join(', ')}); ${fix}`);
   }
   const modelFile = get(meta, 'model_file', '');
   if (typeof modelFile !== 'string' || !/^[^/\\]+\.onnx$/.test(modelFile) || modelFile.startsWith('.')) {

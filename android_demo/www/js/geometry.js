@@ -1,6 +1,7 @@
-// The camera-geometry contract (bundle.json schema 2, `geometry`; docs/contracts.md), the
-// app's side: which horizontal field of view turns the 12 strips of THIS frame into headings.
-// Pure (no DOM); the Python reference is crossing_assist/runtime/camera.py (camera_fov), and
+// The camera-geometry contract (bundle.json schemas 2 and 3, `geometry`; docs/contracts.md), the
+// app's side: which horizontal field of view turns the 12 strips of THIS frame into headings,
+// and which of its rows the graph sees. Pure (no DOM); the Python references are
+// crossing_assist/runtime/camera.py (camera_fov) and crossing_assist/geometry.py (view_rows), and
 // test_vectors.json's `geometry` section holds the cases both must agree on.
 //
 // * orientation of a frame: 'portrait' if height > width, else 'landscape';
@@ -14,7 +15,10 @@
 // * a new FOV or threshold (the phone turned) starts a fresh Decider.
 //
 // The model fits the frame onto its canvas inside the ONNX graph (letterbox or stretch), and
-// the strips are strips of the frame (the camera's view): the app hands over raw frames.
+// the strips are strips of the frame (the camera's view): the app hands over raw frames, with
+// one exception. The view crop (schema 3, geometry.view_crop, letterbox only): the app first
+// keeps only the middle rows the canvas can show at the training camera's angular scale
+// (viewRows), never columns. The FOV, orientation and gate threshold stay the whole frame's.
 
 export const ORIENTATIONS = ['landscape', 'portrait'];
 export const FOV_RANGE_DEG = [20, 170];
@@ -70,4 +74,32 @@ export function zoomedFov(fov, settings = {}, capabilities = {}) {
   if (!(typeof zoom === 'number' && typeof min === 'number' && min > 0 && zoom > min)) return fov;
   const half = (fov * Math.PI) / 360;
   return (360 / Math.PI) * Math.atan(Math.tan(half) / (zoom / min));
+}
+
+/**
+ * The rows of a height x width frame (horizontal FOV `fovDeg`) that the canvas [H, W] (bundle.json
+ * input.size) shows at the training camera's angular scale: [top, rows], centred. Python:
+ * crossing_assist/geometry.py view_rows, the same integers (the shared test vectors check it):
+ *   t = max(1, tan(train / 2) / tan(fov / 2))
+ *   rows = min(height, max(1, floor(width * H * t / W + 0.5))), top = (height - rows) // 2
+ * (a camera wider than the training one, t < 1, is fitted by its width: no further crop).
+ */
+export function viewRows(height, width, fovDeg, canvas, trainFovDeg) {
+  const [ch, cw] = canvas;
+  const rad = Math.PI / 180; // as Python's math.radians: x * (pi / 180)
+  const t = Math.max(1, Math.tan((trainFovDeg * rad) / 2) / Math.tan((fovDeg * rad) / 2));
+  const rows = Math.min(height, Math.max(1, Math.floor((width * ch * t) / cw + 0.5)));
+  return [Math.floor((height - rows) / 2), rows];
+}
+
+/**
+ * What of a frame ({rgb: row-major RGB bytes, width, height}) goes into the graph, for a frame
+ * whose horizontal FOV is `fovDeg`: with geometry.view_crop, its viewRows (a subarray, no copy),
+ * else the whole frame. Returns {rgb, width, height, top, rows}.
+ */
+export function frameView(frame, geometry, fovDeg, canvas) {
+  const { rgb, width, height } = frame;
+  if (!geometry.view_crop) return { rgb, width, height, top: 0, rows: height };
+  const [top, rows] = viewRows(height, width, fovDeg, canvas, geometry.train_fov_deg);
+  return { rgb: rgb.subarray(top * width * 3, (top + rows) * width * 3), width, height: rows, top, rows };
 }

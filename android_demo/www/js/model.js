@@ -7,7 +7,8 @@
 // Model.open says which it got ({backend, threads}); the helper view shows it.
 //
 // The graph takes raw uint8 NHWC RGB frames and resizes/normalises itself (contracts.md
-// section 3), so the app only turns the camera's RGBA pixels into RGB.
+// section 3), so the app only turns the camera's RGBA pixels into RGB (and, for a schema-3
+// view-crop bundle, hands over the frame's middle rows: geometry.js frameView).
 
 import { BundleError, INPUT_NAME, OUTPUT_NAMES, parseBundleMeta } from './bundle.js';
 

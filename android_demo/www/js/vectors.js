@@ -7,12 +7,12 @@
 // max(1, |expected|); the belief element by element.
 
 import { headingToPan, spaceGroups } from './actions.js';
-import { cameraFov, FovError, gateThreshold, orientation } from './geometry.js';
+import { cameraFov, FovError, gateThreshold, orientation, viewRows } from './geometry.js';
 import { isFresh, sameFrame, Watchdog } from './live.js';
 import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains } from './logic.js';
 import { statusMessage } from './view.js';
 
-const SUPPORTED_VERSIONS = [1, 2, 3];
+const SUPPORTED_VERSIONS = [1, 2, 3, 4];
 
 function close(a, b, tol) {
   return Math.abs(a - b) <= tol * Math.max(1, Math.abs(b));
@@ -167,6 +167,17 @@ export function replayVectors(vectors) {
     const okOrientation = orientation(w, h) === v.orientation;
     if (!okOrientation || (got === null) !== (v.fov_deg === null) || (got !== null && !close(got, v.fov_deg, tol))) {
       fail({ scenario: 'geometry.fov_choice', field: `${w}x${h} override ${v.override}`, got, expected: v.fov_deg });
+    }
+  }
+  const crop = vectors.geometry?.view_rows; // version 4: the view crop (schema 3), integers, exactly
+  for (const v of crop?.cases || []) {
+    checks += 1;
+    const [w, h] = v.frame;
+    const fov = cameraFov(crop.geometry, w, h, v.override);
+    const got = viewRows(h, w, fov, v.canvas, v.train_fov_deg);
+    if (fov !== v.fov_deg || got[0] !== v.top || got[1] !== v.rows) {
+      fail({ scenario: 'geometry.view_rows', field: `${w}x${h} fov ${fov} canvas ${v.canvas} train ${v.train_fov_deg}`,
+        got: [fov, ...got], expected: [v.fov_deg, v.top, v.rows] });
     }
   }
   return { version: vectors.version, scenarios: vectors.scenarios.length, steps, checks, failures, nFailures, maxRelDiff };
