@@ -96,19 +96,25 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
             continue
         engine = engine or Engine(bundle, threads=1)
         geo = engine.bundle.geometry
-        lis = Listener(engine)
+        lis, in_view = Listener(engine), []
         for ds, rows in ((ptl, pos), (neg, negs)):
             for r in rows:
                 img = load_frame(ds.image_path(r), r.flags)
-                for win, _, lab, _, fov in ([(img, r.far_x, r.label, True, None)] if view == "landscape" else
-                                            portrait_sets(img, r.far_x, r.label, portrait, portrait_fov_deg=
-                                                          geo.camera_fov_deg[1], train_fov_deg=geo.train_fov_deg)[view]):
+                for win, _, lab, inside, fov in ([(img, r.far_x, r.label, r.label != 0, None)] if view == "landscape" else
+                                                 portrait_sets(img, r.far_x, r.label, portrait, portrait_fov_deg=
+                                                               geo.camera_fov_deg[1], train_fov_deg=geo.train_fov_deg)[view]):
+                    in_view.append(len(lis.labels)) if inside else None
                     lis.add(win, lab, fov)
         t0 = engine.decision_config().threshold
-        n_pos = sum(lab != 0 for lab in lis.labels)
-        result = {"source": source, "view": view, "threshold": t0, "frames": n_pos,
-                  "no_crossing_frames": len(lis.labels) - n_pos,
-                  "curve": [{"scale": m, **summarise(lis.heard(m * t0))} for m in SCALES]}
+        labels = np.asarray(lis.labels)
+        first = np.asarray([clip[0].action if clip[0].ok else -1 for clip in lis.clips])   # the model's own argmax
+        err = np.abs(first[labels != 0] - labels[labels != 0])
+        result = {"source": source, "view": view, "threshold": t0, "frames": int((labels != 0).sum()),
+                  "no_crossing_frames": int((labels == 0).sum()), "goal_in_view_frames": len(in_view),
+                  "accuracy": float((err == 0).mean()), "bin_mae": float(err.mean()),
+                  "curve": [{"scale": m, **summarise(lis.heard(m * t0)),
+                             "beacon_on_goal_in_view": summarise(lis.heard(m * t0, in_view))["beacon_on"]}
+                            for m in SCALES]}
         done.write_text(json.dumps(result, indent=1))
         out[view] = result
     return out
@@ -123,9 +129,18 @@ def pool(folds: list[dict]) -> list[dict]:
         wrong = sum(c["confidently_wrong"] * a for c, a, _ in pts) / sum(a for _, a, _ in pts)
         sil_n = sum(b for _, _, b in pts)
         sil = sum((c["silence_no_crossing"] or 0) * b for c, _, b in pts) / sil_n if sil_n else None
+        vis = [(f["curve"][i].get("beacon_on_goal_in_view"), f.get("goal_in_view_frames", 0)) for f in folds]
+        vis_n = sum(n for v, n in vis if v is not None)
         out.append({"scale": m, "beacon_on": on, "confidently_wrong": wrong, "silence_no_crossing": sil,
+                    "beacon_on_goal_in_view": sum(v * n for v, n in vis if v is not None) / vis_n if vis_n else None,
                     "per_fold": {f["source"]: f["curve"][i] for f in folds}})
     return out
+
+
+def pooled_accuracy(folds: list[dict]) -> dict:
+    """The model's own accuracy and bin MAE (argmax of each clip's first frame), weighted by frames."""
+    n = sum(f["frames"] for f in folds)
+    return {k: sum(f[k] * f["frames"] for f in folds) / n for k in ("accuracy", "bin_mae") if all(k in f for f in folds)}
 
 
 def choose(curve: list[dict], max_wrong: float = 0.005, min_silence: float = 0.98) -> tuple[dict, bool]:
@@ -180,18 +195,22 @@ def main(argv=None) -> int:
     if not folds:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
-    fmt = lambda c: (f"beacon on {c['beacon_on']:.3f}, confidently wrong {100 * c['confidently_wrong']:.2f} %, "  # noqa: E731
+    fmt = lambda c: (f"beacon on {c['beacon_on']:.3f} (goal in view {c.get('beacon_on_goal_in_view') or float('nan'):.3f}), "  # noqa: E731
+                     f"confidently wrong {100 * c['confidently_wrong']:.2f} %, "
                      f"silence off-crossing {c['silence_no_crossing'] if c['silence_no_crossing'] is None else round(c['silence_no_crossing'], 3)}")
     result: dict = {}
     for view in folds[0]:
         curve = pool([f[view] for f in folds])
         best, met = choose(curve)
         one = next(c for c in curve if c["scale"] == 1.0)
+        model = pooled_accuracy([f[view] for f in folds])
         result[view] = {"scale": best["scale"], "targets_met": met, "at_scale": best, "at_fitted_threshold": one,
-                        "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
+                        **model, "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
         suffix = tag(a.mirror) + ("" if view == "landscape" else f"_{view}")
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
                            a.cv / f"gate_risk_coverage{suffix}.png", f"held out, {view}: gate threshold x scale")
+        if model:
+            print(f"{view}: the model's own accuracy {model['accuracy']:.3f}, bin MAE {model['bin_mae']:.3f}")
         print(f"{view}: fitted threshold (scale 1): {fmt(one)}")
         print(f"{view}: chosen scale {best['scale']:g} ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
     # landscape stays at the top level (what build_default_bundle.sh and older readers take)

@@ -32,7 +32,8 @@ from crossing_assist.export.graph import model_bytes, set_metadata
 
 
 def summary(g: dict) -> dict:
-    return {k: g[k] for k in ("scale", "targets_met", "folds")} | {
+    """One view of choose_gate.py's result, without its curves."""
+    return {k: g[k] for k in ("scale", "targets_met", "folds", "accuracy", "bin_mae") if k in g} | {
         "at_scale": {k: v for k, v in g["at_scale"].items() if k != "per_fold"},
         "at_fitted_threshold": {k: v for k, v in g["at_fitted_threshold"].items() if k != "per_fold"}}
 
@@ -58,7 +59,7 @@ def main(argv=None) -> int:
     gate_path = a.cv / a.gate_json
     if gate_path.is_file():
         g = json.loads(gate_path.read_text())
-        meta["metrics"]["gate_held_out"] = summary(g) | ({"portrait": summary(g["portrait"])} if "portrait" in g else {})
+        meta["metrics"]["gate_held_out"] = summary(g) | {k: summary(g[k]) for k in ("portrait", "portrait_window") if k in g}
         if a.rescale_gate:
             if not old_gate:
                 print(f"error: {a.src} records no held-out gate scale; re-export it instead", file=sys.stderr)
