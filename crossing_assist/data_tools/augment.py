@@ -33,7 +33,7 @@ from crossing_assist.actions import (
     parse_label, x_to_bin, x_to_heading,
 )
 
-from crossing_assist.geometry import window_x
+from crossing_assist.geometry import window_fov, window_x
 
 OUT_OF_FRAME_MODES = ("unknown", "edge")
 
@@ -302,8 +302,6 @@ def portrait_sets(image: np.ndarray, far_x: float | None, label: int, n: int, *,
     ``portrait``: what a phone held in portrait (3:4, ``portrait_fov_deg`` across) sees from the
     same spot (:func:`phone_views`); ``portrait_window``: 3:4 windows of the photo
     (:func:`portrait_views`), i.e. a narrower camera, whose FOV is the window's own."""
-    from crossing_assist.geometry import window_fov
-
     h, w = _check_image(image).shape[:2]
     win_fov = window_fov(max(1, int(round(0.75 * h))) / w, train_fov_deg)
     phone = phone_views(image, far_x, label, n, fov_deg=portrait_fov_deg, train_fov_deg=train_fov_deg)
