@@ -27,7 +27,7 @@ from pathlib import Path
 
 import onnx
 
-from crossing_assist.bundle import SCHEMA_VERSION, read_bundle, write_bundle
+from crossing_assist.bundle import SCHEMA_VERSION, BundleError, read_bundle, write_bundle
 from crossing_assist.export.graph import model_bytes, set_metadata
 
 
@@ -47,7 +47,11 @@ def main(argv=None) -> int:
     ap.add_argument("--rescale-gate", action="store_true", help="thresholds = fitted x the held-out scales")
     ap.add_argument("--view-crop", action="store_true", help="current schema, geometry.view_crop true")
     a = ap.parse_args(argv)
-    b = read_bundle(a.src)
+    try:
+        b = read_bundle(a.src)
+    except BundleError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     meta = json.loads((a.src / "bundle.json").read_text())
     old_gate = meta["metrics"].get("gate_held_out")
     if (a.cv / "cv.json").is_file():
@@ -88,9 +92,10 @@ def main(argv=None) -> int:
     set_metadata(model, meta)
     write_bundle(a.out, model_bytes(model), meta)
     b = read_bundle(a.out)
-    full, cross = b.metrics["full_split"], b.metrics["cross_fit"]
-    print(f"bundle written: {a.out} ({b.model_size / 1e6:.1f} MB, {b.precision}, schema {b.schema_version}, val accuracy "
-          f"{full['accuracy']:.3f}, held-out coverage {cross['coverage']:.3f} at target {b.calibration.conformal.coverage}"
+    full, cross = b.metrics.get("full_split"), b.metrics.get("cross_fit")
+    measured = (f", val accuracy {full['accuracy']:.3f}, held-out coverage {cross['coverage']:.3f} at target "
+                f"{b.calibration.conformal.coverage}") if full and cross else ""
+    print(f"bundle written: {a.out} ({b.model_size / 1e6:.1f} MB, {b.precision}, schema {b.schema_version}{measured}"
           + "".join(f"; {s}" for s in stamped) + ")")
     return 0
 

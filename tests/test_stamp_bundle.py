@@ -1,0 +1,74 @@
+"""scripts/stamp_bundle.py: held-out figures, held-out gate scales on the fitted threshold and the
+schema-3 view crop stamped into a bundle without re-exporting it; the graph's embedded copy follows."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from runtime_toy import make_toy_bundle
+
+from crossing_assist.bundle import read_bundle
+from crossing_assist.geometry import Geometry
+
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "stamp_bundle.py"
+
+
+def _stamp(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(SCRIPT), *map(str, args)], capture_output=True, text=True)
+
+
+def _gate(scale: float) -> dict:
+    point = {"scale": scale, "beacon_on": 0.5, "confidently_wrong": 0.0, "silence_no_crossing": 1.0, "per_fold": {}}
+    return {"scale": scale, "targets_met": True, "folds": [], "accuracy": 0.6, "bin_mae": 0.5,
+            "at_scale": point, "at_fitted_threshold": point}
+
+
+@pytest.fixture
+def shipped(tmp_path):
+    """A letterboxed schema-2-style bundle (no view crop) whose landscape threshold 0.5 is its
+    fitted threshold 1.0 times a recorded held-out scale of 0.5, and a CV folder."""
+    src = make_toy_bundle(tmp_path / "src", geometry=Geometry(fit="letterbox"), threshold=0.5)
+    meta = json.loads((src / "bundle.json").read_text())
+    meta["metrics"]["gate_held_out"] = {"scale": 0.5}
+    (src / "bundle.json").write_text(json.dumps(meta))
+    cv = tmp_path / "cv"
+    cv.mkdir()
+    (cv / "gate.json").write_text(json.dumps(_gate(0.25) | {"portrait": _gate(1.5), "portrait_window": _gate(2.0)}))
+    (cv / "cv.json").write_text(json.dumps({"config": {"epochs": 2}, "folds": [], "accuracy": {"mean": 0.6, "sd": 0.01},
+                                            "bin_mae": {"mean": 0.4, "sd": 0.02}, "far_x_error": {"mean": 0.03, "sd": 0.001},
+                                            "majority_accuracy": 0.3}))
+    return src, cv
+
+
+def test_stamp_rescales_the_gate_and_turns_the_view_crop_on(shipped, tmp_path):
+    from crossing_assist.runtime.engine import Engine
+
+    src, cv = shipped
+    assert not read_bundle(src).geometry.view_crop
+    r = _stamp(src, tmp_path / "out", "--cv", cv, "--rescale-gate", "--view-crop")
+    assert r.returncode == 0, r.stderr
+    b = read_bundle(tmp_path / "out")
+    assert b.schema_version == 3 and b.geometry.view_crop
+    unc = b.calibration.uncertainty
+    assert unc.threshold == pytest.approx(0.25) and unc.portrait_threshold == pytest.approx(1.5)   # fitted 1.0 x scales
+    assert b.metrics["leave_one_photographer_out"]["accuracy"]["mean"] == 0.6
+    assert set(b.metrics["gate_held_out"]) >= {"scale", "accuracy", "portrait", "portrait_window"}
+    assert len(b.provenance["stamped"]["what"]) == 2
+    Engine(tmp_path / "out")          # the graph's embedded copy matches the new bundle.json
+
+
+def test_stamp_refuses_what_it_cannot_do(shipped, tmp_path):
+    src, cv = shipped
+    r = _stamp(src, tmp_path / "a", "--cv", tmp_path, "--rescale-gate")          # no gate.json there
+    assert r.returncode == 2 and "choose_gate" in r.stderr
+    stretch = make_toy_bundle(tmp_path / "s", geometry=Geometry(fit="stretch"))
+    r = _stamp(stretch, tmp_path / "b", "--cv", cv, "--view-crop")
+    assert r.returncode == 2 and "not letterboxed" in r.stderr
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_stamp_on_a_folder_that_is_no_bundle_is_one_line(tmp_path):
+    r = _stamp(tmp_path, tmp_path / "out", "--cv", tmp_path)
+    assert r.returncode == 2 and r.stderr.startswith("error:") and len(r.stderr.strip().splitlines()) == 1
