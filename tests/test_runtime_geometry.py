@@ -11,7 +11,7 @@ import pytest
 from runtime_toy import LANDSCAPE_FOV, PORTRAIT_FOV, TOY2, bar_frame, make_toy_bundle, toy_bundle  # noqa: F401  (fixture)
 
 from crossing_assist.actions import bin_center_x, get_space, heading_to_x, x_to_bin
-from crossing_assist.bundle import BundleError
+from crossing_assist.bundle import BundleError, read_bundle
 from crossing_assist.runtime.beacon import KIND_BEACON, KIND_STOP
 from crossing_assist.runtime.belief import belief_heading
 from crossing_assist.runtime.engine import Engine
@@ -199,3 +199,26 @@ def test_a_bad_portrait_threshold_is_one_line(tmp_path, bad):
     (folder / "bundle.json").write_text(json.dumps(raw).replace("Infinity", "1e999"))
     with pytest.raises(BundleError, match="calibration.uncertainty.portrait_threshold"):
         read_bundle(folder)
+
+
+def test_demo_summary_says_which_rows_a_view_crop_bundle_saw(tmp_path):
+    """A schema-3 bundle with the view crop: a portrait clip's summary names the rows the model
+    saw (the training camera's view at its scale); a landscape clip at the training FOV loses none."""
+    from runtime_toy import write_clip
+
+    from crossing_assist.geometry import Geometry, view_rows
+
+    bundle = make_toy_bundle(tmp_path / "b", TOY2, size=(36, 48),   # a 4:3 canvas
+                             geometry=Geometry(fit="letterbox", camera_fov_deg=(67.0, 53.0), train_fov_deg=67.0,
+                                               view_crop=True))
+    size = read_bundle(bundle).input.size
+    for name, (h, w) in (("portrait", (128, 96)), ("landscape", (96, 128))):
+        clip = write_clip(tmp_path / f"{name}.mp4", [bin_center_x(STRIP)] * 6, fps=10, h=h, w=w)
+        r = subprocess.run([*DEMO, str(clip), "--bundle", str(bundle), "--out", str(tmp_path / name), "--no-video",
+                            "--quiet"], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        top, rows = view_rows(h, w, 53.0 if h > w else 67.0, size, 67.0)
+        if name == "portrait":
+            assert rows < h and f"the model sees rows {top}-{top + rows} of {h} (view crop" in r.stdout
+        else:
+            assert rows == h and "view crop" not in r.stdout

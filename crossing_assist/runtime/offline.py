@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from crossing_assist.fileio import sweep_orphans, tmp_tag
+from crossing_assist.geometry import view_rows
 from crossing_assist.runtime.annotate import annotate
 from crossing_assist.runtime.audio import write_wav
 from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
@@ -65,6 +66,7 @@ class Summary:
     truth: dict | None = None
     frame_size: tuple[int, int] | None = None      # (W, H) of the decoded frames
     fov_deg: tuple[float, ...] = ()                # the horizontal FOVs the headings assumed
+    view_rows: tuple[int, int] | None = None       # (top, rows) the graph saw with the bundle's view crop
     warnings: tuple[str, ...] = ()
 
     def lines(self) -> list[str]:
@@ -78,8 +80,12 @@ class Summary:
         if self.frame_size:
             w, h = self.frame_size
             fovs = ", ".join(f"{f:g}" for f in self.fov_deg) or "none (no frame was understood)"
+            seen = ""
+            if self.view_rows and self.view_rows[1] < h:
+                top, rows = self.view_rows
+                seen = f"; the model sees rows {top}-{top + rows} of {h} (view crop: the training camera's view)"
             out.insert(1, f"frames {w}x{h} ({'portrait' if h > w else 'landscape'}); headings assume a "
-                          f"horizontal field of view of {fovs} deg")
+                          f"horizontal field of view of {fovs} deg{seen}")
         if self.failed:
             out.append(f"failed inferences: {self.failed}")
         if self.truth:
@@ -247,7 +253,12 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
                         "the trace and beacon.wav end with a stop")
     outputs = rec.finish(n, end_s)
     truth = load_truth(cfg.video)
+    view = None
+    if rec.frame_size and len(rec.fovs) == 1 and pipeline.engine.bundle.geometry.view_crop:
+        b = pipeline.engine.bundle
+        view = view_rows(rec.frame_size[1], rec.frame_size[0], next(iter(rec.fovs)), b.input.size,
+                         b.geometry.train_fov_deg)
     return Summary(frames=n, video_s=n / source.fps, wall_s=time.perf_counter() - t0, gates=dict(rec.gates),
                    reasons=dict(rec.reasons), failed=rec.failed, outputs={k: str(v) for k, v in outputs.items()},
                    truth=compare(truth, rec.headings) if truth else None, frame_size=rec.frame_size,
-                   fov_deg=tuple(sorted(rec.fovs)), warnings=tuple(warnings))
+                   fov_deg=tuple(sorted(rec.fovs)), view_rows=view, warnings=tuple(warnings))
