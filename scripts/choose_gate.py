@@ -11,7 +11,8 @@ case, which sets the portrait threshold), and ``portrait_window``, 3:4 windows o
 narrower camera, reported only); a goal out of view lies in the edge strip. Sweep the gate
 threshold as a multiple ``m`` of the bundle's own fitted threshold. Per orientation the folds' rates are pooled per ``m``, and ``m*``
 is the largest beacon-on rate with confidently wrong <= 0.5 % and silence on no-crossing frames
->= 98 % (else the point nearest those targets). A portrait strip is 0.56 of a landscape one, so
+>= 98 % (else the point nearest those targets). A portrait strip is 0.75 of a landscape one on
+the canvas (0.56 for a 3:4 window), so
 the same angular doubt spreads over more strips and one landscape-fitted threshold silences
 portrait frames: hence a scale per orientation. Writes ``CV/gate.json`` and
 ``CV/gate_risk_coverage.png`` (``--mirror``: the folds' bundles with mirror test-time
@@ -103,7 +104,8 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
                 for win, _, lab, inside, fov in ([(img, r.far_x, r.label, r.label != 0, None)] if view == "landscape" else
                                                  portrait_sets(img, r.far_x, r.label, portrait, portrait_fov_deg=
                                                                geo.camera_fov_deg[1], train_fov_deg=geo.train_fov_deg)[view]):
-                    in_view.append(len(lis.labels)) if inside else None
+                    if inside:
+                        in_view.append(len(lis.labels))
                     lis.add(win, lab, fov)
         t0 = engine.decision_config().threshold
         labels = np.asarray(lis.labels)
