@@ -202,6 +202,10 @@ class Bundle:
         cropped to the training camera's view when ``geometry.view_crop`` (schema 3), else all."""
         return self.geometry.view(frame, fov_deg, self.input.size)
 
+    def rows_seen(self, height: int, width: int, fov_deg: float) -> tuple[int, int]:
+        """``(top, rows)`` of a ``height x width`` frame that :meth:`view` keeps."""
+        return self.geometry.rows_seen(height, width, fov_deg, self.input.size)
+
     @property
     def model_path(self) -> Path:
         return self.dir / self.model_file

@@ -98,12 +98,17 @@ class Geometry:
             d["view_crop"] = self.view_crop
         return d
 
+    def rows_seen(self, height: int, width: int, fov_deg: float, canvas: tuple[int, int]) -> tuple[int, int]:
+        """``(top, rows)`` of a ``height x width`` frame (horizontal FOV ``fov_deg``) that the graph
+        sees: :func:`view_rows` with ``view_crop``, else all of them."""
+        return view_rows(height, width, fov_deg, canvas, self.train_fov_deg) if self.view_crop else (0, int(height))
+
     def view(self, frame: np.ndarray, fov_deg: float, canvas: tuple[int, int]) -> np.ndarray:
-        """The part of an H x W x C frame (horizontal FOV ``fov_deg``) the graph should see:
-        its :func:`view_rows` with ``view_crop``, else the whole frame (a view, not a copy)."""
+        """The part of an H x W x C frame (horizontal FOV ``fov_deg``) the graph should see
+        (:meth:`rows_seen`; a view, not a copy; the frame itself without ``view_crop``)."""
         if not self.view_crop:
             return frame
-        top, rows = view_rows(frame.shape[0], frame.shape[1], fov_deg, canvas, self.train_fov_deg)
+        top, rows = self.rows_seen(frame.shape[0], frame.shape[1], fov_deg, canvas)
         return frame[top:top + rows]
 
     def camera_fov(self, width: int, height: int, override: float | None = None) -> float:

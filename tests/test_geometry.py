@@ -191,6 +191,8 @@ def test_geometry_view_crops_only_when_the_bundle_says_so():
     on = Geometry(view_crop=True).view(frame, 53.0, (168, 224))
     assert on.shape == (478, 480, 3) and np.array_equal(on, frame[81:559])
     assert Geometry().view(frame, 53.0, (168, 224)) is frame
+    assert Geometry(view_crop=True).rows_seen(640, 480, 53.0, (168, 224)) == (81, 478)
+    assert Geometry().rows_seen(640, 480, 53.0, (168, 224)) == (0, 640)
 
 
 @pytest.mark.parametrize("crop", [True, False])

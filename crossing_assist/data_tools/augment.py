@@ -283,11 +283,11 @@ def phone_views(image: np.ndarray, far_x: float | None, label: int, n: int = 3, 
     fh = max(1, int(round(cw / aspect)))
     out = []
     for win, x, b, inside in portrait_views(image, far_x, label, n, aspect=cw / h):
+        top = abs(fh - h) // 2
         if fh > h:
-            top = (fh - h) // 2
             win = cv2.copyMakeBorder(win, top, fh - h - top, 0, 0, cv2.BORDER_REPLICATE)
         else:
-            win = np.ascontiguousarray(win[(h - fh) // 2:(h - fh) // 2 + fh])
+            win = np.ascontiguousarray(win[top:top + fh])
         out.append((win, x, b, inside))
     return out
 
@@ -302,8 +302,9 @@ def portrait_sets(image: np.ndarray, far_x: float | None, label: int, n: int, *,
     ``portrait``: what a phone held in portrait (3:4, ``portrait_fov_deg`` across) sees from the
     same spot (:func:`phone_views`); ``portrait_window``: 3:4 windows of the photo
     (:func:`portrait_views`), i.e. a narrower camera, whose FOV is the window's own."""
-    h, w = _check_image(image).shape[:2]
-    win_fov = window_fov(max(1, int(round(0.75 * h))) / w, train_fov_deg)
+    w = _check_image(image).shape[1]
+    windows = portrait_views(image, far_x, label, n)
+    win_fov = window_fov(windows[0][0].shape[1] / w, train_fov_deg) if windows else train_fov_deg
     phone = phone_views(image, far_x, label, n, fov_deg=portrait_fov_deg, train_fov_deg=train_fov_deg)
     return {"portrait": [v + (portrait_fov_deg,) for v in phone],
-            "portrait_window": [v + (win_fov,) for v in portrait_views(image, far_x, label, n)]}
+            "portrait_window": [v + (win_fov,) for v in windows]}

@@ -203,7 +203,8 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
         entry.update(summarise(heard))
         inside = [h for h, (_, _, _, ins, _) in zip(heard, frames) if ins]
         entry["beacon_on_goal_in_view"] = float(np.mean([h.on for h in inside])) if inside else None
-        t0 = float(engine.decision_config(name.split("_")[0]).threshold)   # the view's orientation's gate threshold
+        orient = "landscape" if name == "landscape" else "portrait"
+        t0 = float(engine.decision_config(orient).threshold)   # the view's orientation's gate threshold
         curve = lis.risk_coverage([t0 * m for m in GATE_SCALES])
         entry.update(bundle_threshold=t0, risk_coverage=curve, best_threshold_here=choose_threshold(curve))
         plot_risk_coverage(curve, t0, out / ("risk_coverage.png" if name == "landscape" else f"risk_coverage_{name}.png"),

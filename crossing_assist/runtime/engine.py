@@ -101,7 +101,7 @@ class Engine:
     def _check_frame(self, frame: np.ndarray) -> np.ndarray:
         frame = inference.check_frame(frame)
         check_frame_shape(frame.shape[0], frame.shape[1])   # e.g. 1 x N or 1:10: never a heading
-        return frame[None]
+        return frame
 
     def predict(self, frame_rgb: np.ndarray, fov_deg: float | None = None) -> Prediction:
         """Run one H x W x 3 uint8 RGB frame (its rows cropped to the training camera's view
@@ -111,7 +111,7 @@ class Engine:
         try:
             x = self._check_frame(frame_rgb)
             fov = self.camera_fov(frame_rgb.shape[1], frame_rgb.shape[0], fov_deg)
-            outs = inference.run(self.session, self.bundle.view(x[0], fov)[None])
+            outs = inference.run(self.session, self.bundle.view(x, fov)[None])
             probs, ent, mi, var, votes = (np.asarray(outs[k], dtype=np.float64)[0] for k in
                                           ("probs", "entropy", "mutual_info", "variance", "votes"))
             if probs.shape != (self.space.n,) or not np.all(np.isfinite(probs)):

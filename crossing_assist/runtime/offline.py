@@ -22,7 +22,6 @@ import cv2
 import numpy as np
 
 from crossing_assist.fileio import sweep_orphans, tmp_tag
-from crossing_assist.geometry import view_rows
 from crossing_assist.runtime.annotate import annotate
 from crossing_assist.runtime.audio import write_wav
 from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
@@ -66,7 +65,7 @@ class Summary:
     truth: dict | None = None
     frame_size: tuple[int, int] | None = None      # (W, H) of the decoded frames
     fov_deg: tuple[float, ...] = ()                # the horizontal FOVs the headings assumed
-    view_rows: tuple[int, int] | None = None       # (top, rows) the graph saw with the bundle's view crop
+    view_rows: tuple[int, int] | None = None       # (top, rows) the graph saw (Bundle.rows_seen)
     warnings: tuple[str, ...] = ()
 
     def lines(self) -> list[str]:
@@ -254,10 +253,8 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     outputs = rec.finish(n, end_s)
     truth = load_truth(cfg.video)
     view = None
-    if rec.frame_size and len(rec.fovs) == 1 and pipeline.engine.bundle.geometry.view_crop:
-        b = pipeline.engine.bundle
-        view = view_rows(rec.frame_size[1], rec.frame_size[0], next(iter(rec.fovs)), b.input.size,
-                         b.geometry.train_fov_deg)
+    if rec.frame_size and len(rec.fovs) == 1:
+        view = pipeline.engine.bundle.rows_seen(rec.frame_size[1], rec.frame_size[0], next(iter(rec.fovs)))
     return Summary(frames=n, video_s=n / source.fps, wall_s=time.perf_counter() - t0, gates=dict(rec.gates),
                    reasons=dict(rec.reasons), failed=rec.failed, outputs={k: str(v) for k, v in outputs.items()},
                    truth=compare(truth, rec.headings) if truth else None, frame_size=rec.frame_size,
