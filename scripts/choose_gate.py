@@ -79,6 +79,15 @@ def held_out_rows(ptl, neg, source: str, used: set[str], n_frames: int, seed: in
     return pos, negs
 
 
+def model_accuracy(lis: Listener) -> dict:
+    """The model's own accuracy and bin MAE over the clips with a crossing: the argmax of each
+    clip's first frame (a failed inference counts as wrong), no decision logic."""
+    labels = np.asarray(lis.labels)
+    first = np.asarray([clip[0].action if clip[0].ok else -1 for clip in lis.clips])
+    err = np.abs(first[labels != 0] - labels[labels != 0])
+    return {"accuracy": float((err == 0).mean()), "bin_mae": float(err.mean())}
+
+
 def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, portrait: int,
                mirror: bool = False) -> dict:
     """The fold's held-out curves: ``{"landscape": {...}, "portrait": {...}, "portrait_window": {...}}``
@@ -109,11 +118,9 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
                     lis.add(win, lab, fov)
         t0 = engine.decision_config().threshold
         labels = np.asarray(lis.labels)
-        first = np.asarray([clip[0].action if clip[0].ok else -1 for clip in lis.clips])   # the model's own argmax
-        err = np.abs(first[labels != 0] - labels[labels != 0])
         result = {"source": source, "view": view, "threshold": t0, "frames": int((labels != 0).sum()),
                   "no_crossing_frames": int((labels == 0).sum()), "goal_in_view_frames": len(in_view),
-                  "accuracy": float((err == 0).mean()), "bin_mae": float(err.mean()),
+                  **model_accuracy(lis),
                   "curve": [{"scale": m, **summarise(lis.heard(m * t0)),
                              "beacon_on_goal_in_view": summarise(lis.heard(m * t0, in_view))["beacon_on"]}
                             for m in SCALES]}

@@ -29,7 +29,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from choose_gate import finished_folds, fold_bundle, held_out_parser, held_out_rows, tag  # noqa: E402  (a sibling script)
+from choose_gate import (  # noqa: E402  (a sibling script)
+    finished_folds, fold_bundle, held_out_parser, held_out_rows, model_accuracy, tag,
+)
 
 from crossing_assist.data_tools.augment import PORTRAIT_SETS, portrait_sets, roll  # noqa: E402
 from crossing_assist.data_tools.corrupt import CORRUPTIONS, corrupt  # noqa: E402
@@ -74,11 +76,7 @@ def fold_table(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
             far_y = float(flag_value(r.flags, "far_y") or 0.5)
             view, label, fov = render(condition, img, r.far_x, far_y, r.label, rng, engine.bundle.geometry)
             lis.add(view, label, fov)
-        labels = np.asarray(lis.labels)
-        first = np.asarray([clip[0].action if clip[0].ok else -1 for clip in lis.clips])
-        known = labels != 0
-        err = np.abs(first[known] - labels[known])
-        out[condition] = {"accuracy": float((err == 0).mean()), "bin_mae": float(err.mean()), **summarise(lis.heard())}
+        out[condition] = {**model_accuracy(lis), **summarise(lis.heard())}
         print(f"  {source} {condition}: accuracy {out[condition]['accuracy']:.3f}, beacon on "
               f"{out[condition]['beacon_on']:.3f}, wrong {out[condition]['confidently_wrong']:.4f}", file=sys.stderr, flush=True)
     done.write_text(json.dumps(out, indent=1))
