@@ -102,6 +102,20 @@ def test_windows_are_cached_with_the_features_and_keyed_by_fit_and_seed(ds, tmp_
     assert cache_key(bb, k, CANVAS, ident, 67.0, ds) == cache_key(bb, k, CANVAS, ident, 67.0, ds, "stretch", 5)
 
 
+def test_field_view_features_are_keyed_by_the_field_recipe(ds, monkeypatch):
+    """Changing what a field view draws (its aspects) must not reuse features cached under the old recipe;
+    features without field views keep their key."""
+    from crossing_assist.data_tools import augment
+
+    bb = create_backbone("mobilenet_v3_small", weights="none")
+    k = len(bb.blocks) - 2
+    fields, ident = make_variants(False, (), 2), make_variants(False)
+    before = cache_key(bb, k, CANVAS, fields, 67.0, ds, "letterbox"), cache_key(bb, k, CANVAS, ident, 67.0, ds)
+    monkeypatch.setattr(augment, "FIELD_ASPECTS", ((3 / 4, 1.0),))
+    assert cache_key(bb, k, CANVAS, fields, 67.0, ds, "letterbox") != before[0]
+    assert cache_key(bb, k, CANVAS, ident, 67.0, ds) == before[1]
+
+
 def test_predict_split_reads_strips_inside_each_samples_window(ds, tmp_path):
     from crossing_assist.models.heads import create_head
     from crossing_assist.models.policy import Policy, policy_config

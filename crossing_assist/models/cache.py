@@ -6,7 +6,7 @@ M x C x h x w, the output of the backbone's frozen blocks), ``labels.npy`` (int6
 on the canvas), ``row.npy`` (index of the dataset row each sample
 came from), ``variant.npy`` (index into the variant list) and ``meta.json``. The key hashes
 everything that changes the features: backbone name, weights source *and* file fingerprint,
-number of frozen blocks, input size, mean/std, the variants (mirroring, yaw angles, field views and their seed, FOV), the fit and
+number of frozen blocks, input size, mean/std, the variants (mirroring, yaw angles, field views, their seed and recipe, FOV), the fit and
 the dataset rows (image paths, labels, file sizes and mtimes). ``meta.json`` is written last
 (atomically), so a half-written entry is never used.
 """
@@ -24,6 +24,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from ..data_tools.augment import field_recipe
 from ..data_tools.manifest import Dataset
 from ..fileio import sweep_orphans
 from .backbones import Backbone
@@ -70,6 +71,8 @@ def cache_key(backbone: Backbone, frozen_blocks: int, size: tuple[int, int],
     }
     if fit != "stretch" or any(v.field >= 0 for v in variants):   # keys of older entries unchanged
         spec.update(fit=fit, fields=[v.field for v in variants], seed=seed, version=2)
+    if any(v.field >= 0 for v in variants):
+        spec["field_recipe"] = field_recipe()
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:24]
 
 
