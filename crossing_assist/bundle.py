@@ -14,6 +14,9 @@ canvas, and the default camera field of view per orientation); a version-1 bundl
 ``fit = stretch`` with ``fov_deg`` for both orientations. Version 3 adds ``geometry.view_crop``
 (letterbox bundles, absent = false; the consumer crops the frame's rows to the training camera's view before
 the graph, :func:`crossing_assist.geometry.view_rows`); a version-2 bundle reads as no crop.
+``geometry.sensor_aspect`` (optional, schema 2 and 3, 1..3; absent or null = none) is the long /
+short side of the sensor ``camera_fov_deg`` describes: the default FOV of a frame narrower than
+it is its crop's (:func:`crossing_assist.geometry.default_fov`); older readers ignore it.
 Readers that predate a version refuse it, so no consumer silently skips the crop. Two fields depend on the model bytes and
 are filled in by :func:`write_bundle`: ``model_sha256`` and ``model_size`` (bytes). They are the
 only fields left out of the copy embedded in the ONNX metadata (``bundle_json``).
@@ -35,7 +38,7 @@ from crossing_assist import __version__
 from crossing_assist.actions import DEFAULT_FOV_DEG, VALID_SPACES, ActionSpace, get_space
 from crossing_assist.errors import UserError
 from crossing_assist.errors import short_repr as _short  # one cut-to-length repr for every error line
-from crossing_assist.geometry import FITS, Geometry, GeometryError, check_fov
+from crossing_assist.geometry import FITS, SENSOR_ASPECT_RANGE, Geometry, GeometryError, check_fov
 
 SCHEMA_VERSION = 3
 READABLE_SCHEMAS = (1, 2, 3)
@@ -194,7 +197,8 @@ class Bundle:
     def camera_fov(self, width: int, height: int, override: float | None = None) -> float:
         """Horizontal FOV (degrees) that turns strips of a ``width x height`` frame into
         headings: ``override`` (the user's or device's) if given, else this bundle's default for
-        the frame's orientation. Raises GeometryError outside 20..170 degrees."""
+        the frame's orientation and aspect (:meth:`Geometry.camera_fov`). Raises GeometryError
+        outside 20..170 degrees."""
         return self.geometry.camera_fov(width, height, override)
 
     def view(self, frame, fov_deg: float):
@@ -348,8 +352,11 @@ def _parse_geometry(d: Any, fov_deg: float, version: int) -> Geometry:
             raise BundleError(f"bundle.json: geometry.pad_rgb = {_short(pad)} must be three integers 0..255")
     train = _num(d.get("train_fov_deg", fovs[0]), "geometry.train_fov_deg", 0.0, 180.0, lo_open=True, hi_open=True)
     crop = fit == "letterbox" and version >= 3 and _bool(d.get("view_crop", False), "geometry.view_crop")
+    aspect = d.get("sensor_aspect")
+    if aspect is not None:
+        aspect = _num(aspect, "geometry.sensor_aspect", *SENSOR_ASPECT_RANGE)
     return Geometry(fit=fit, pad_rgb=tuple(pad), camera_fov_deg=(fovs[0], fovs[1]), train_fov_deg=train,
-                    view_crop=crop)
+                    view_crop=crop, sensor_aspect=aspect)
 
 
 def _str(value: Any, name: str) -> str:

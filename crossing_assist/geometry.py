@@ -13,7 +13,10 @@ that is out of view but inferable lies in an edge strip (1 or 12), so the paddin
 strip: an edge strip means "at or beyond that edge of the view".
 
 Headings use the horizontal field of view of the camera that took the frame in its present
-orientation (:func:`camera_fov`), never a constant.
+orientation (:meth:`Geometry.camera_fov`), never a constant. The bundle's default is per
+orientation (``camera_fov_deg``, the full sensor); with ``sensor_aspect`` (long side / short side
+of that sensor) a frame narrower than the sensor in its orientation is a crop of it and gets the
+crop's FOV (9:16 portrait video: ~41 deg across, not 53; :func:`default_fov`).
 
 The *view crop* (``Geometry.view_crop``, bundle schema 3) keeps the model's angular scale: the
 canvas shows the training camera's view (``train_fov_deg`` across its width, 4:3), so a frame
@@ -41,6 +44,10 @@ CAMERA_FOV_DEG = {"landscape": 67.0, "portrait": 53.0}
 #: The horizontal field of view assumed for the PTL training photos (phone cameras, landscape).
 TRAIN_FOV_DEG = 67.0
 FOV_RANGE_DEG = (20.0, 170.0)
+#: Long side / short side of the sensor ``camera_fov_deg`` describes (a phone's 4:3 main camera);
+#: the exporter writes it as ``geometry.sensor_aspect`` for letterbox models.
+SENSOR_ASPECT = 4 / 3
+SENSOR_ASPECT_RANGE = (1.0, 3.0)
 DEFAULT_CANVAS = (168, 224)            # (H, W): 4:3 landscape
 PAD_RGB = (124, 116, 104)              # ImageNet mean in uint8: normalises to ~0
 MAX_ASPECT = 8.0                       # frames more elongated than 8:1 are refused
@@ -73,6 +80,38 @@ class GeometryError(ValueError):
     """A frame or field of view the geometry cannot use (one line, says what is valid)."""
 
 
+def default_fov(width: int, height: int, camera_fov_deg: tuple[float, float],
+                sensor_aspect: float | None = None) -> float:
+    """The default horizontal FOV (degrees, unchecked) of a ``width x height`` frame:
+    ``camera_fov_deg`` (landscape, portrait) of its :func:`orientation`; with ``sensor_aspect``
+    (long / short side of that sensor), a frame narrower than the sensor in its orientation is a
+    centred crop of it: with ``full = sensor_aspect`` (landscape) or ``1 / sensor_aspect``
+    (portrait) and ``a = width / height``, ``a < full`` gives ``window_fov(a / full, fov)``.
+    E.g. 67/53 deg and 4:3: 1080 x 1920 (9:16) -> ~41.0 deg, 1:1 -> ~52.8 deg; 3:4, 4:3 and
+    16:9 keep theirs. The phone app computes the same (android_demo/www/js/geometry.js)."""
+    o = orientation(width, height)
+    fov = camera_fov_deg[ORIENTATIONS.index(o)]
+    if sensor_aspect is not None:
+        full = sensor_aspect if o == "landscape" else 1 / sensor_aspect
+        a = width / height
+        if a < full:
+            fov = window_fov(a / full, fov)
+    return fov
+
+
+def check_sensor_aspect(value: float) -> float:
+    """A sensor aspect (long side / short side) in 1..3, as float; else GeometryError (one line)."""
+    lo, hi = SENSOR_ASPECT_RANGE
+    try:
+        aspect = float(value)
+    except (TypeError, ValueError):
+        aspect = math.nan
+    if isinstance(value, bool) or not lo <= aspect <= hi:
+        raise GeometryError(f"Invalid sensor aspect: {value!r}; valid: long side / short side in {lo:g}..{hi:g} "
+                            "(e.g. 1.3333333333333333 for a 4:3 sensor)")
+    return aspect
+
+
 @dataclass(frozen=True)
 class Geometry:
     """The bundle's geometry contract (``bundle.json`` ``geometry``).
@@ -80,7 +119,9 @@ class Geometry:
     ``fit``: ``letterbox`` (scale to fit, centre, pad with ``pad_rgb``) or ``stretch`` (schema 1:
     resize to the canvas whatever the aspect); ``camera_fov_deg``: default horizontal FOV per
     orientation; ``train_fov_deg``: the FOV assumed for the training photos; ``view_crop``
-    (schema 3): crop the rows beyond the training camera's view before fitting (:func:`view_rows`).
+    (schema 3): crop the rows beyond the training camera's view before fitting (:func:`view_rows`);
+    ``sensor_aspect`` (optional, 1..3; None = absent): long side / short side of the sensor
+    ``camera_fov_deg`` describes, so narrower frames get their crop's FOV (:func:`default_fov`).
     """
 
     fit: str = "letterbox"
@@ -88,6 +129,7 @@ class Geometry:
     camera_fov_deg: tuple[float, float] = (CAMERA_FOV_DEG["landscape"], CAMERA_FOV_DEG["portrait"])
     train_fov_deg: float = TRAIN_FOV_DEG
     view_crop: bool = False
+    sensor_aspect: float | None = None
 
     def to_json(self) -> dict:
         d = {"fit": self.fit, "strips": "frame",
@@ -96,6 +138,8 @@ class Geometry:
         if self.fit == "letterbox":
             d["pad_rgb"] = list(self.pad_rgb)
             d["view_crop"] = self.view_crop
+        if self.sensor_aspect is not None:
+            d["sensor_aspect"] = self.sensor_aspect
         return d
 
     def rows_seen(self, height: int, width: int, fov_deg: float, canvas: tuple[int, int]) -> tuple[int, int]:
@@ -112,10 +156,12 @@ class Geometry:
         return frame[top:top + rows]
 
     def camera_fov(self, width: int, height: int, override: float | None = None) -> float:
-        """Horizontal FOV (degrees) for a ``width x height`` frame: ``override`` if given, else
-        the default for the frame's orientation. Raises GeometryError outside 20..170 degrees."""
-        fov = self.camera_fov_deg[ORIENTATIONS.index(orientation(width, height))] if override is None else override
-        return check_fov(fov)
+        """Horizontal FOV (degrees) for a ``width x height`` frame: ``override`` (the user's or the
+        device's) as given, else the default for the frame's orientation and aspect
+        (:func:`default_fov`). Raises GeometryError outside 20..170 degrees."""
+        if override is not None:
+            return check_fov(override)
+        return check_fov(default_fov(width, height, self.camera_fov_deg, self.sensor_aspect))
 
 
 def orientation(width: int, height: int) -> str:

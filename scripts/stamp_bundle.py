@@ -3,7 +3,7 @@ geometry schema) into its bundle.json and the graph's embedded copy, writing a n
 atomically. The graph itself is left as it is.
 
     .venv/bin/python scripts/stamp_bundle.py SRC OUT --cv runs/default/cv --gate-json gate_mirror.json
-        [--rescale-gate] [--view-crop]
+        [--rescale-gate] [--view-crop] [--sensor-aspect 4:3]
 
 * Always: ``metrics.leave_one_photographer_out`` from ``CV/cv.json`` and ``metrics.gate_held_out``
   from ``CV/GATE_JSON`` (scripts/choose_gate.py), where present.
@@ -14,6 +14,10 @@ atomically. The graph itself is left as it is.
 * ``--view-crop``: upgrade a letterbox bundle to the current schema with ``geometry.view_crop``
   (consumers crop rows beyond the training camera's view, crossing_assist/geometry.py): right for
   models trained on windows of the training photos at their own scale, as the default is.
+* ``--sensor-aspect X``: ``geometry.sensor_aspect`` = X (long side / short side of the sensor
+  ``camera_fov_deg`` describes, 1..3; a number or a ratio, ``4:3`` = 1.3333333333333333): frames narrower than it (9:16
+  video) get their crop's default FOV (crossing_assist/geometry.py ``default_fov``). Schema 2 or 3
+  bundles; the schema is kept.
 The change is recorded in ``provenance.stamped``.
 """
 
@@ -29,6 +33,7 @@ import onnx
 
 from crossing_assist.bundle import SCHEMA_VERSION, BundleError, read_bundle, write_bundle
 from crossing_assist.export.graph import model_bytes, set_metadata
+from crossing_assist.geometry import GeometryError, check_sensor_aspect
 
 
 def summary(g: dict) -> dict:
@@ -36,6 +41,18 @@ def summary(g: dict) -> dict:
     return {k: g[k] for k in ("scale", "targets_met", "folds", "accuracy", "bin_mae") if k in g} | {
         "at_scale": {k: v for k, v in g["at_scale"].items() if k != "per_fold"},
         "at_fitted_threshold": {k: v for k, v in g["at_fitted_threshold"].items() if k != "per_fold"}}
+
+
+def _ratio(text: str) -> float | str:
+    """``4:3`` or ``4/3`` as the number 4 / 3; anything else as typed (checked by the caller)."""
+    for sep in (":", "/"):
+        if sep in text:
+            n, _, d = text.partition(sep)
+            try:
+                return float(n) / float(d)
+            except (ValueError, ZeroDivisionError):
+                return text
+    return text
 
 
 def main(argv=None) -> int:
@@ -46,7 +63,14 @@ def main(argv=None) -> int:
     ap.add_argument("--gate-json", default="gate.json", help="choose_gate.py's result in CV")
     ap.add_argument("--rescale-gate", action="store_true", help="thresholds = fitted x the held-out scales")
     ap.add_argument("--view-crop", action="store_true", help="current schema, geometry.view_crop true")
+    ap.add_argument("--sensor-aspect", metavar="X", help="geometry.sensor_aspect = X (long / short side of the "
+                    "sensor camera_fov_deg describes, 1..3; a number or a ratio such as 4:3)")
     a = ap.parse_args(argv)
+    try:
+        aspect = None if a.sensor_aspect is None else check_sensor_aspect(_ratio(a.sensor_aspect))
+    except GeometryError as exc:
+        print(f"error: --sensor-aspect: {exc}", file=sys.stderr)
+        return 2
     try:
         b = read_bundle(a.src)
     except BundleError as exc:
@@ -85,6 +109,12 @@ def main(argv=None) -> int:
         meta["schema_version"] = SCHEMA_VERSION
         meta["geometry"]["view_crop"] = True
         stamped.append(f"schema {SCHEMA_VERSION}, geometry.view_crop")
+    if aspect is not None:
+        if b.schema_version < 2:
+            print(f"error: {a.src} is schema {b.schema_version} (no geometry block); re-export it", file=sys.stderr)
+            return 2
+        meta["geometry"]["sensor_aspect"] = aspect
+        stamped.append(f"geometry.sensor_aspect {aspect:g}")
     if stamped:
         meta["provenance"]["stamped"] = {"what": stamped, "by": "scripts/stamp_bundle.py " + " ".join(sys.argv[1:] if argv is None else argv),
                                          "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}

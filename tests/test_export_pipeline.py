@@ -87,6 +87,8 @@ def test_graph_metadata_carries_the_bundle_facts(work):
     props = sess.get_modelmeta().custom_metadata_map
     assert json.loads(props["bundle_json"]) == embedded_meta(bundle.raw)
     assert props["schema_version"] == "3" and bundle.geometry.view_crop == (bundle.geometry.fit == "letterbox")
+    # letterbox models state the 4:3 sensor camera_fov_deg describes: 9:16 video gets its crop's FOV
+    assert bundle.geometry.sensor_aspect == (4 / 3 if bundle.geometry.fit == "letterbox" else None)
 
 
 def test_predict_bundle_is_random_and_well_formed(work):
@@ -282,3 +284,17 @@ def test_export_without_labelled_data_is_honestly_uncalibrated(work, tmp_path):
     assert b.calibration.temperature == 1.0 and b.calibration.conformal.threshold == 0.0
     assert b.calibration.conformal.n_frames == 0 and "cross_fit" not in b.metrics
     assert any("not calibrated" in n for n in res.notes)
+
+
+def test_letterbox_exports_state_the_phone_sensor():
+    """The exported geometry: letterbox models get view_crop and sensor_aspect 4:3 (so 9:16 video
+    gets its crop's FOV); stretch models neither (today's rule)."""
+    from types import SimpleNamespace
+
+    from crossing_assist.export.exporter import _geometry
+    from crossing_assist.export.graph import GraphSpec
+
+    for fit, aspect in (("letterbox", 4 / 3), ("stretch", None)):
+        g = _geometry(SimpleNamespace(fov_deg=67.0), GraphSpec(size=(32, 32), mean=(0.5,) * 3, std=(0.25,) * 3, fit=fit))
+        assert g.sensor_aspect == aspect and g.view_crop == (fit == "letterbox")
+        assert g.to_json().get("sensor_aspect") == aspect

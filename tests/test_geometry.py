@@ -150,6 +150,7 @@ def test_bundle_camera_fov_by_orientation_and_override(tmp_path):
     (lambda m: m.update(fov_deg=70.0), "fov_deg"),
     (lambda m: m["geometry"]["camera_fov_deg"].update(portrait=60.0), "geometry"),
     (lambda m: m["geometry"].update(fit="letterbox", pad_rgb=[0, 0, 0]), "geometry"),
+    (lambda m: m["geometry"].update(sensor_aspect=16 / 9), "geometry"),
 ])
 def test_edited_geometry_in_bundle_json_is_caught_against_the_graph(tmp_path, edit, key):
     from crossing_assist.runtime.engine import Engine
@@ -212,3 +213,54 @@ def test_engine_crops_a_portrait_frame_to_the_training_view(tmp_path, crop):
     pred = Engine(folder).predict(frame)
     assert pred.ok and pred.orientation == "portrait" and pred.fov_deg == 53.0
     assert pred.action == (10 if crop else 3)
+
+
+# ----------------------------------------------------------------------------- sensor_aspect: a crop's FOV
+
+
+SENSOR = Geometry(camera_fov_deg=(67.0, 53.0), sensor_aspect=4 / 3)
+
+
+def test_a_frame_narrower_than_the_sensor_gets_its_crops_fov():
+    """With sensor_aspect 4:3, 9:16 portrait video is a crop of the 3:4 portrait sensor:
+    2 atan(0.75 tan(26.5 deg)) ~ 41.0 deg across, not 53; without the field, 53 as before."""
+    assert SENSOR.camera_fov(1080, 1920) == pytest.approx(41.005, abs=0.001)
+    assert Geometry(camera_fov_deg=(67.0, 53.0)).camera_fov(1080, 1920) == 53.0
+    assert SENSOR.camera_fov(1000, 1000) == pytest.approx(52.801, abs=0.001)     # 1:1: a crop of 4:3 landscape
+    assert SENSOR.camera_fov(480, 640) == 53.0 and SENSOR.camera_fov(640, 480) == 67.0     # the full sensor
+    assert SENSOR.camera_fov(1920, 1080) == 67.0 and SENSOR.camera_fov(600, 640) == 53.0   # rows cropped only
+    for w, h in ((1080, 1920), (480, 640), (1000, 1000)):
+        assert SENSOR.camera_fov(w, h, override=60.0) == 60.0            # an override is used as given
+    with pytest.raises(GeometryError, match="20..170"):
+        SENSOR.camera_fov(100, 800)                                       # 1:8: ~9.5 deg, refused like any FOV
+
+
+def test_the_view_crop_of_9_16_video_keeps_a_3_4_view_with_sensor_aspect():
+    """The training canvas (4:3, 67 deg across) shows ~53 deg vertically; a 9:16 frame spans the
+    sensor's long side (~67 deg) vertically, so the crop keeps ~3/4 of its rows (a 3:4 view).
+    With the 53 deg default the model saw a square (zoomed in)."""
+    crop = Geometry(camera_fov_deg=(67.0, 53.0), view_crop=True, sensor_aspect=4 / 3)
+    top, rows = crop.rows_seen(1920, 1080, crop.camera_fov(1080, 1920), (168, 224))
+    assert 1080 / rows == pytest.approx(3 / 4, abs=0.01) and top == (1920 - rows) // 2
+    old = Geometry(camera_fov_deg=(67.0, 53.0), view_crop=True)
+    assert old.rows_seen(1920, 1080, old.camera_fov(1080, 1920), (168, 224))[1] == pytest.approx(1080, abs=10)
+
+
+def test_sensor_aspect_is_read_validated_and_round_tripped(tmp_path):
+    from crossing_assist.testing.toy_bundle import Toy
+
+    meta = toy_meta(TOY2)                                                           # 80 / 50 deg
+    assert parse_meta(meta, need_bytes=False).geometry.sensor_aspect is None        # absent: old rule
+    for version in (2, 3):
+        meta = toy_meta(TOY2) | {"schema_version": version}
+        meta["geometry"]["sensor_aspect"] = 4 / 3
+        b = parse_meta(meta, need_bytes=False)
+        assert b.geometry.sensor_aspect == 4 / 3 and b.camera_fov(1080, 1920) == pytest.approx(38.553, abs=0.001)
+        assert b.geometry.to_json() == meta["geometry"]
+    for bad in (0.9, 3.5, "4:3", True, float("inf")):
+        meta["geometry"]["sensor_aspect"] = bad
+        assert "geometry.sensor_aspect" in _err(meta)
+    geo = Geometry(fit="letterbox", camera_fov_deg=(67.0, 53.0), view_crop=True, sensor_aspect=4 / 3)
+    folder = make_toy_bundle(tmp_path / "b", Toy(samples=1, drop_p=0.0, geometry=geo))
+    b = read_bundle(folder)
+    assert b.geometry == geo and b.raw["geometry"]["sensor_aspect"] == 4 / 3

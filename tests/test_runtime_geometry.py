@@ -222,3 +222,32 @@ def test_demo_summary_says_which_rows_a_view_crop_bundle_saw(tmp_path):
             assert rows < h and f"the model sees rows {top}-{top + rows} of {h} (view crop" in r.stdout
         else:
             assert rows == h and "view crop" not in r.stdout
+
+
+def test_demo_gives_9_16_video_its_crops_fov_with_sensor_aspect(tmp_path):
+    """crossing-demo on a 9:16 portrait clip with a bundle that states its sensor (4:3): the
+    headings assume the crop's ~41 deg, not the portrait 53, and the view crop keeps a 3:4 view.
+    A clip narrower than 20 degrees' worth (1:8) is refused frame by frame (stop cue), and the
+    annotated video is still written."""
+    from runtime_toy import write_clip
+
+    from crossing_assist.geometry import Geometry, view_rows
+
+    geo = Geometry(fit="letterbox", camera_fov_deg=(67.0, 53.0), train_fov_deg=67.0, view_crop=True,
+                   sensor_aspect=4 / 3)
+    bundle = make_toy_bundle(tmp_path / "b", TOY2, size=(36, 48), geometry=geo)
+    fov = read_bundle(bundle).camera_fov(72, 128)
+    assert fov == pytest.approx(41.005, abs=1e-3)
+    clip = write_clip(tmp_path / "v916.mp4", [bin_center_x(STRIP)] * 6, fps=10, h=128, w=72)
+    r = subprocess.run([*DEMO, str(clip), "--bundle", str(bundle), "--out", str(tmp_path / "v916"), "--no-video",
+                        "--quiet"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    top, rows = view_rows(128, 72, fov, (36, 48), 67.0)
+    assert 72 / rows == pytest.approx(3 / 4, abs=0.02)
+    assert f"field of view of {fov:g} deg" in r.stdout and f"rows {top}-{top + rows} of 128" in r.stdout, r.stdout
+    narrow = write_clip(tmp_path / "n.mp4", [bin_center_x(STRIP)] * 4, fps=10, h=128, w=16)
+    r = subprocess.run([*DEMO, str(narrow), "--bundle", str(bundle), "--out", str(tmp_path / "n"), "--quiet"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    trace = [json.loads(line) for line in (tmp_path / "n" / "trace.jsonl").read_text().splitlines()]
+    assert trace and all(t["stop"] for t in trace), trace[:2]

@@ -13,8 +13,17 @@ from crossing_assist.runtime import belief as bf
 from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
 from crossing_assist.runtime.gate import GateConfig
 from crossing_assist.runtime.live import is_fresh, same_frame
+from crossing_assist.geometry import view_rows
 from crossing_assist.runtime.camera import camera_fov, gate_threshold
-from crossing_assist.testing.vectors import FRAME_SIZES, GEOMETRY_V2, VIEW_CANVASES, build_vectors, main
+from crossing_assist.testing.vectors import (
+    ASPECT_SIZES,
+    FRAME_SIZES,
+    GEOMETRY_V2,
+    GEOMETRY_V3_SENSOR,
+    VIEW_CANVASES,
+    build_vectors,
+    main,
+)
 
 VECTORS = Path(__file__).resolve().parents[1] / "android_demo" / "test_vectors.json"
 
@@ -92,7 +101,7 @@ def test_vectors_replay_from_json_alone(stored):
 
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == 4
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == 5
     assert "decision steps" in capsys.readouterr().out
 
 
@@ -103,14 +112,16 @@ def test_geometry_scenarios_cover_both_orientations_and_several_aspects(stored):
     fovs = {row["fov_deg"] for sc in stored["scenarios"] for row in sc["steps"] if "frame" in row}
     assert {67.0, 53.0, 60.0, 90.0} <= fovs
     refused = [c for c in stored["geometry"]["fov_choice"] if c["fov_deg"] is None]
-    assert refused and all(c["override"] is not None and not 20 <= c["override"] <= 170 for c in refused)
+    assert refused and all(c["override"] is not None and not 20 <= c["override"] <= 170 for c in refused
+                           if "sensor_aspect" not in c["geometry"] or c["override"] is not None)
+    # without an override, only a crop narrower than 20 degrees (1:8 and beyond, portrait) is refused
+    assert {tuple(c["frame"]) for c in refused if c["override"] is None} == {(100, 1000), (180, 1440)}
 
 
 def test_view_crop_vectors_cover_orientations_aspects_and_fovs(stored):
     """Version 4: the view crop's rows for portrait and landscape frames of several aspects, the
     orientation's default FOV and overrides, every canvas; each case replays from its JSON alone
     with the formula in docs (the integers a port must reproduce exactly)."""
-    from crossing_assist.geometry import view_rows
 
     section = stored["geometry"]["view_rows"]
     assert section["geometry"]["view_crop"] is True and section["geometry"]["fit"] == "letterbox"
@@ -131,22 +142,52 @@ def test_view_crop_vectors_cover_orientations_aspects_and_fovs(stored):
         assert c["top"] == (h - c["rows"]) // 2
 
 
+def test_sensor_aspect_vectors_give_crops_their_fov(stored):
+    """Version 5: with sensor_aspect the default FOV of a frame narrower than the sensor is its
+    crop's (9:16 -> ~41 deg, 1:1 -> ~52.8), the full sensor's and wider frames keep theirs, an
+    override wins; without the field every frame of an orientation gets the same default."""
+    choice = stored["geometry"]["fov_choice"]
+    by = {(c["geometry"].get("sensor_aspect"), tuple(c["frame"]), c["override"]): c["fov_deg"] for c in choice
+          if c["geometry"]["camera_fov_deg"] == GEOMETRY_V2["camera_fov_deg"] and tuple(c["frame"]) in ASPECT_SIZES}
+    s = GEOMETRY_V3_SENSOR["sensor_aspect"]
+    assert by[(s, (1080, 1920), None)] == pytest.approx(41.005, abs=1e-3) and by[(None, (1080, 1920), None)] == 53.0
+    assert by[(s, (480, 480), None)] == pytest.approx(52.801, abs=1e-3)
+    for frame, fov in (((480, 640), 53.0), ((600, 640), 53.0), ((640, 480), 67.0), ((1920, 1080), 67.0)):
+        assert by[(s, frame, None)] == fov == by[(None, frame, None)]
+    assert all(by[(s, f, 60.0)] == 60.0 for f in ASPECT_SIZES)
+    assert {c["fov_deg"] for c in choice if c["override"] is None and "sensor_aspect" not in c["geometry"]
+            and c["geometry"]["camera_fov_deg"] == GEOMETRY_V2["camera_fov_deg"]} == {67.0, 53.0}
+    turned = next(sc for sc in stored["scenarios"] if sc["name"] == "sensor_aspect_9x16_video_turned")
+    assert {(tuple(r["frame"]), round(r["fov_deg"], 3)) for r in turned["steps"]} == {((1080, 1920), 41.005),
+                                                                                       ((1920, 1080), 67.0)}
+    section = stored["geometry"]["view_rows_sensor"]
+    assert section["geometry"] == GEOMETRY_V3_SENSOR
+    for c in section["cases"]:
+        w, h = c["frame"]
+        assert c["fov_deg"] == pytest.approx(camera_fov(section["geometry"], w, h, c["override"]), rel=1e-12)
+        assert [c["top"], c["rows"]] == list(view_rows(h, w, c["fov_deg"], tuple(c["canvas"]), c["train_fov_deg"]))
+    v916 = next(c for c in section["cases"] if c["frame"] == [1080, 1920] and c["override"] is None
+                and c["canvas"] == [168, 224] and c["train_fov_deg"] == 67.0)
+    assert 1080 / v916["rows"] == pytest.approx(3 / 4, abs=0.01)          # a 3:4 view, not a square
+
+
 def test_fov_rule_matches_the_geometry_module():
     """One truth: the vectors' reference FOV choice is the bundle geometry's (where it exists)."""
     geometry = pytest.importorskip("crossing_assist.geometry", reason="crossing_assist.geometry not merged yet")
-    g = geometry.Geometry(camera_fov_deg=(GEOMETRY_V2["camera_fov_deg"]["landscape"],
-                                          GEOMETRY_V2["camera_fov_deg"]["portrait"]))
-    for w, h in FRAME_SIZES:
-        for override in (None, 60.0, 19.0, 171.0):
-            try:
-                want = g.camera_fov(w, h, override)
-            except ValueError:
-                want = None
-            try:
-                got = camera_fov(GEOMETRY_V2, w, h, override)
-            except ValueError:
-                got = None
-            assert got == want, (w, h, override)
+    cam = (GEOMETRY_V2["camera_fov_deg"]["landscape"], GEOMETRY_V2["camera_fov_deg"]["portrait"])
+    for geom, g in ((GEOMETRY_V2, geometry.Geometry(camera_fov_deg=cam)),
+                    (GEOMETRY_V3_SENSOR, geometry.Geometry(camera_fov_deg=cam, sensor_aspect=4 / 3))):
+        for w, h in FRAME_SIZES + ASPECT_SIZES:
+            for override in (None, 60.0, 19.0, 171.0):
+                try:
+                    want = g.camera_fov(w, h, override)
+                except ValueError:
+                    want = None
+                try:
+                    got = camera_fov(geom, w, h, override)
+                except ValueError:
+                    got = None
+                assert got == want, (w, h, override)
 
 
 def test_guard_vectors_follow_the_live_loop(stored):

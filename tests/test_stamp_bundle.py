@@ -72,3 +72,30 @@ def test_stamp_refuses_what_it_cannot_do(shipped, tmp_path):
 def test_stamp_on_a_folder_that_is_no_bundle_is_one_line(tmp_path):
     r = _stamp(tmp_path, tmp_path / "out", "--cv", tmp_path)
     assert r.returncode == 2 and r.stderr.startswith("error:") and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_stamp_sets_the_sensor_aspect_in_the_json_and_the_graph(shipped, tmp_path):
+    """--sensor-aspect gives an existing bundle geometry.sensor_aspect (its schema kept): 9:16
+    frames then get their crop's default FOV; the embedded copy agrees (the engine opens it)."""
+    from crossing_assist.runtime.engine import Engine
+
+    src, cv = shipped
+    assert read_bundle(src).geometry.sensor_aspect is None and read_bundle(src).camera_fov(1080, 1920) == 53.0
+    r = _stamp(src, tmp_path / "out", "--cv", cv, "--sensor-aspect", "4:3")
+    assert r.returncode == 0, r.stderr
+    b = read_bundle(tmp_path / "out")
+    assert b.geometry.sensor_aspect == 4 / 3 and b.schema_version == read_bundle(src).schema_version
+    assert b.camera_fov(1080, 1920) == pytest.approx(41.005, abs=1e-3) and b.camera_fov(480, 640) == 53.0
+    assert any("sensor_aspect" in s for s in b.provenance["stamped"]["what"])
+    engine = Engine(tmp_path / "out")        # check_session: bundle.json and the graph's copy agree
+    assert engine.camera_fov(1080, 1920) == b.camera_fov(1080, 1920)
+    r = _stamp(src, tmp_path / "num", "--cv", cv, "--sensor-aspect", repr(16 / 9))    # a number works too
+    assert r.returncode == 0 and read_bundle(tmp_path / "num").geometry.sensor_aspect == 16 / 9, r.stderr
+
+
+@pytest.mark.parametrize("bad", ["0.5", "3:4", "3.5", "wide", "nan", "4:0"])
+def test_stamp_refuses_a_bad_sensor_aspect_in_one_line(shipped, tmp_path, bad):
+    src, cv = shipped
+    r = _stamp(src, tmp_path / "out", "--cv", cv, "--sensor-aspect", bad)
+    assert r.returncode == 2 and r.stderr.startswith("error: --sensor-aspect") and "1..3" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()

@@ -143,7 +143,7 @@ test('bundle.json validation accepts a good bundle and names the bad field', () 
   delete v1.geometry;
   assert.deepEqual(parseBundleMeta(v1).geometry,
     { fit: 'stretch', pad_rgb: null, strips: 'frame', camera_fov_deg: { landscape: 90, portrait: 90 }, train_fov_deg: 90,
-      view_crop: false });
+      view_crop: false, sensor_aspect: null });
   const bad = [
     [(m) => { m.schema_version = 4; }, /schema_version 4 unsupported \(this app reads 1, 2, 3\); update the app/],
     [(m) => { m.schema_version = 3; m.geometry.view_crop = 'yes'; }, /geometry.view_crop = "yes" must be true or false/],
@@ -153,6 +153,8 @@ test('bundle.json validation accepts a good bundle and names the bad field', () 
     [(m) => { m.geometry.fit = 'crop'; }, /geometry.fit/],
     [(m) => { m.geometry.camera_fov_deg.portrait = 10; }, /camera_fov_deg.portrait = 10 is out of range/],
     [(m) => { m.geometry.pad_rgb = [0, 0]; }, /pad_rgb/],
+    [(m) => { m.geometry.sensor_aspect = 0.75; }, /geometry.sensor_aspect = 0.75 is out of range; valid: \[1, 3\]/],
+    [(m) => { m.geometry.sensor_aspect = '4:3'; }, /geometry.sensor_aspect = "4:3" is not a finite number/],
     [(m) => { m.actions.names[1] = 'west'; }, /actions.names disagree/],
     [(m) => { m.calibration.uncertainty.measure = 'votes'; }, /measure = "votes" unknown/],
     [(m) => { m.input.size = [8, 8]; }, /input.size/],
@@ -181,6 +183,18 @@ test('bundle.json schema 3: view_crop is read for letterbox bundles only, absent
   const noTrain = validMeta();
   delete noTrain.geometry.train_fov_deg; // optional, as in Python: the landscape FOV
   assert.equal(parseBundleMeta(noTrain).geometry.train_fov_deg, 67);
+});
+
+test('bundle.json geometry.sensor_aspect: optional (absent or null = null), any schema >= 2, in 1..3', () => {
+  const aspect = (change) => {
+    const m = validMeta();
+    change(m);
+    return parseBundleMeta(m).geometry.sensor_aspect;
+  };
+  assert.equal(aspect(() => {}), null);
+  assert.equal(aspect((m) => { m.geometry.sensor_aspect = null; }), null);
+  assert.equal(aspect((m) => { m.geometry.sensor_aspect = 4 / 3; }), 4 / 3);
+  assert.equal(aspect((m) => { m.schema_version = 3; m.geometry.fit = 'stretch'; m.geometry.sensor_aspect = 3; }), 3);
 });
 
 test('viewRows: the training camera keeps everything; portrait loses sky and feet; never columns', async () => {
@@ -222,6 +236,19 @@ test('the shared vectors hold the view crop, and a wrong viewRows is caught', { 
   const r = replayVectors(v);
   assert.equal(r.nFailures, 1);
   assert.equal(r.failures[0].scenario, 'geometry.view_rows');
+});
+
+test('the shared vectors hold the per-aspect default FOV (sensor_aspect), and a wrong one is caught', { skip: noVectors }, () => {
+  const v = loadVectors();
+  assert.ok(v.version >= 5);
+  const sensor = v.geometry.view_rows_sensor.cases;
+  const c = sensor.find((x) => x.frame[0] === 1080 && x.frame[1] === 1920 && x.override === null);
+  assert.ok(Math.abs(c.fov_deg - 41.005) < 1e-3, `${c.fov_deg}`);
+  const choice = v.geometry.fov_choice.filter((x) => x.geometry.sensor_aspect != null && x.override === null);
+  assert.ok(choice.some((x) => x.fov_deg === null) && choice.some((x) => x.fov_deg === 67));
+  delete v.geometry.view_rows_sensor.geometry.sensor_aspect; // a port that ignores the field
+  const r = replayVectors(v);
+  assert.ok(r.nFailures > 0 && r.failures.every((f) => f.scenario === 'geometry.view_rows_sensor'), JSON.stringify(r.failures[0]));
 });
 
 test('actions: headings of the 4-action space and the pan law', () => {
@@ -266,7 +293,7 @@ test('gyroscope: the integrator gives the mean turn rate between two steps', () 
 // ----------------------------------------------------------------------------- issue 12 / 14 modules
 
 test('geometry: orientation picks the FOV; overrides and the 20..170 range', async () => {
-  const { cameraFov, FovError, orientation, zoomedFov } = await import('../www/js/geometry.js');
+  const { cameraFov, defaultFovText, FovError, orientation, zoomedFov } = await import('../www/js/geometry.js');
   const g = { camera_fov_deg: { landscape: 67, portrait: 53 } };
   assert.equal(orientation(640, 480), 'landscape');
   assert.equal(orientation(480, 640), 'portrait');
@@ -276,6 +303,19 @@ test('geometry: orientation picks the FOV; overrides and the 20..170 range', asy
   assert.equal(cameraFov(g, 720, 1280, 60), 60);
   assert.throws(() => cameraFov(g, 720, 1280, 19.9), FovError);
   assert.throws(() => cameraFov(g, 720, 1280, 171), /valid: 20..170/);
+  // sensor_aspect 4:3: a frame narrower than the sensor in its orientation gets its crop's FOV
+  const s = { ...g, sensor_aspect: 4 / 3 };
+  const crop916 = 2 * Math.atan(0.75 * Math.tan((53 * Math.PI) / 360)) * 180 / Math.PI; // ~41.0
+  assert.ok(Math.abs(cameraFov(s, 1080, 1920) - crop916) < 1e-9 && Math.abs(crop916 - 41.005) < 1e-3);
+  assert.equal(cameraFov(g, 1080, 1920), 53); // without the field: the orientation's, as before
+  assert.ok(Math.abs(cameraFov(s, 480, 480) - 52.801) < 1e-3); // 1:1: a crop of the 4:3 landscape sensor
+  assert.deepEqual([cameraFov(s, 480, 640), cameraFov(s, 640, 480), cameraFov(s, 1920, 1080)], [53, 67, 67]);
+  assert.equal(cameraFov(s, 1080, 1920, 60), 60); // an override is used as given
+  assert.throws(() => cameraFov(s, 100, 800), FovError); // 1:8: ~9.5 deg, refused like any FOV
+  assert.equal(defaultFovText(g, 'portrait'), '53°');
+  assert.equal(defaultFovText(s, 'portrait'), '53° for 3:4 and wider frames, their crop’s for narrower ones (9:16: 41.0°)');
+  assert.equal(defaultFovText(s, 'landscape'), '67° for 4:3 and wider frames, their crop’s for narrower ones (1:1: 52.8°)');
+  assert.equal(defaultFovText({ ...s, sensor_aspect: 16 / 9 }, 'portrait'), '53° for 9:16 and wider frames, their crop’s for narrower ones');
   assert.equal(zoomedFov(67, {}, {}), 67);
   assert.ok(Math.abs(zoomedFov(90, { zoom: 2 }, { zoom: { min: 1 } }) - 2 * Math.atan(0.5) * 180 / Math.PI) < 1e-12);
 });

@@ -49,7 +49,7 @@ from crossing_assist.errors import UserError
 from crossing_assist.export import calibrate as cal
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
 from crossing_assist.export.quantize import INT8_MODES, quantize_convs
-from crossing_assist.geometry import Geometry
+from crossing_assist.geometry import SENSOR_ASPECT, Geometry
 
 if TYPE_CHECKING:  # annotations only: models is imported where it is used (_load_policy)
     from crossing_assist.models.policy import PolicyConfig
@@ -190,8 +190,12 @@ def _spec(config: PolicyConfig, samples: int, p: float, temperature: float = 1.0
 
 
 def _geometry(config: PolicyConfig, spec: GraphSpec) -> Geometry:
-    """Letterboxed models see the training camera's view: consumers crop rows beyond it (schema 3)."""
-    return Geometry(fit=spec.fit, pad_rgb=spec.pad_rgb, train_fov_deg=config.fov_deg, view_crop=spec.fit == "letterbox")
+    """Letterboxed models see the training camera's view: consumers crop rows beyond it (schema 3),
+    and frames narrower than the phone's 4:3 sensor (9:16 video) get their crop's FOV
+    (``sensor_aspect``)."""
+    letterbox = spec.fit == "letterbox"
+    return Geometry(fit=spec.fit, pad_rgb=spec.pad_rgb, train_fov_deg=config.fov_deg, view_crop=letterbox,
+                    sensor_aspect=SENSOR_ASPECT if letterbox else None)
 
 
 def parity_check(policy, spec: GraphSpec, frames: np.ndarray) -> float:

@@ -13,8 +13,9 @@ from crossing_assist.runtime.decide import Decision
 GREEN, AMBER, RED, WHITE, GREY = (60, 200, 60), (0, 170, 255), (40, 40, 230), (255, 255, 255), (150, 150, 150)
 
 
-def annotate(frame_rgb: np.ndarray, pred: Prediction, dec: Decision, space, fov_deg: float) -> np.ndarray:
-    """The frame (H x W x 3 RGB uint8) with the overlay, as BGR uint8 of the same size."""
+def annotate(frame_rgb: np.ndarray, pred: Prediction, dec: Decision, space, fov_deg: float | None) -> np.ndarray:
+    """The frame (H x W x 3 RGB uint8) with the overlay, as BGR uint8 of the same size
+    (``fov_deg`` None: no heading line, the frame's FOV was refused)."""
     img = cv2.cvtColor(frame_rgb, cv2.COLOR_RGB2BGR)
     h, w = img.shape[:2]
     for k in range(1, N_BINS):
@@ -28,7 +29,7 @@ def annotate(frame_rgb: np.ndarray, pred: Prediction, dec: Decision, space, fov_
             x0, x1 = round((k - 1) * w / N_BINS) + 2, round(k * w / N_BINS) - 2
             cv2.rectangle(img, (x0, h - 1 - round(p * h * 0.3)), (x1, h - 1), AMBER, -1)
     color = RED if dec.stop else (GREEN if dec.gate == "learner" else AMBER)
-    if dec.heading_deg is not None:
+    if dec.heading_deg is not None and fov_deg is not None:
         x = heading_to_x(max(-89.0, min(89.0, dec.heading_deg)), fov_deg)
         xp = round(min(max(x, 0.0), 1.0) * (w - 1))
         cv2.line(img, (xp, 0), (xp, h - 1), color, 3)

@@ -3,7 +3,7 @@
 The camera-geometry contract (docs/contracts.md, "Camera geometry") on the JSON the phone app
 reads: :func:`geometry_of` (schema 1 reads as one FOV for both orientations),
 :func:`camera_fov` (the frame's orientation -> the override or the bundle's ``camera_fov_deg``,
-refused outside 20..170 degrees) and :func:`gate_threshold` (the orientation's threshold).
+narrowed to a crop's with ``sensor_aspect``, refused outside 20..170 degrees) and :func:`gate_threshold` (the orientation's threshold).
 They agree with :meth:`crossing_assist.bundle.Bundle.camera_fov` and
 :meth:`~crossing_assist.bundle.UncertaintySpec.threshold_for`, which they call; the app's
 ``android_demo/www/js/geometry.js`` is the same rule, checked against the shared test vectors
@@ -29,10 +29,12 @@ def geometry_of(meta: dict) -> dict:
 def camera_fov(geometry: dict, width: int, height: int, override: float | None = None) -> float:
     """Horizontal FOV (degrees) for a ``width x height`` frame: ``override`` (the user's or the
     device's value for this orientation) if given, else ``geometry.camera_fov_deg`` of the
-    frame's orientation. Raises ValueError outside 20..170 degrees (the runtime then plays the
-    stop cue)."""
+    frame's orientation, or its crop's FOV when ``geometry.sensor_aspect`` says the frame is
+    narrower than the sensor (:func:`crossing_assist.geometry.default_fov`). Raises ValueError
+    outside 20..170 degrees (the runtime then plays the stop cue)."""
     cam = geometry["camera_fov_deg"]
-    return Geometry(camera_fov_deg=(cam["landscape"], cam["portrait"])).camera_fov(width, height, override)
+    return Geometry(camera_fov_deg=(cam["landscape"], cam["portrait"]),
+                    sensor_aspect=geometry.get("sensor_aspect")).camera_fov(width, height, override)
 
 
 def gate_threshold(uncertainty: dict, width: int, height: int) -> float:

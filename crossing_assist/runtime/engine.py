@@ -91,8 +91,10 @@ class Engine:
 
     def decision_config(self, orientation: str = "landscape", **overrides) -> DecisionConfig:
         """The decision logic's config for this bundle and frames of ``orientation``: actions,
-        measure, that orientation's gate threshold and FOV (the override, else the bundle's).
-        :class:`Pipeline` follows the frames' orientation."""
+        measure, that orientation's gate threshold and FOV (the override, else the bundle's for
+        a full-sensor frame). A starting point: :class:`Pipeline` and ``listen.decide_still``
+        take each frame's own FOV (:meth:`camera_fov`: a crop narrower than the sensor, e.g.
+        9:16 video with ``geometry.sensor_aspect``, gets a narrower one) and orientation."""
         unc = self.bundle.calibration.uncertainty
         fov = self.fov_override or self.bundle.geometry.camera_fov_deg[ORIENTATIONS.index(orientation)]
         kw = {"fov_deg": fov, "measure": unc.measure, "threshold": unc.threshold_for(orientation), **overrides}

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from crossing_assist.fileio import sweep_orphans, tmp_tag
+from crossing_assist.geometry import GeometryError
 from crossing_assist.runtime.annotate import annotate
 from crossing_assist.runtime.audio import write_wav
 from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
@@ -165,7 +166,12 @@ class _Recorder:
             self.fovs.add(step.prediction.fov_deg)
         self.trace.write(json.dumps(trace_record(i, step)) + "\n")
         if self.cfg.annotate:
-            fov = step.prediction.fov_deg or self.engine.camera_fov(frame.shape[1], frame.shape[0])
+            fov = step.prediction.fov_deg
+            if fov is None:
+                try:
+                    fov = self.engine.camera_fov(frame.shape[1], frame.shape[0])
+                except GeometryError:   # refused (e.g. a crop too narrow): frames of this size get no heading
+                    fov = None
             img = annotate(frame, step.prediction, d, self.engine.space, fov)
             if self.writer is None:
                 h, w = img.shape[:2]

@@ -43,6 +43,15 @@ the FOV the frame gets (:func:`~crossing_assist.runtime.camera.camera_fov` of
 :func:`crossing_assist.geometry.view_rows` (integers: a port must agree exactly; wide cameras,
 whose frames are fitted by their width, included). Its own cases,
 no generator: the vectors above are those of version 3.
+
+Version 5: ``geometry.sensor_aspect`` (optional, long / short side of the sensor
+``camera_fov_deg`` describes): the default FOV of a frame narrower than the sensor in its
+orientation is its crop's (:func:`crossing_assist.geometry.default_fov`; 9:16 portrait video:
+~41 deg, not 53). ``geometry.fov_choice`` gains cases over :data:`ASPECT_SIZES` (9:16 to 10:1)
+with and without the field (refused where a crop's FOV falls below 20 degrees);
+``geometry.view_rows_sensor`` is ``view_rows`` under :data:`GEOMETRY_V3_SENSOR` (the rows seen at
+the per-aspect default FOV); one more decision scenario (own generator, appended) has a phone
+filming 9:16 video upright, turned to landscape and back. The vectors above are those of version 4.
 """
 
 from __future__ import annotations
@@ -70,7 +79,7 @@ from crossing_assist.runtime.status import status_message
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 4
+VERSION = 5
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -160,6 +169,12 @@ GEOMETRY_V2 = {"fit": "letterbox", "pad_rgb": [124, 116, 104], "strips": "frame"
                "camera_fov_deg": {"landscape": 67.0, "portrait": 53.0}, "train_fov_deg": 67.0}
 #: Schema 3's geometry: the same with the view crop on.
 GEOMETRY_V3 = {**GEOMETRY_V2, "view_crop": True}
+#: Schema 3 with ``sensor_aspect`` (version 5): the exporter's letterbox geometry.
+GEOMETRY_V3_SENSOR = {**GEOMETRY_V3, "sensor_aspect": 4 / 3}
+#: Frame sizes (width, height) for the sensor-aspect FOV vectors: 9:16, 3:4, 1:1, 4:3, 16:9 and
+#: extremes (1:10, 1:8 and their landscape twins), a frame just wider than 3:4 and one just narrower.
+ASPECT_SIZES = ((1080, 1920), (720, 1280), (480, 640), (3, 4), (600, 640), (479, 640), (480, 480), (640, 480),
+                (4, 3), (500, 400), (1920, 1080), (1280, 720), (100, 1000), (1000, 100), (180, 1440), (1440, 180))
 #: Canvases (input.size, [H, W]) for the view-crop vectors: the default bundle's 3:4, square, the
 #: phone app toy's 1:2, and a tall one.
 VIEW_CANVASES = ((168, 224), (224, 224), (24, 48), (320, 240))
@@ -190,6 +205,11 @@ def _geometry_scenarios(rng: np.random.Generator) -> list[tuple]:
     two = {"measure": "entropy", "threshold": 0.8, "portrait_threshold": 1.6}
     steps = [(i / FPS, 0.0, _frame(13, 4, 0.7, own), FRAME_SIZES[(i // 30) % 2]) for i in range(90)]
     out.append(("portrait_threshold_phone_turned", GEOMETRY_V2, {}, two, steps))
+    # Version 5: 9:16 video held upright (its crop's FOV, ~41 deg), turned to 16:9 landscape and back.
+    own = np.random.default_rng(5)
+    sizes = ((1080, 1920), (1920, 1080))
+    steps = [(i / FPS, 0.0, _frame(13, 8, 0.9, own), sizes[(i // 30) % 2]) for i in range(90)]
+    out.append(("sensor_aspect_9x16_video_turned", GEOMETRY_V3_SENSOR, {}, two, steps))
     return out
 
 
@@ -222,6 +242,32 @@ def _fov_choices() -> list[dict]:
                 except ValueError:
                     row["fov_deg"] = None  # refused: the runtime plays the stop cue
                 cases.append(row)
+    odd = {**GEOMETRY_V2, "camera_fov_deg": {"landscape": 80.0, "portrait": 50.0}, "sensor_aspect": 16 / 9}
+    square = {**GEOMETRY_V2, "sensor_aspect": 1.0}
+    for geom in (GEOMETRY_V2, GEOMETRY_V3_SENSOR, odd, square):   # version 5: with and without sensor_aspect
+        for w, h in ASPECT_SIZES:
+            for override in (None, 60.0, 19.9):
+                row = {"geometry": geom, "frame": [w, h], "override": override, "orientation": orientation(w, h)}
+                try:
+                    row["fov_deg"] = camera_fov(geom, w, h, override)
+                except ValueError:
+                    row["fov_deg"] = None
+                cases.append(row)
+    return cases
+
+
+def _view_rows_sensor() -> list[dict]:
+    """The view crop under :data:`GEOMETRY_V3_SENSOR` (version 5): the per-aspect default FOV
+    (or an override) -> the rows the graph sees; frames whose default FOV is refused left out."""
+    cases = []
+    for w, h in ASPECT_SIZES[:12]:
+        for override in (None, 60.0):
+            fov = camera_fov(GEOMETRY_V3_SENSOR, w, h, override)
+            for canvas in VIEW_CANVASES:
+                for train in (67.0, 53.0):
+                    top, rows = view_rows(h, w, fov, canvas, train)
+                    cases.append({"frame": [w, h], "override": override, "fov_deg": fov, "canvas": list(canvas),
+                                  "train_fov_deg": train, "top": top, "rows": rows})
     return cases
 
 
@@ -341,7 +387,8 @@ def build_vectors(seed: int = 20240601) -> dict:
         "guards": _guards(rng),
         "status": _status_vectors(),
         "geometry": {"fov_range_deg": list(FOV_RANGE_DEG), "fov_choice": _fov_choices(),
-                     "view_rows": {"geometry": GEOMETRY_V3, "cases": _view_rows()}},
+                     "view_rows": {"geometry": GEOMETRY_V3, "cases": _view_rows()},
+                     "view_rows_sensor": {"geometry": GEOMETRY_V3_SENSOR, "cases": _view_rows_sensor()}},
     }
 
 

@@ -13,7 +13,8 @@
 // * in the background guidance pauses (stop cue, no inference); back in front, the Decider
 //   starts afresh (no stale heading) and the screen wake lock is requested again;
 // * the field of view comes from the frame's orientation (portrait / landscape): the user's
-//   setting for it, else the bundle's default (geometry.js); a new FOV starts a fresh Decider,
+//   setting for it, else the bundle's default (geometry.js cameraFov: a crop narrower than the
+//   sensor, e.g. 9:16 video, gets its own with geometry.sensor_aspect); a new FOV starts a fresh Decider,
 //   and an invalid one stops;
 // * a bundle with geometry.view_crop (schema 3) sees only the frame's middle rows at the training
 //   camera's angular scale (geometry.js viewRows, from the whole frame's FOV), as Engine.predict.
@@ -28,7 +29,7 @@
 
 import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
-import { cameraFov, FovError, frameView, gateThreshold, orientation, zoomedFov } from './geometry.js';
+import { cameraFov, defaultFovText, FovError, frameView, gateThreshold, orientation, zoomedFov } from './geometry.js';
 import { Haptics } from './haptics.js';
 import { isFresh, sameFrame, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
 import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs } from './logic.js';
@@ -608,7 +609,7 @@ async function init() {
     const bundle = await fetchBundle(base.href);
     app.meta = bundle.meta;
     view.bundle(bundle.meta);
-    for (const o of ['landscape', 'portrait']) $(`fov-default-${o}`).textContent = `${bundle.meta.geometry.camera_fov_deg[o]}°`;
+    for (const o of ['landscape', 'portrait']) $(`fov-default-${o}`).textContent = defaultFovText(bundle.meta.geometry, o);
     const threads = Number(params.get('threads')) || undefined; // ?threads=N: for benchmarks
     app.model = await openBest(bundle, new URL('vendor/', location.href).href, { threads });
     view.backend(app.model);

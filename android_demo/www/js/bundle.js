@@ -114,15 +114,17 @@ function parseCalibration(d) {
 /**
  * The geometry block (schema 2; schema 3 adds view_crop), or schema 1's implied one: fit
  * 'stretch' and one field of view (fov_deg) for both orientations. Returns {fit, pad_rgb,
- * strips, camera_fov_deg: {landscape, portrait}, train_fov_deg, view_crop}. view_crop (crop the
- * frame's rows to the training camera's view, geometry.js viewRows) is read only for a letterbox
- * bundle of schema >= 3 (absent = false), as crossing_assist/bundle.py reads it; train_fov_deg
- * is optional (default: the landscape FOV) in (0, 180).
+ * strips, camera_fov_deg: {landscape, portrait}, train_fov_deg, view_crop, sensor_aspect}.
+ * view_crop (crop the frame's rows to the training camera's view, geometry.js viewRows) is read
+ * only for a letterbox bundle of schema >= 3 (absent = false), as crossing_assist/bundle.py
+ * reads it; train_fov_deg is optional (default: the landscape FOV) in (0, 180); sensor_aspect
+ * (long / short side of the sensor camera_fov_deg describes, geometry.js defaultFov) is optional
+ * in 1..3 (absent or null = null: every frame gets its orientation's FOV).
  */
 export function parseGeometry(meta, version, fovDeg) {
   if (version < 2) {
     return { fit: 'stretch', pad_rgb: null, strips: 'frame', camera_fov_deg: { landscape: fovDeg, portrait: fovDeg },
-      train_fov_deg: fovDeg, view_crop: false };
+      train_fov_deg: fovDeg, view_crop: false, sensor_aspect: null };
   }
   const g = get(meta, 'geometry', '');
   const fit = get(g, 'fit', 'geometry');
@@ -143,7 +145,8 @@ export function parseGeometry(meta, version, fovDeg) {
   const train = num(g.train_fov_deg === undefined ? camera.landscape : g.train_fov_deg, 'geometry.train_fov_deg', 0, 180,
     { loOpen: true, hiOpen: true });
   const crop = fit === 'letterbox' && version >= 3 && bool(g.view_crop === undefined ? false : g.view_crop, 'geometry.view_crop');
-  return { fit, pad_rgb: pad, strips, camera_fov_deg: camera, train_fov_deg: train, view_crop: crop };
+  const aspect = g.sensor_aspect == null ? null : num(g.sensor_aspect, 'geometry.sensor_aspect', 1, 3);
+  return { fit, pad_rgb: pad, strips, camera_fov_deg: camera, train_fov_deg: train, view_crop: crop, sensor_aspect: aspect };
 }
 
 /**

@@ -6,7 +6,9 @@
 //
 // * orientation of a frame: 'portrait' if height > width, else 'landscape';
 // * FOV = the override for that orientation (the user's setting, or what the camera reports)
-//   if there is one, else the bundle's geometry.camera_fov_deg[orientation];
+//   if there is one, else the bundle's geometry.camera_fov_deg[orientation]; with
+//   geometry.sensor_aspect (long / short side of that sensor), a frame narrower than the sensor
+//   in its orientation is a crop of it and gets the crop's FOV (defaultFov: 9:16 video ~41 deg);
 // * a FOV outside 20..170 degrees is refused (FovError): the app then plays the stop cue;
 // * a schema-1 bundle has one fov_deg for both orientations (parseGeometry in bundle.js);
 // * the gate threshold is the orientation's too: calibration.uncertainty.portrait_threshold for
@@ -45,12 +47,65 @@ export function checkFov(fov) {
 }
 
 /**
- * Horizontal FOV (degrees) for a width x height frame: `override` when not null/undefined,
- * else geometry.camera_fov_deg[orientation]. Throws FovError outside 20..170.
+ * Horizontal FOV (degrees) of a window covering `fraction` of the width of a frame whose
+ * horizontal FOV is `fovDeg`: 2 atan(fraction tan(fov / 2)). Python: geometry.py window_fov.
+ */
+export function windowFov(fraction, fovDeg) {
+  const rad = Math.PI / 180; // Python's math.radians / math.degrees: x * (pi / 180), x * (180 / pi)
+  return 2 * Math.atan(fraction * Math.tan((fovDeg * rad) / 2)) * (180 / Math.PI);
+}
+
+/**
+ * The default horizontal FOV (degrees, unchecked) of a width x height frame (Python: geometry.py
+ * default_fov): geometry.camera_fov_deg[orientation]; with geometry.sensor_aspect s (not
+ * null/undefined), full = s (landscape) or 1 / s (portrait), a = width / height, and a < full
+ * (a crop narrower than the sensor) gives windowFov(a / full, that FOV).
+ */
+export function defaultFov(geometry, width, height) {
+  const o = orientation(width, height);
+  let fov = geometry.camera_fov_deg[o];
+  const s = geometry.sensor_aspect;
+  if (s != null) {
+    const full = o === 'landscape' ? s : 1 / s;
+    const a = width / height;
+    if (a < full) fov = windowFov(a / full, fov);
+  }
+  return fov;
+}
+
+/** An aspect (long / short side) as a ratio of small integers ('4:3', '16:9'), else '1.41:1'. */
+function ratioText(aspect) {
+  for (let d = 1; d <= 20; d += 1) {
+    const n = Math.round(aspect * d);
+    if (Math.abs(n / d - aspect) < 1e-6) return `${n}:${d}`;
+  }
+  return `${aspect.toFixed(2)}:1`;
+}
+
+/**
+ * The settings page's words for the bundle's default FOV of an orientation (what an empty FOV
+ * field means): '53°', or with geometry.sensor_aspect '53° for 3:4 and wider frames, their
+ * crop's for narrower ones (9:16: 41.0°)' (landscape's example: 1:1).
+ */
+export function defaultFovText(geometry, o) {
+  const fov = `${geometry.camera_fov_deg[o]}°`;
+  const s = geometry.sensor_aspect;
+  if (s == null) return fov;
+  const sensor = ratioText(s).split(':');
+  const [w, h] = o === 'portrait' ? [9, 16] : [1, 1];
+  const full = o === 'portrait' ? `${sensor[1]}:${sensor[0]}` : sensor.join(':');
+  const narrower = w / h < (o === 'portrait' ? 1 / s : s); // the example is a crop of this sensor
+  const example = narrower ? ` (${w}:${h}: ${defaultFov(geometry, w, h).toFixed(1)}°)` : '';
+  return `${fov} for ${full} and wider frames, their crop’s for narrower ones${example}`;
+}
+
+/**
+ * Horizontal FOV (degrees) for a width x height frame: `override` when not null/undefined (as
+ * given), else defaultFov (the orientation's, a crop's with sensor_aspect). Throws FovError
+ * outside 20..170.
  */
 export function cameraFov(geometry, width, height, override = null) {
-  const fov = override ?? geometry.camera_fov_deg[orientation(width, height)];
-  return checkFov(fov);
+  return checkFov(override ?? defaultFov(geometry, width, height));
 }
 
 /**

@@ -12,7 +12,7 @@ import { isFresh, sameFrame, Watchdog } from './live.js';
 import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains } from './logic.js';
 import { statusMessage } from './view.js';
 
-const SUPPORTED_VERSIONS = [1, 2, 3, 4];
+const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5];
 
 function close(a, b, tol) {
   return Math.abs(a - b) <= tol * Math.max(1, Math.abs(b));
@@ -169,15 +169,19 @@ export function replayVectors(vectors) {
       fail({ scenario: 'geometry.fov_choice', field: `${w}x${h} override ${v.override}`, got, expected: v.fov_deg });
     }
   }
-  const crop = vectors.geometry?.view_rows; // version 4: the view crop (schema 3), integers, exactly
-  for (const v of crop?.cases || []) {
-    checks += 1;
-    const [w, h] = v.frame;
-    const fov = cameraFov(crop.geometry, w, h, v.override);
-    const got = viewRows(h, w, fov, v.canvas, v.train_fov_deg);
-    if (fov !== v.fov_deg || got[0] !== v.top || got[1] !== v.rows) {
-      fail({ scenario: 'geometry.view_rows', field: `${w}x${h} fov ${fov} canvas ${v.canvas} train ${v.train_fov_deg}`,
-        got: [fov, ...got], expected: [v.fov_deg, v.top, v.rows] });
+  // version 4: the view crop (schema 3); version 5: the same at the per-aspect default FOV
+  // (geometry.sensor_aspect). The rows are integers, exactly; the FOV within the tolerance.
+  for (const name of ['view_rows', 'view_rows_sensor']) {
+    const crop = vectors.geometry?.[name];
+    for (const v of crop?.cases || []) {
+      checks += 1;
+      const [w, h] = v.frame;
+      const fov = cameraFov(crop.geometry, w, h, v.override);
+      const got = viewRows(h, w, fov, v.canvas, v.train_fov_deg);
+      if (!close(fov, v.fov_deg, tol) || got[0] !== v.top || got[1] !== v.rows) {
+        fail({ scenario: `geometry.${name}`, field: `${w}x${h} fov ${fov} canvas ${v.canvas} train ${v.train_fov_deg}`,
+          got: [fov, ...got], expected: [v.fov_deg, v.top, v.rows] });
+      }
     }
   }
   return { version: vectors.version, scenarios: vectors.scenarios.length, steps, checks, failures, nFailures, maxRelDiff };
