@@ -140,11 +140,15 @@ class UncertaintySpec:
     gate's coefficient should be about one half, for landscape frames; ``portrait_threshold``
     the same for portrait frames (optional; absent = ``threshold``). A portrait strip is narrower
     (0.56 of a landscape one with a 3:4 frame on a 4:3 canvas), so the same doubt in degrees
-    spreads over more strips and reads as a higher entropy."""
+    spreads over more strips and reads as a higher entropy. ``fitted_threshold`` (optional,
+    informative): the threshold as fitted on the calibration frames, before the held-out scales
+    (``scripts/choose_gate.py``) made ``threshold`` and ``portrait_threshold``; tools that re-scale
+    the gate start from it (``scripts/stamp_bundle.py --rescale-gate``)."""
 
     measure: str
     threshold: float
     portrait_threshold: float | None = None
+    fitted_threshold: float | None = None
 
     def threshold_for(self, orientation: str) -> float:
         """The threshold for frames of this orientation (``landscape`` or ``portrait``)."""
@@ -156,6 +160,8 @@ class UncertaintySpec:
         d = {"measure": self.measure, "threshold": self.threshold}
         if self.portrait_threshold is not None:
             d["portrait_threshold"] = self.portrait_threshold
+        if self.fitted_threshold is not None:
+            d["fitted_threshold"] = self.fitted_threshold
         return d
 
 
@@ -323,6 +329,8 @@ def _parse_calibration(d: Any) -> Calibration:
                        0.0, 1e6, lo_open=True),
         portrait_threshold=None if u.get("portrait_threshold") is None else
         _num(u["portrait_threshold"], "calibration.uncertainty.portrait_threshold", 0.0, 1e6, lo_open=True),
+        fitted_threshold=None if u.get("fitted_threshold") is None else
+        _num(u["fitted_threshold"], "calibration.uncertainty.fitted_threshold", 0.0, 1e6, lo_open=True),
     )
     return Calibration(temperature=temp, conformal=conformal, uncertainty=unc)
 

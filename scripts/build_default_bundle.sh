@@ -86,4 +86,8 @@ fi
 
 # Replace the embedded bundle in one rename (write_bundle validates and swaps atomically).
 # bundle.json (and the graph's copy) also carry the leave-one-photographer-out figures.
-"$PY" scripts/stamp_bundle.py "$SRC" "$OUT" --cv "$CV_DIR" --gate-json "$GATE_JSON"
+# With a gate choice, the thresholds are re-derived from the fitted one and the scales stamped beside
+# them, so the two agree even if choose_gate.py rewrote the choice while this script ran.
+RESCALE=()
+if [ -f "$CV_DIR/$GATE_JSON" ]; then RESCALE=(--rescale-gate); fi
+"$PY" scripts/stamp_bundle.py "$SRC" "$OUT" --cv "$CV_DIR" --gate-json "$GATE_JSON" "${RESCALE[@]}"

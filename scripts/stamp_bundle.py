@@ -8,9 +8,10 @@ atomically. The graph itself is left as it is.
 * Always: ``metrics.leave_one_photographer_out`` from ``CV/cv.json`` and ``metrics.gate_held_out``
   from ``CV/GATE_JSON`` (scripts/choose_gate.py), where present.
 * ``--rescale-gate``: the gate thresholds become the bundle's fitted threshold times the scales in
-  ``GATE_JSON`` (landscape, and portrait where chosen). The fitted threshold is read back from
-  the bundle's own record (its landscape threshold over its recorded held-out scale), so a
-  shipped bundle takes new held-out scales without a re-export.
+  ``GATE_JSON`` (landscape, and portrait where chosen). The fitted threshold is the bundle's
+  ``calibration.uncertainty.fitted_threshold`` (bundles exported before it was recorded: their
+  landscape threshold over their recorded held-out scale), so a shipped bundle takes new held-out
+  scales without a re-export.
 * ``--view-crop``: upgrade a letterbox bundle to the current schema with ``geometry.view_crop``
   (consumers crop rows beyond the training camera's view, crossing_assist/geometry.py): right for
   models trained on windows of the training photos at their own scale, as the default is.
@@ -89,11 +90,15 @@ def main(argv=None) -> int:
         g = json.loads(gate_path.read_text())
         meta["metrics"]["gate_held_out"] = summary(g) | {k: summary(g[k]) for k in ("portrait", "portrait_window") if k in g}
         if a.rescale_gate:
-            if not old_gate:
-                print(f"error: {a.src} records no held-out gate scale; re-export it instead", file=sys.stderr)
-                return 2
             unc = meta["calibration"]["uncertainty"]
-            fitted = unc["threshold"] / old_gate["scale"]
+            fitted = unc.get("fitted_threshold")
+            if fitted is None:   # exported before bundles recorded it: undo the recorded scale
+                if not old_gate:
+                    print(f"error: {a.src} records neither its fitted gate threshold nor a held-out gate scale; "
+                          "re-export it instead", file=sys.stderr)
+                    return 2
+                fitted = unc["threshold"] / old_gate["scale"]
+            unc["fitted_threshold"] = fitted
             unc["threshold"] = fitted * g["scale"]
             if "portrait" in g:
                 unc["portrait_threshold"] = fitted * g["portrait"]["scale"]

@@ -177,6 +177,7 @@ def test_gate_scales_per_orientation(work, tmp_path):
     assert u.threshold == pytest.approx(0.5 * fitted.threshold, rel=1e-6)
     assert u.portrait_threshold == pytest.approx(1.5 * fitted.threshold, rel=1e-6)
     assert u.threshold_for("portrait") == u.portrait_threshold and u.threshold_for("landscape") == u.threshold
+    assert u.fitted_threshold == pytest.approx(fitted.threshold, rel=1e-6)   # recorded for later re-scaling
 
 
 def test_mirror_export_writes_the_flag_and_its_graph_is_mirror_equivariant(work, tmp_path):

@@ -53,10 +53,25 @@ def test_stamp_rescales_the_gate_and_turns_the_view_crop_on(shipped, tmp_path):
     assert b.schema_version == 3 and b.geometry.view_crop
     unc = b.calibration.uncertainty
     assert unc.threshold == pytest.approx(0.25) and unc.portrait_threshold == pytest.approx(1.5)   # fitted 1.0 x scales
+    assert unc.fitted_threshold == pytest.approx(1.0)                    # recorded for the next re-scale
     assert b.metrics["leave_one_photographer_out"]["accuracy"]["mean"] == 0.6
     assert set(b.metrics["gate_held_out"]) >= {"scale", "accuracy", "portrait", "portrait_window"}
     assert len(b.provenance["stamped"]["what"]) == 2
     Engine(tmp_path / "out")          # the graph's embedded copy matches the new bundle.json
+
+
+def test_rescale_starts_from_the_recorded_fitted_threshold_not_a_stale_scale(shipped, tmp_path):
+    """A bundle exported at the fitted threshold whose metrics already name a newer held-out scale (the
+    gate choice rewritten while the export ran) must not have that scale undone from its threshold."""
+    src, cv = shipped
+    meta = json.loads((src / "bundle.json").read_text())
+    meta["calibration"]["uncertainty"]["fitted_threshold"] = 0.5     # threshold 0.5 = fitted x 1, metrics say 0.5
+    (src / "bundle.json").write_text(json.dumps(meta))
+    r = _stamp(src, tmp_path / "out", "--cv", cv, "--rescale-gate")
+    assert r.returncode == 0, r.stderr
+    unc = read_bundle(tmp_path / "out").calibration.uncertainty
+    assert unc.fitted_threshold == pytest.approx(0.5)
+    assert unc.threshold == pytest.approx(0.125) and unc.portrait_threshold == pytest.approx(0.75)
 
 
 def test_stamp_refuses_what_it_cannot_do(shipped, tmp_path):

@@ -191,13 +191,15 @@ class CalibrationResult:
     measure: str
     uncertainty_threshold: float
     portrait_uncertainty_threshold: float | None = None   # None: portrait frames use uncertainty_threshold
+    fitted_uncertainty_threshold: float | None = None     # before the held-out scales (informative)
 
     def spec(self) -> Calibration:
         """The bundle's typed ``calibration`` block."""
         return Calibration(temperature=self.temperature,
                            conformal=ConformalSpec(self.coverage, self.threshold, self.n_frames),
                            uncertainty=UncertaintySpec(self.measure, self.uncertainty_threshold,
-                                                       self.portrait_uncertainty_threshold))
+                                                       self.portrait_uncertainty_threshold,
+                                                       self.fitted_uncertainty_threshold))
 
 
 def uncalibrated(n_actions: int, measure: str = "entropy") -> CalibrationResult:

@@ -283,7 +283,8 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
         temperature=temperature, coverage=cfg.coverage,
         threshold=cal.conformal_threshold(got["probs"], data.actions, cfg.coverage),
         n_frames=len(data.actions), measure=cfg.measure, uncertainty_threshold=cfg.gate_scale * fitted,
-        portrait_uncertainty_threshold=None if cfg.gate_scale_portrait is None else cfg.gate_scale_portrait * fitted)
+        portrait_uncertainty_threshold=None if cfg.gate_scale_portrait is None else cfg.gate_scale_portrait * fitted,
+        fitted_uncertainty_threshold=fitted)
     full = _measure(got, data, calib.threshold, meta["actions"]["n"], majority)
     log(f"{cfg.calib_split} through onnxruntime (T={meta['mc']['samples']}): accuracy {full['accuracy']:.4f} "
         f"on {full['n']} frames")
