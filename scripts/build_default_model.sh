@@ -4,8 +4,8 @@
 # Canvas: 168 x 224 (4:3 landscape, the PTL photos' own aspect), frames letterboxed onto it exactly
 # as the bundle's graph fits a camera frame (crossing_assist/geometry.py).
 # Data: PTL train (real photos, ../shared/data/ptl, squash undone: aspect=4:3) with, per photo, its
-# two random *field views* (mirrored half the time, roll up to 15 deg, an aspect the model meets, mostly the 1:1 middle of a
-# portrait phone's frame, letterboxed, a corruption: night, glare, rain, blur, JPEG, noise, occluder); negatives labelled
+# two random *field views* (mirrored half the time, roll up to 15 deg, a phone aspect such as 3:4 portrait
+# letterboxed, a corruption: night, glare, rain, blur, JPEG, noise, occluder); negatives labelled
 # unknown: views above the far kerb of every other PTL photo (crossing-data negatives) and
 # synthetic corners without a crossing (crossing-data synth, 40 % unknown).
 # Selection: fixed epoch count (--select-on last); the recipe is compared on held-out photographers

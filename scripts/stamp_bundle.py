@@ -19,7 +19,8 @@ atomically. The graph itself is left as it is.
   ``camera_fov_deg`` describes, 1..3; a number or a ratio, ``4:3`` = 1.3333333333333333): frames narrower than it (9:16
   video) get their crop's default FOV (crossing_assist/geometry.py ``default_fov``). Schema 2 or 3
   bundles; the schema is kept.
-The change is recorded in ``provenance.stamped``.
+Each stamp is appended to ``provenance.stamped`` (a list, oldest first; a single earlier record
+becomes its first entry), so a bundle stamped twice keeps both records.
 """
 
 from __future__ import annotations
@@ -121,8 +122,10 @@ def main(argv=None) -> int:
         meta["geometry"]["sensor_aspect"] = aspect
         stamped.append(f"geometry.sensor_aspect {aspect:g}")
     if stamped:
-        meta["provenance"]["stamped"] = {"what": stamped, "by": "scripts/stamp_bundle.py " + " ".join(sys.argv[1:] if argv is None else argv),
-                                         "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+        earlier = meta["provenance"].get("stamped", [])
+        record = {"what": stamped, "by": "scripts/stamp_bundle.py " + " ".join(sys.argv[1:] if argv is None else argv),
+                  "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+        meta["provenance"]["stamped"] = [*(earlier if isinstance(earlier, list) else [earlier]), record]
     model = onnx.load_model_from_string(b.model_path.read_bytes())
     set_metadata(model, meta)
     write_bundle(a.out, model_bytes(model), meta)

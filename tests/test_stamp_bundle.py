@@ -56,8 +56,12 @@ def test_stamp_rescales_the_gate_and_turns_the_view_crop_on(shipped, tmp_path):
     assert unc.fitted_threshold == pytest.approx(1.0)                    # recorded for the next re-scale
     assert b.metrics["leave_one_photographer_out"]["accuracy"]["mean"] == 0.6
     assert set(b.metrics["gate_held_out"]) >= {"scale", "accuracy", "portrait", "portrait_window"}
-    assert len(b.provenance["stamped"]["what"]) == 2
+    assert len(b.provenance["stamped"]) == 1 and len(b.provenance["stamped"][0]["what"]) == 2
     Engine(tmp_path / "out")          # the graph's embedded copy matches the new bundle.json
+    r = _stamp(tmp_path / "out", tmp_path / "again", "--cv", cv, "--sensor-aspect", "4:3")
+    assert r.returncode == 0, r.stderr
+    history = read_bundle(tmp_path / "again").provenance["stamped"]
+    assert [len(h["what"]) for h in history] == [2, 1] and "view_crop" in history[0]["what"][1]
 
 
 def test_rescale_starts_from_the_recorded_fitted_threshold_not_a_stale_scale(shipped, tmp_path):
@@ -101,7 +105,7 @@ def test_stamp_sets_the_sensor_aspect_in_the_json_and_the_graph(shipped, tmp_pat
     b = read_bundle(tmp_path / "out")
     assert b.geometry.sensor_aspect == 4 / 3 and b.schema_version == read_bundle(src).schema_version
     assert b.camera_fov(1080, 1920) == pytest.approx(41.005, abs=1e-3) and b.camera_fov(480, 640) == 53.0
-    assert any("sensor_aspect" in s for s in b.provenance["stamped"]["what"])
+    assert any("sensor_aspect" in s for s in b.provenance["stamped"][-1]["what"])
     engine = Engine(tmp_path / "out")        # check_session: bundle.json and the graph's copy agree
     assert engine.camera_fov(1080, 1920) == b.camera_fov(1080, 1920)
     r = _stamp(src, tmp_path / "num", "--cv", cv, "--sensor-aspect", repr(16 / 9))    # a number works too

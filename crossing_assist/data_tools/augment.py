@@ -175,11 +175,10 @@ def random_augment(image: np.ndarray, far_x: float | None, label: int, rng: np.r
 
 # ----------------------------------------------------------------------------- field views
 
-#: Aspects (width / height) of what the model meets, with how often a field view uses each. After a
-#: bundle's view crop (:func:`crossing_assist.geometry.view_rows`) a phone held in portrait reaches the
-#: model as the middle 1:1 of its frame at the training camera's scale, a landscape phone as 4:3 or
-#: 16:9; the narrower full-height windows stand for narrower cameras.
-FIELD_ASPECTS = ((1.0, 0.45), (4 / 3, 0.20), (16 / 9, 0.15), (3 / 4, 0.15), (9 / 16, 0.05))
+#: Aspects (width / height) of the frames a phone gives, with how often a field view uses each.
+#: (Drawing mostly 1:1, what a portrait phone gives after a bundle's view crop, was cross-validated
+#: on 2026-11-29 and did not help portrait frames: docs/models.md.)
+FIELD_ASPECTS = ((3 / 4, 0.45), (9 / 16, 0.15), (1.0, 0.15), (16 / 9, 0.10), (4 / 3, 0.15))
 #: Bump when :func:`field_view` draws differently with the same aspects: cached features of field
 #: views are keyed by :func:`field_recipe`.
 FIELD_VERSION = 1
