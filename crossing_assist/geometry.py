@@ -99,6 +99,15 @@ def default_fov(width: int, height: int, camera_fov_deg: tuple[float, float],
     return fov
 
 
+def parse_ratio(text: str) -> float:
+    """``W:H`` (e.g. ``4:3``, ``3:4``) as the positive number W / H; ValueError otherwise."""
+    w, sep, h = str(text).partition(":")
+    ratio = float(w) / float(h) if sep and float(h) != 0 else math.nan
+    if not ratio > 0 or math.isinf(ratio):
+        raise ValueError(f"not a ratio W:H of positive numbers: {text!r}")
+    return ratio
+
+
 def check_sensor_aspect(value: float) -> float:
     """A sensor aspect (long side / short side) in 1..3, as float; else GeometryError (one line)."""
     lo, hi = SENSOR_ASPECT_RANGE

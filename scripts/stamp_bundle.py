@@ -35,7 +35,7 @@ import onnx
 
 from crossing_assist.bundle import SCHEMA_VERSION, BundleError, read_bundle, write_bundle
 from crossing_assist.export.graph import model_bytes, set_metadata
-from crossing_assist.geometry import GeometryError, check_sensor_aspect
+from crossing_assist.geometry import GeometryError, check_sensor_aspect, parse_ratio
 
 
 def summary(g: dict) -> dict:
@@ -45,16 +45,12 @@ def summary(g: dict) -> dict:
         "at_fitted_threshold": {k: v for k, v in g["at_fitted_threshold"].items() if k != "per_fold"}}
 
 
-def _ratio(text: str) -> float | str:
-    """``4:3`` or ``4/3`` as the number 4 / 3; anything else as typed (checked by the caller)."""
-    for sep in (":", "/"):
-        if sep in text:
-            n, _, d = text.partition(sep)
-            try:
-                return float(n) / float(d)
-            except (ValueError, ZeroDivisionError):
-                return text
-    return text
+def _number_or_ratio(text: str) -> float | str:
+    """``4:3`` as the number 4 / 3; anything else as typed (checked by the caller)."""
+    try:
+        return parse_ratio(text) if ":" in text else text
+    except ValueError:
+        return text
 
 
 def main(argv=None) -> int:
@@ -69,7 +65,7 @@ def main(argv=None) -> int:
                     "sensor camera_fov_deg describes, 1..3; a number or a ratio such as 4:3)")
     a = ap.parse_args(argv)
     try:
-        aspect = None if a.sensor_aspect is None else check_sensor_aspect(_ratio(a.sensor_aspect))
+        aspect = None if a.sensor_aspect is None else check_sensor_aspect(_number_or_ratio(a.sensor_aspect))
     except GeometryError as exc:
         print(f"error: --sensor-aspect: {exc}", file=sys.stderr)
         return 2

@@ -264,3 +264,18 @@ def test_sensor_aspect_is_read_validated_and_round_tripped(tmp_path):
     folder = make_toy_bundle(tmp_path / "b", Toy(samples=1, drop_p=0.0, geometry=geo))
     b = read_bundle(folder)
     assert b.geometry == geo and b.raw["geometry"]["sensor_aspect"] == 4 / 3
+
+
+def test_parse_ratio_reads_w_to_h_and_refuses_the_rest():
+    """One W:H reader for --aspect, the aspect=W:H flag and stamp_bundle --sensor-aspect."""
+    from crossing_assist.data_tools.images import ImageError, true_aspect
+    from crossing_assist.geometry import parse_ratio
+
+    assert parse_ratio("4:3") == 4 / 3 and parse_ratio("3:4") == 0.75 and parse_ratio(" 16 : 9 ") == 16 / 9
+    for bad in ("4", "4:0", "0:3", "-4:3", "a:b", "4:3:2", "inf:1", ""):
+        with pytest.raises(ValueError):
+            parse_ratio(bad)
+    img = np.zeros((30, 30, 3), np.uint8)
+    assert true_aspect(img, ("aspect=4:3",)).shape == (30, 40, 3)
+    with pytest.raises(ImageError, match="expected W:H"):
+        true_aspect(img, ("aspect=4:0",))

@@ -59,10 +59,11 @@ def _cmd_photo_clip(args: argparse.Namespace) -> int:
     from crossing_assist.data_tools.manifest import ManifestError
     from crossing_assist.data_tools.photo_clip import PhotoClipConfig, make_photo_clip
 
+    from crossing_assist.geometry import parse_ratio
+
     try:
-        aw, ah = (float(v) for v in args.aspect.split(":"))
-        aspect = aw / ah
-    except (ValueError, ZeroDivisionError):
+        aspect = parse_ratio(args.aspect)
+    except ValueError:
         raise ManifestError(f"--aspect {args.aspect!r} invalid; expected W:H, e.g. 3:4") from None
     clip, side, fov = make_photo_clip(PhotoClipConfig(Path(args.dataset), Path(args.out), args.split, args.count,
                                                       args.seconds_each, args.fps, aspect, args.height))

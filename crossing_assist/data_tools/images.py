@@ -10,6 +10,7 @@ import numpy as np
 
 from crossing_assist.data_tools.manifest import atomic_write_bytes
 from crossing_assist.errors import UserError
+from crossing_assist.geometry import parse_ratio
 
 
 class ImageError(UserError):
@@ -43,13 +44,11 @@ def true_aspect(image: np.ndarray, flags: tuple[str, ...] = ()) -> np.ndarray:
     if value is None:
         return image
     try:
-        aw, ah = (float(v) for v in value.split(":"))
-        if not (aw > 0 and ah > 0):
-            raise ValueError
+        aspect = parse_ratio(value)
     except ValueError:
         raise ImageError(f"Invalid flag aspect={value!r}; expected W:H, e.g. aspect=4:3") from None
     h, w = image.shape[:2]
-    want = max(1, int(round(h * aw / ah)))
+    want = max(1, int(round(h * aspect)))
     if abs(want - w) <= 1:
         return image
     return cv2.resize(image, (want, h), interpolation=cv2.INTER_AREA if want < w else cv2.INTER_LINEAR)
