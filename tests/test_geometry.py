@@ -279,3 +279,12 @@ def test_parse_ratio_reads_w_to_h_and_refuses_the_rest():
     assert true_aspect(img, ("aspect=4:3",)).shape == (30, 40, 3)
     with pytest.raises(ImageError, match="expected W:H"):
         true_aspect(img, ("aspect=4:0",))
+
+
+@pytest.mark.parametrize("bad", ["3x4", "3:0", "-3:4"])
+def test_photo_clip_refuses_a_bad_aspect_in_one_line(tmp_path, capsys, bad):
+    from crossing_assist.data_tools.cli import main
+
+    assert main(["photo-clip", str(tmp_path), "--out", str(tmp_path / "c.mp4"), f"--aspect={bad}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "expected W:H" in err[0] and not (tmp_path / "c.mp4").exists()
