@@ -21,8 +21,14 @@ UNFREEZE=${UNFREEZE:-4}
 FIELD=${FIELD:-2}       # field views a photo: 2 (since 2026-11-29) vs 1: PTL val 0.728 vs 0.697, held out 0.614 vs 0.618
 HEAD=${HEAD:-spatial_fine}   # columns x2 before the context conv: leave-one-photographer-out 0.618 vs spatial's 0.602
 THREADS=${THREADS:-1}
+# ablations (scripts/augment_ablation.py): field-view steps left out, and whether negatives are added
+FIELD_WITHOUT=${FIELD_WITHOUT:-}   # e.g. roll or corruption (crossing-train --field-without)
+NEGATIVES=${NEGATIVES:-1}          # 0: no synthetic corners and no PTL negatives
 scripts/prepare_default_data.sh "$PTL"
-RECIPE=(--data runs/data/ptl --extra-data runs/data/synth --extra-data runs/data/neg_half --backbone efficientnet_lite0
+EXTRA=()
+if [ "$NEGATIVES" = 1 ]; then EXTRA+=(--extra-data runs/data/synth --extra-data runs/data/neg_half); fi
+if [ -n "$FIELD_WITHOUT" ]; then EXTRA+=(--field-without "$FIELD_WITHOUT"); fi
+RECIPE=(--data runs/data/ptl "${EXTRA[@]}" --backbone efficientnet_lite0
     --head "$HEAD" --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --weight-decay 1e-4 --smoothing 0.2
     --aux-x 1.0 --unfreeze "$UNFREEZE" --input-size 168x224 --fit letterbox --no-mirror --field "$FIELD" --seed 0
     --threads "$THREADS" --quiet)

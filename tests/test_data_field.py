@@ -108,6 +108,27 @@ def test_field_view_is_deterministic_for_a_seeded_rng_and_varies_across_seeds():
         assert v.dtype == np.uint8 and v.ndim == 3 and 1 <= lab <= 12 and lab == x_to_bin(x)
 
 
+def test_field_view_without_a_step_leaves_only_that_step_out():
+    """An ablation's views (``without``) differ from the full recipe's only in the step left out:
+    every other draw stays the same, so the two recipes see the same rolls, aspects and corruptions."""
+    img = _photo()
+    for s in range(16):
+        full = field_view(img, 0.4, 0.6, x_to_bin(0.4), np.random.default_rng(s))
+        tags = full[3].split()
+        no_corr = field_view(img, 0.4, 0.6, x_to_bin(0.4), np.random.default_rng(s), ("corruption",))
+        assert no_corr[3].split() == [t for t in tags if t not in CORRUPTIONS]
+        no_roll = field_view(img, 0.4, 0.6, x_to_bin(0.4), np.random.default_rng(s), ("roll",))
+        assert no_roll[3].split() == [t for t in tags if not t.startswith("roll=")]
+        no_aspect = field_view(img, 0.4, 0.6, x_to_bin(0.4), np.random.default_rng(s), ("aspect",))
+        assert no_aspect[0].shape[1] / no_aspect[0].shape[0] == pytest.approx(img.shape[1] / img.shape[0], abs=0.02)
+        if not any(t in CORRUPTIONS for t in tags):   # nothing left out: the very same view
+            np.testing.assert_array_equal(no_corr[0], full[0])
+            assert no_corr[1:] == full[1:]
+        one = next((t for t in tags if t in CORRUPTIONS), None)
+        if one:   # one corruption by name: only that one goes
+            assert one not in field_view(img, 0.4, 0.6, x_to_bin(0.4), np.random.default_rng(s), (one,))[3].split()
+
+
 def test_field_view_keeps_unknown_unknown():
     img = _photo()
     for s in range(20):

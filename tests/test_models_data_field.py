@@ -111,6 +111,8 @@ def test_field_view_features_are_keyed_by_the_field_recipe(ds, monkeypatch):
     k = len(bb.blocks) - 2
     fields, ident = make_variants(False, (), 2), make_variants(False)
     before = cache_key(bb, k, CANVAS, fields, 67.0, ds, "letterbox"), cache_key(bb, k, CANVAS, ident, 67.0, ds)
+    ablated = make_variants(False, (), 2, ("roll",))   # an ablation leaves a step out: other views
+    assert cache_key(bb, k, CANVAS, ablated, 67.0, ds, "letterbox") != before[0]
     monkeypatch.setattr(augment, "FIELD_ASPECTS", ((3 / 4, 1.0),))
     assert cache_key(bb, k, CANVAS, fields, 67.0, ds, "letterbox") != before[0]
     assert cache_key(bb, k, CANVAS, ident, 67.0, ds) == before[1]
@@ -140,3 +142,16 @@ def test_predict_split_reads_strips_inside_each_samples_window(ds, tmp_path):
     assert len(narrow) and len(wide)
     np.testing.assert_allclose(a[wide], b[wide], atol=1e-6)
     assert np.abs(a[narrow] - b[narrow]).max() > 1e-4
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--field", "2", "--field-without", "roll,sky"], "Invalid field_without roll,sky; valid: mirror, roll, aspect, corruption, night"),
+    (["--field-without", "roll"], "Invalid field_without needs --field >= 1"),
+])
+def test_crossing_train_refuses_a_bad_field_without_in_one_line(tmp_path, capsys, argv, message):
+    from crossing_assist.models.cli import train_main
+
+    assert train_main(["--data", str(tmp_path), "--out", str(tmp_path / "run"), *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"error: {message}") and "\n" not in err
+    assert not (tmp_path / "run").exists()

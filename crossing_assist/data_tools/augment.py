@@ -182,15 +182,28 @@ FIELD_ASPECTS = ((3 / 4, 0.45), (9 / 16, 0.15), (1.0, 0.15), (16 / 9, 0.10), (4 
 #: Bump when :func:`field_view` draws differently with the same aspects: cached features of field
 #: views are keyed by :func:`field_recipe`.
 FIELD_VERSION = 1
+#: The steps of a field view, in order; each (or one corruption by name) can be left out for an
+#: ablation (``crossing-train --field-without``).
+FIELD_STEPS = ("mirror", "roll", "aspect", "corruption")
 
 
-def field_recipe() -> dict:
+def field_steps() -> tuple[str, ...]:
+    """Every name :func:`field_view`'s ``without`` accepts: the steps, then each corruption."""
+    from crossing_assist.data_tools.corrupt import CORRUPTIONS
+
+    return FIELD_STEPS + tuple(CORRUPTIONS)
+
+
+def field_recipe(without: tuple[str, ...] = ()) -> dict:
     """What :func:`field_view` draws from, as a cache key part: features of field views cached under
     another recipe are stale."""
     from crossing_assist.data_tools.corrupt import CORRUPTIONS
 
-    return {"aspects": [[round(a, 6), w] for a, w in FIELD_ASPECTS], "corruptions": sorted(CORRUPTIONS),
-            "version": FIELD_VERSION}
+    recipe = {"aspects": [[round(a, 6), w] for a, w in FIELD_ASPECTS], "corruptions": sorted(CORRUPTIONS),
+              "version": FIELD_VERSION}
+    if without:   # keys of the full recipe unchanged
+        recipe["without"] = sorted(without)
+    return recipe
 
 
 def roll(image: np.ndarray, far_x: float | None, far_y: float, label: int, roll_deg: float,
@@ -238,29 +251,36 @@ def crop_window(image: np.ndarray, far_x: float | None, label: int, aspect: floa
 
 
 def field_view(image: np.ndarray, far_x: float | None, far_y: float, label: int,
-               rng: np.random.Generator) -> tuple[np.ndarray, float | None, int, str]:
+               rng: np.random.Generator, without: tuple[str, ...] = ()) -> tuple[np.ndarray, float | None, int, str]:
     """One random view of a (true-aspect) photo as a user's phone might take it: mirrored
     (p 0.5), rolled by up to 15 degrees (p 0.7), cut to a phone aspect (:data:`FIELD_ASPECTS`,
-    p 0.7) and corrupted (:mod:`.corrupt`, p 0.7). Returns the view, its goal, bin and a tag."""
+    p 0.7) and corrupted (:mod:`.corrupt`, p 0.7). Returns the view, its goal, bin and a tag.
+
+    ``without`` names steps (:data:`FIELD_STEPS`) or corruptions left out, for an ablation: their
+    random draws are still made, so every other step draws exactly what the full recipe does."""
     from crossing_assist.data_tools.corrupt import CORRUPTIONS, corrupt
 
     tags = []
-    if rng.random() < 0.5:
+    if rng.random() < 0.5 and "mirror" not in without:
         image, far_x, label = mirror(image, far_x, label)
         tags.append("m")
     if rng.random() < 0.7:
         deg = float(rng.uniform(-15, 15))
-        image, far_x, label = roll(image, far_x, far_y, label, deg)
-        tags.append(f"roll={deg:+.0f}")
+        if "roll" not in without:
+            image, far_x, label = roll(image, far_x, far_y, label, deg)
+            tags.append(f"roll={deg:+.0f}")
     if rng.random() < 0.7:
         aspects, weights = zip(*FIELD_ASPECTS)
         aspect = float(aspects[rng.choice(len(aspects), p=np.asarray(weights) / sum(weights))])
-        image, far_x, label = crop_window(image, far_x, label, aspect, float(rng.random()))
-        tags.append(f"aspect={aspect:.2f}")
+        offset = float(rng.random())
+        if "aspect" not in without:
+            image, far_x, label = crop_window(image, far_x, label, aspect, offset)
+            tags.append(f"aspect={aspect:.2f}")
     if rng.random() < 0.7:
         name = str(rng.choice(list(CORRUPTIONS)))
-        image = corrupt(image, name, rng)
-        tags.append(name)
+        if "corruption" not in without and name not in without:
+            image = corrupt(image, name, rng)
+            tags.append(name)
     return image, far_x, parse_label(label), " ".join(tags)
 
 

@@ -71,8 +71,9 @@ def cache_key(backbone: Backbone, frozen_blocks: int, size: tuple[int, int],
     }
     if fit != "stretch" or any(v.field >= 0 for v in variants):   # keys of older entries unchanged
         spec.update(fit=fit, fields=[v.field for v in variants], seed=seed, version=2)
-    if any(v.field >= 0 for v in variants):
-        spec["field_recipe"] = field_recipe()
+    views = [v for v in variants if v.field >= 0]
+    if views:
+        spec["field_recipe"] = field_recipe(views[0].without)
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:24]
 
 

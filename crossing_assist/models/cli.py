@@ -56,6 +56,10 @@ def _floats(text: str) -> tuple[float, ...]:
         raise argparse.ArgumentTypeError(f"invalid list {text!r}; expected numbers like 8,16") from None
 
 
+def _names(text: str) -> tuple[str, ...]:
+    return tuple(t.strip() for t in text.split(",") if t.strip())
+
+
 def train_parser() -> argparse.ArgumentParser:
     d = _DEFAULTS
     p = argparse.ArgumentParser(prog="crossing-train", description="Train a crossing policy (frozen backbone, cached features).")
@@ -77,6 +81,9 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--yaw", type=_floats, default=d["yaw"], help="fixed yaw angles in degrees, e.g. 8,16 (each +-)")
     p.add_argument("--field", type=int, default=d["field"],
                    help="random field views per frame: roll, phone aspect (letterboxed), corruption")
+    p.add_argument("--field-without", type=_names, default=d["field_without"],
+                   help="field-view steps left out, comma-separated, for an ablation: mirror, roll, aspect, "
+                        "corruption, or one corruption (night, rain, ...)")
     p.add_argument("--fov", dest="fov_deg", type=float, default=d["fov_deg"],
                    help="horizontal field of view of the training photos (deg)")
     p.add_argument("--input-size", type=_canvas_size, default=d["input_size"], help="canvas H or HxW, e.g. 168x224 (4:3)")
@@ -111,7 +118,8 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         cfg = TrainConfig(
             data=a.data, out=a.out, extra_data=tuple(a.extra_data), backbone=a.backbone, weights=a.weights, head=a.head, actions=a.actions,
             epochs=a.epochs, batch_size=a.batch_size, optimizer=a.optimizer, lr=a.lr,
-            weight_decay=a.weight_decay, p=a.p, mirror=a.mirror, yaw=tuple(a.yaw), field=a.field, fov_deg=a.fov_deg,
+            weight_decay=a.weight_decay, p=a.p, mirror=a.mirror, yaw=tuple(a.yaw), field=a.field,
+            field_without=tuple(a.field_without), fov_deg=a.fov_deg,
             input_size=(224, 298) if a.four_three else a.input_size, fit=a.fit, unfreeze=a.unfreeze, balance=a.balance,
             smoothing=a.smoothing, aux_x=a.aux_x, select_on=a.select_on,
             holdout=tuple(s.strip() for s in a.holdout.split(",") if s.strip()), seed=a.seed,

@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass, fields
 from crossing_assist.errors import UserError
 
 from ..actions import VALID_SPACES
+from ..data_tools.augment import field_steps
 from ..geometry import FITS, TRAIN_FOV_DEG
 from .backbones import list_backbones
 from .heads import HEAD_KINDS
@@ -42,6 +43,7 @@ class TrainConfig:
     mirror: bool = True
     yaw: tuple[float, ...] = ()         # fixed yaw angles (degrees), each used as +-angle
     field: int = 0                      # random field views per frame (roll, phone aspect, corruption)
+    field_without: tuple[str, ...] = ()  # field-view steps or corruptions left out (an ablation)
     fov_deg: float = TRAIN_FOV_DEG      # horizontal FOV assumed for the training photos
     input_size: tuple[int, int] | None = None   # (H, W) canvas; None = the backbone's own
     fit: str = "letterbox"              # how a frame meets the canvas: letterbox | stretch
@@ -76,6 +78,9 @@ class TrainConfig:
             (self.threads >= 1, f"threads {self.threads}; valid: >= 1"),
             (self.fit in FITS, f"fit {self.fit!r}; valid: {', '.join(FITS)}"),
             (0 <= self.field <= 16, f"field {self.field}; valid: 0..16"),
+            (set(self.field_without) <= set(field_steps()),
+             f"field_without {','.join(self.field_without)}; valid: {', '.join(field_steps())}"),
+            (not self.field_without or self.field > 0, "field_without needs --field >= 1"),
             (self.input_size is None or min(self.input_size) >= 16, f"input_size {self.input_size}; valid: >= 16 px"),
         ]
         for ok, msg in check:

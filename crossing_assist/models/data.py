@@ -36,6 +36,7 @@ class Variant:
     mirrored: bool = False
     yaw_deg: float = 0.0
     field: int = -1          # >= 0: the field-th random field view (mirror/yaw unused)
+    without: tuple[str, ...] = ()   # field-view steps left out (an ablation; augment.field_view)
 
     @property
     def tag(self) -> str:
@@ -44,12 +45,14 @@ class Variant:
         return f"{'m' if self.mirrored else 'o'}{self.yaw_deg:+g}"
 
 
-def make_variants(mirror: bool, yaw_angles: tuple[float, ...] = (), field: int = 0) -> tuple[Variant, ...]:
-    """Identity (+ mirrored) x (0 and +-each yaw angle), then ``field`` random field views;
-    identity first."""
+def make_variants(mirror: bool, yaw_angles: tuple[float, ...] = (), field: int = 0,
+                  field_without: tuple[str, ...] = ()) -> tuple[Variant, ...]:
+    """Identity (+ mirrored) x (0 and +-each yaw angle), then ``field`` random field views
+    (``field_without``: their steps left out); identity first."""
     flips = (False, True) if mirror else (False,)
     angles = (0.0,) + tuple(s * float(a) for a in yaw_angles for s in (1, -1) if a)
-    return tuple(Variant(f, a) for f in flips for a in angles) + tuple(Variant(field=i) for i in range(field))
+    return (tuple(Variant(f, a) for f in flips for a in angles)
+            + tuple(Variant(field=i, without=tuple(field_without)) for i in range(field)))
 
 
 def resize_rgb(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -102,7 +105,8 @@ def load_variants(ds: Dataset, row: Row, size: tuple[int, int], variants: tuple[
     far_y = float(flag_value(row.flags, "far_y") or 0.5)
     for v in variants:
         if v.field >= 0:
-            img, fx, lab, _ = augment.field_view(base, row.far_x, far_y, row.label, _field_rng(seed, v.field, row.image))
+            img, fx, lab, _ = augment.field_view(base, row.far_x, far_y, row.label, _field_rng(seed, v.field, row.image),
+                                                  v.without)
         else:
             img, fx, lab = apply_variant(base, row.far_x, row.label, v, fov_deg)
         window = content_window(img.shape[0], img.shape[1], size)
