@@ -12,6 +12,11 @@ fold with the full recipe's CV, so a difference is paired on the same held-out p
 
 Writes OUT/ablation.md (the table), OUT/ablation.json and OUT/ablation.png (paired differences
 per fold). A variant is trained into OUT/NAME/cv; a killed run resumes its unfinished fold.
+
+Clean held-out photos cannot show what an augmentation is for (a night photo is rare in PTL).
+Where both the baseline and a variant hold the field-conditions table of their folds
+(``python scripts/robustness_table.py OUT/NAME/cv --mirror --frames 60``, ``robustness_mirror.json``),
+a second table sets each condition's held-out accuracy with and without the augmentation side by side.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ VARIANTS: dict[str, tuple[str, dict[str, str]]] = {
 #: trained by ``--run`` unless ``--variants`` names others
 DEFAULT_VARIANTS = ("no_corruption", "no_roll", "no_aspect", "no_negatives", "no_field_views")
 METRICS = (("accuracy", "accuracy", 1), ("bin_mae", "bin MAE", -1), ("far_x_error", "far-x error", -1))
+ROBUSTNESS = "robustness_mirror.json"   # scripts/robustness_table.py CV --mirror
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -111,6 +117,21 @@ def table(base: dict, rows: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
+def conditions_table(base: dict, var: dict, name: str) -> str:
+    """Held-out accuracy and confidently-wrong rate under each field condition, the full recipe
+    beside the variant (both from :mod:`robustness_table`, the same photos)."""
+    lines = [f"| condition | accuracy: full recipe | without {name[3:].replace('_', ' ')} | Δ | "
+             "confidently wrong: full | without |", "|---|---:|---:|---:|---:|---:|"]
+    for cond, b in base["conditions"].items():
+        v = var["conditions"].get(cond)
+        if v is not None:
+            lines.append(f"| {cond} | {b['accuracy']:.3f} | {v['accuracy']:.3f} | {100 * (v['accuracy'] - b['accuracy']):+.1f} | "
+                         f"{100 * b['confidently_wrong']:.2f} % | {100 * v['confidently_wrong']:.2f} % |")
+    frames = {base.get("frames_per_fold"), var.get("frames_per_fold")}
+    note = "" if len(frames) == 1 else " (warning: different photos per fold)"
+    return "\n".join(lines) + f"\n\n{base.get('frames_per_fold')} photos per fold, folds pooled{note}."
+
+
 def plot(rows: dict[str, dict], path: Path) -> None:
     import matplotlib
 
@@ -163,6 +184,12 @@ def main(argv=None) -> int:
         print(f"warning: {', '.join(odd)} trained for other epochs than the baseline", file=sys.stderr)
     rows = {n: compare(base, cv) for n, cv in cvs.items()}
     text = table(base, rows)
+    base_rob = base_dir / ROBUSTNESS
+    for n in rows:
+        if base_rob.is_file() and (out / n / "cv" / ROBUSTNESS).is_file():
+            var_rob = json.loads((out / n / "cv" / ROBUSTNESS).read_text())
+            text += f"\n\nField conditions, without {VARIANTS[n][0]}:\n\n" + conditions_table(
+                json.loads(base_rob.read_text()), var_rob, n)
     out.mkdir(parents=True, exist_ok=True)
     (out / "ablation.md").write_text(text + "\n")
     (out / "ablation.json").write_text(json.dumps({"baseline": str(base_dir), "variants": rows}, indent=1))
