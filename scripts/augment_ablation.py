@@ -105,7 +105,7 @@ def compare(base: dict, cv: dict) -> dict:
 
 def table(base: dict, rows: dict[str, dict]) -> str:
     acc, mae, fx = (base[k] for k in ("accuracy", "bin_mae", "far_x_error"))
-    lines = ["| left out | accuracy | Δ accuracy (paired) | folds better | bin MAE | Δ | far-x error | Δ |",
+    lines = ["| left out | accuracy | Δ accuracy (paired) | folds better without | bin MAE | Δ | far-x error | Δ |",
              "|---|---:|---:|---:|---:|---:|---:|---:|",
              f"| nothing (the default recipe) | {acc['mean']:.3f} ± {acc['sd']:.3f} | | | {mae['mean']:.3f} | | "
              f"{fx['mean']:.4f} | |"]
@@ -139,7 +139,7 @@ def plot(rows: dict[str, dict], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     names = list(rows)
-    fig, ax = plt.subplots(figsize=(7, 0.6 * len(names) + 1.6))
+    fig, ax = plt.subplots(figsize=(8, 0.6 * len(names) + 1.8))
     for i, n in enumerate(names):
         d = rows[n]["per_fold_delta_accuracy"]
         ax.barh(i, rows[n]["delta_accuracy"][0], color="tab:red" if rows[n]["delta_accuracy"][0] < 0 else "tab:green",
@@ -147,7 +147,7 @@ def plot(rows: dict[str, dict], path: Path) -> None:
         ax.scatter(list(d.values()), [i] * len(d), color="k", s=12, zorder=3)
     ax.axvline(0, color="k", lw=0.8)
     ax.set_yticks(range(len(names)), [f"without {n[3:].replace('_', ' ')}" for n in names])
-    ax.set_xlabel("accuracy minus the full recipe's, per held-out photographer (dots) and mean (bar)")
+    ax.set_xlabel("accuracy without minus with (dots: held-out photographers; bars: mean)\nleft of 0: the augmentation helps")
     ax.set_title("Leave-one-photographer-out: what each augmentation is worth")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
