@@ -118,15 +118,17 @@ def table(base: dict, rows: dict[str, dict]) -> str:
 
 
 def conditions_table(base: dict, var: dict, name: str) -> str:
-    """Held-out accuracy and confidently-wrong rate under each field condition, the full recipe
-    beside the variant (both from :mod:`robustness_table`, the same photos)."""
+    """Held-out accuracy, confidently-wrong rate and silence on no-crossing views under each field
+    condition, the full recipe beside the variant (both from :mod:`robustness_table`, the same photos)."""
     lines = [f"| condition | accuracy: full recipe | without {name[3:].replace('_', ' ')} | Δ | "
-             "confidently wrong: full | without |", "|---|---:|---:|---:|---:|---:|"]
+             "confidently wrong: full | without | silence, no crossing: full | without |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for cond, b in base["conditions"].items():
         v = var["conditions"].get(cond)
         if v is not None:
             lines.append(f"| {cond} | {b['accuracy']:.3f} | {v['accuracy']:.3f} | {100 * (v['accuracy'] - b['accuracy']):+.1f} | "
-                         f"{100 * b['confidently_wrong']:.2f} % | {100 * v['confidently_wrong']:.2f} % |")
+                         f"{100 * b['confidently_wrong']:.2f} % | {100 * v['confidently_wrong']:.2f} % | "
+                         f"{100 * b['silence_no_crossing']:.1f} % | {100 * v['silence_no_crossing']:.1f} % |")
     frames = {base.get("frames_per_fold"), var.get("frames_per_fold")}
     note = "" if len(frames) == 1 else " (warning: different photos per fold)"
     return "\n".join(lines) + f"\n\n{base.get('frames_per_fold')} photos per fold, folds pooled{note}."

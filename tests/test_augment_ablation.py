@@ -43,10 +43,11 @@ def test_field_conditions_are_set_side_by_side_when_both_have_them(tmp_path):
     _cv(tmp_path / "abl" / "no_corruption" / "cv", {"ptl:a": 0.61, "ptl:b": 0.69})
     for folder, night in ((tmp_path / "base", 0.65), (tmp_path / "abl" / "no_corruption" / "cv", 0.58)):
         (folder / "robustness_mirror.json").write_text(json.dumps({"frames_per_fold": 60, "conditions": {
-            "clean": {"accuracy": 0.67, "confidently_wrong": 0.03}, "night": {"accuracy": night, "confidently_wrong": 0.04}}}))
+            "clean": {"accuracy": 0.67, "confidently_wrong": 0.03, "silence_no_crossing": 1.0},
+            "night": {"accuracy": night, "confidently_wrong": 0.04, "silence_no_crossing": night + 0.3}}}))
     r = _run("--out", str(tmp_path / "abl"), "--baseline", str(tmp_path / "base"), "--variants", "no_corruption")
     assert r.returncode == 0, r.stderr
-    assert "| night | 0.650 | 0.580 | -7.0 | 4.00 % | 4.00 % |" in r.stdout
+    assert "| night | 0.650 | 0.580 | -7.0 | 4.00 % | 4.00 % | 95.0 % | 88.0 % |" in r.stdout
     assert "| clean | 0.670 | 0.670 | +0.0 |" in (tmp_path / "abl" / "ablation.md").read_text()
     assert (tmp_path / "abl" / "ablation.png").stat().st_size > 0
 
