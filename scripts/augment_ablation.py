@@ -160,20 +160,20 @@ def main(argv=None) -> int:
     a = parse_args(argv)
     out = Path(a.out)
     base_dir = Path(a.baseline)
+    if read_cv(base_dir) is None:   # the full recipe trained here (by --run) instead
+        base_dir = out / "full" / "cv"
     if a.run:
         jobs = [(out / name, VARIANTS[name][1]) for name in a.variants if read_cv(out / name / "cv") is None]
         if read_cv(base_dir) is None:
-            base_dir = out / "full" / "cv"
-            if read_cv(base_dir) is None:
-                jobs.insert(0, (out / "full", {}))
+            jobs.insert(0, (base_dir.parent, {}))
         with ThreadPoolExecutor(a.jobs) as pool:
             failed = [str(o) for (o, _), rc in zip(jobs, pool.map(lambda j: train(*j, a.epochs), jobs)) if rc]
         if failed:
             print(f"error: training failed for {', '.join(failed)}", file=sys.stderr)
             return 1
-    base = read_cv(base_dir) or read_cv(out / "full" / "cv")
+    base = read_cv(base_dir)
     if base is None:
-        print(f"error: no baseline CV in {base_dir}; run CV=1 EPOCHS={a.epochs} scripts/build_default_model.sh "
+        print(f"error: no baseline CV in {a.baseline} or {base_dir}; run CV=1 EPOCHS={a.epochs} scripts/build_default_model.sh "
               "or pass --run", file=sys.stderr)
         return 2
     cvs = {n: cv for n in a.variants if (cv := read_cv(out / n / "cv")) is not None}
@@ -186,12 +186,11 @@ def main(argv=None) -> int:
         print(f"warning: {', '.join(odd)} trained for other epochs than the baseline", file=sys.stderr)
     rows = {n: compare(base, cv) for n, cv in cvs.items()}
     text = table(base, rows)
-    base_rob = base_dir / ROBUSTNESS
+    base_rob = json.loads((base_dir / ROBUSTNESS).read_text()) if (base_dir / ROBUSTNESS).is_file() else None
     for n in rows:
-        if base_rob.is_file() and (out / n / "cv" / ROBUSTNESS).is_file():
+        if base_rob is not None and (out / n / "cv" / ROBUSTNESS).is_file():
             var_rob = json.loads((out / n / "cv" / ROBUSTNESS).read_text())
-            text += f"\n\nField conditions, without {VARIANTS[n][0]}:\n\n" + conditions_table(
-                json.loads(base_rob.read_text()), var_rob, n)
+            text += f"\n\nField conditions, without {VARIANTS[n][0]}:\n\n" + conditions_table(base_rob, var_rob, n)
     out.mkdir(parents=True, exist_ok=True)
     (out / "ablation.md").write_text(text + "\n")
     (out / "ablation.json").write_text(json.dumps({"baseline": str(base_dir), "variants": rows}, indent=1))

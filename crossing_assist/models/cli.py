@@ -57,6 +57,7 @@ def _floats(text: str) -> tuple[float, ...]:
 
 
 def _names(text: str) -> tuple[str, ...]:
+    """``a, b,`` -> ("a", "b")."""
     return tuple(t.strip() for t in text.split(",") if t.strip())
 
 
@@ -94,7 +95,7 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--smoothing", type=float, default=d["smoothing"], help="label mass given to neighbouring bins")
     p.add_argument("--aux-x", type=float, default=d["aux_x"], help="weight of the far_x regression auxiliary loss")
     p.add_argument("--select-on", default=d["select_on"], help="val | holdout | last: which set picks best.pt")
-    p.add_argument("--holdout", default="", help="comma-separated train sources held out for selection")
+    p.add_argument("--holdout", type=_names, default=d["holdout"], help="comma-separated train sources held out for selection")
     p.add_argument("--seed", type=int, default=d["seed"])
     p.add_argument("--threads", type=int, default=d["threads"])
     p.add_argument("--cache-dir", default=d["cache_dir"])
@@ -122,7 +123,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             field_without=tuple(a.field_without), fov_deg=a.fov_deg,
             input_size=(224, 298) if a.four_three else a.input_size, fit=a.fit, unfreeze=a.unfreeze, balance=a.balance,
             smoothing=a.smoothing, aux_x=a.aux_x, select_on=a.select_on,
-            holdout=tuple(s.strip() for s in a.holdout.split(",") if s.strip()), seed=a.seed,
+            holdout=tuple(a.holdout), seed=a.seed,
             threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
         if a.cv:
             from .crossval import cross_validate, format_cv
