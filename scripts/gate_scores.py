@@ -1,0 +1,152 @@
+"""Is the gate's uncertainty measure, or the model, what keeps the beacon confidently wrong?
+
+For each fold of one or more leave-one-photographer-out runs (``crossing-train --cv source``), play
+the held-out photographer's unseen photos once through the fold's bundle (the same photos as
+``scripts/choose_gate.py``) and rank the frames by several per-frame scores: the bundle's entropy
+(what the gate uses), the mutual information, ``1 - max p`` and ``1 - P(argmax +- 1 strip)`` (the
+model's own probability of *not* being >= 2 strips off, the confidently-wrong criterion). For each
+score and beacon-on rate (the beacon on for the frames with the lowest scores; an ``unknown`` argmax
+is always off) it prints the confidently-wrong rate (on and >= 2 strips off the label). With several
+runs (``--with``) it scores their ensemble too: the mean of the members' probabilities.
+
+Frame-level ranking, the first frame's outputs without the decision logic's filter: a still clip
+through the runtime sharpens the belief but keeps this order. ``scripts/choose_gate.py`` measures
+what is heard.
+
+    .venv/bin/python scripts/gate_scores.py runs/default/cv --mirror --frames 200 \
+        --with runs/ablation/no_corruption/cv
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from crossing_assist.data_tools.images import load_frame
+from crossing_assist.data_tools.manifest import read_manifest
+from crossing_assist.runtime.listen import WRONG_STRIPS
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from choose_gate import finished_folds, fold_bundle, held_out_parser, held_out_rows  # noqa: E402  (a sibling script)
+
+COVERAGES = (0.5, 0.6, 0.7, 0.8, 0.9)
+
+
+def window_mass(probs: np.ndarray, k: int = 1) -> np.ndarray:
+    """Per frame, the probability of the strips within ``k`` of the argmax (0 when the argmax is unknown)."""
+    a = probs.argmax(1)
+    out = np.zeros(len(probs))
+    for i, j in enumerate(a):
+        if j:
+            out[i] = probs[i, max(1, j - k):min(probs.shape[1] - 1, j + k) + 1].sum()
+    return out
+
+
+def entropy(probs: np.ndarray) -> np.ndarray:
+    return -(probs * np.log(np.clip(probs, 1e-12, 1.0))).sum(1)
+
+
+def scores(probs: np.ndarray, mutual_info: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """The per-frame scores compared (lower = surer)."""
+    out = {"entropy": entropy(probs), "1 - max p": 1.0 - probs.max(1), "1 - P(argmax +- 1)": 1.0 - window_mass(probs)}
+    if mutual_info is not None:
+        out["mutual information"] = np.asarray(mutual_info, float)
+    return out
+
+
+def wrong_at_coverage(score: np.ndarray, pred: np.ndarray, labels: np.ndarray,
+                      coverages=COVERAGES) -> list[dict]:
+    """Beacon on for the frames with a crossing whose score is among the lowest ``coverage`` of them
+    (an unknown argmax stays off): per coverage, the beacon-on and confidently-wrong rates over the
+    frames with a crossing and the silence over those without."""
+    pos, known = labels != 0, pred != 0
+    s = np.where(known, score, np.inf)
+    out = []
+    for c in coverages:
+        on = known & (s <= np.quantile(s[pos], c, method="lower"))
+        wrong = on & pos & (np.abs(pred - labels) >= WRONG_STRIPS)
+        out.append({"coverage": c, "beacon_on": float(on[pos].mean()), "confidently_wrong": float(wrong.sum() / pos.sum()),
+                    "silence_no_crossing": float(1 - on[~pos].mean()) if (~pos).any() else None})
+    return out
+
+
+def fold_outputs(fold: Path, source: str, ptl, neg, used, frames: int, seed: int, mirror: bool) -> dict:
+    """The fold bundle's outputs on its held-out photos and no-crossing views (cached in the fold)."""
+    from crossing_assist.runtime.engine import Engine
+
+    done = fold / f"gate_scores{'_mirror' if mirror else ''}_{frames}.json"
+    if done.is_file():
+        return json.loads(done.read_text())
+    engine = Engine(fold_bundle(fold, source, ptl, mirror), threads=1)
+    pos, negs = held_out_rows(ptl, neg, source, used, frames, seed)
+    out = {"labels": [], "probs": [], "mutual_info": []}
+    for ds, rows in ((ptl, pos), (neg, negs)):
+        for r in rows:
+            p = engine.predict(load_frame(ds.image_path(r), r.flags))
+            out["labels"].append(int(r.label))
+            out["probs"].append(p.probs.tolist() if p.ok else None)
+            out["mutual_info"].append(p.mutual_info if p.ok else float("inf"))
+    done.write_text(json.dumps(out))
+    return out
+
+
+def table(name: str, rows: list[dict]) -> str:
+    return f"| {name} | " + " | ".join(f"{100 * r['confidently_wrong']:.2f} %" for r in rows) + " |"
+
+
+def main(argv=None) -> int:
+    ap = held_out_parser(__doc__.split("\n\n")[0], frames=200)
+    ap.add_argument("--with", dest="others", type=Path, action="append", default=[],
+                    help="another --cv source run of the same photographers: ensemble members")
+    a = ap.parse_args(argv)
+    ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
+    used = {r.image for r in read_manifest(a.used_neg).rows}
+    runs = [a.cv, *a.others]
+    members: list[list[dict]] = [[] for _ in runs]
+    for fold, source in finished_folds(a.cv):
+        print(f"fold {source}", file=sys.stderr, flush=True)
+        for i, cv in enumerate(runs):
+            other = cv / fold.name
+            if not (other / "weights").is_dir():
+                print(f"error: {other} has no weights: every run needs the same folds", file=sys.stderr)
+                return 2
+            members[i].append(fold_outputs(other, source, ptl, neg, used, a.frames, a.seed, a.mirror))
+    if not members[0]:
+        print(f"error: no finished fold in {a.cv}", file=sys.stderr)
+        return 2
+    labels = np.concatenate([f["labels"] for f in members[0]])
+    ok = np.ones(len(labels), bool)
+    stacked = []
+    for run in members:
+        probs = [p for f in run for p in f["probs"]]
+        ok &= np.asarray([p is not None for p in probs])
+        stacked.append((np.asarray([p if p is not None else [np.nan] * len(probs[0]) for p in probs], float),
+                        np.concatenate([f["mutual_info"] for f in run])))
+    labels = labels[ok]
+    pos = labels != 0
+    head = "| score | " + " | ".join(f"on {c:.0%}" for c in COVERAGES) + " |\n|---|" + "---:|" * len(COVERAGES)
+    result = {"runs": [str(r) for r in runs], "frames": int(pos.sum()), "no_crossing_frames": int((~pos).sum()),
+              "failed": int((~ok).sum()), "runs_scored": {}}
+    print(f"{pos.sum()} held-out frames with a crossing, {(~pos).sum()} without; confidently wrong (of frames with a "
+          f"crossing) at each beacon-on rate, frame level")
+    for name, (probs, mi) in [*((str(r), m) for r, m in zip(runs, stacked)),
+                               *((("ensemble (mean probabilities)", (np.mean([p for p, _ in stacked], 0), None)),)
+                                 if len(runs) > 1 else ())]:
+        probs = probs[ok]
+        pred = probs.argmax(1)
+        acc = float((pred[pos] == labels[pos]).mean())
+        rows = {k: wrong_at_coverage(s, pred, labels) for k, s in scores(probs, None if mi is None else mi[ok]).items()}
+        result["runs_scored"][name] = {"accuracy": acc, "bin_mae": float(np.abs(pred[pos] - labels[pos]).mean()),
+                                       "scores": rows}
+        print(f"\n{name}: argmax accuracy {acc:.3f}\n{head}")
+        for k, r in rows.items():
+            print(table(k, r))
+    (a.cv / f"gate_scores{'_mirror' if a.mirror else ''}.json").write_text(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,49 @@
+"""scripts/gate_scores.py: per-frame scores and confidently-wrong rates at fixed beacon-on rates."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+import gate_scores as gs  # noqa: E402
+
+
+def _probs(rows):
+    p = np.full((len(rows), 13), 1e-6)
+    for i, row in enumerate(rows):
+        for k, v in row.items():
+            p[i, k] = v
+    return p / p.sum(1, keepdims=True)
+
+
+def test_window_mass_sums_the_argmax_neighbours_and_is_zero_for_unknown():
+    p = _probs([{5: 0.5, 6: 0.3, 9: 0.2}, {0: 0.6, 3: 0.4}, {1: 0.7, 2: 0.2, 12: 0.1}])
+    m = gs.window_mass(p)
+    assert m[0] == pytest.approx(0.8, abs=1e-4)     # strips 4..6
+    assert m[1] == 0.0                               # argmax unknown
+    assert m[2] == pytest.approx(0.9, abs=1e-4)     # strips 1..2 (the edge clips the window)
+
+
+def test_wrong_at_coverage_turns_on_the_surest_frames_and_counts_two_strips_off():
+    labels = np.array([5, 5, 5, 5, 0, 0])
+    pred = np.array([5, 7, 6, 0, 3, 0])             # right, 2 off, 1 off, unknown; two no-crossing frames
+    score = np.array([0.1, 0.2, 0.3, 0.0, 0.15, 0.0])
+    rows = gs.wrong_at_coverage(score, pred, labels, coverages=(0.5, 0.75))
+    # on 50 %: the two lowest crossing scores among known argmaxes (0.1, 0.2): one of them 2 strips off
+    assert rows[0]["beacon_on"] == 0.5 and rows[0]["confidently_wrong"] == 0.25
+    # the no-crossing frame scored 0.15 (argmax 3) is on too; the unknown one stays silent
+    assert rows[0]["silence_no_crossing"] == 0.5
+    assert rows[1]["beacon_on"] == 0.75 and rows[1]["confidently_wrong"] == 0.25
+
+
+def test_a_score_that_ranks_the_wrong_frames_last_gives_fewer_wrong_at_the_same_beacon_on():
+    # two frames spread over neighbouring strips (right within one strip), two confident but 3 strips off
+    p = _probs([{6: 0.45, 7: 0.45}, {6: 0.45, 5: 0.45}, {9: 0.8}, {3: 0.8}, {6: 0.9}])
+    labels = np.array([6, 6, 6, 6, 6])
+    pred = p.argmax(1)
+    s = gs.scores(p)
+    by_entropy = gs.wrong_at_coverage(s["entropy"], pred, labels, coverages=(0.6,))[0]
+    by_window = gs.wrong_at_coverage(s["1 - P(argmax +- 1)"], pred, labels, coverages=(0.6,))[0]
+    assert by_entropy["confidently_wrong"] == 0.4 and by_window["confidently_wrong"] == 0.0
