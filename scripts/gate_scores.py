@@ -119,12 +119,15 @@ def main(argv=None) -> int:
         return 2
     labels = np.concatenate([f["labels"] for f in members[0]])
     ok = np.ones(len(labels), bool)
-    stacked = []
-    for run in members:
-        probs = [p for f in run for p in f["probs"]]
+    entries = []   # (name, probs, mutual information): each run, then their ensemble
+    for cv, run in zip(runs, members):
+        probs = [p for f in run for p in f["probs"]]   # None where inference failed
+        width = next(len(p) for p in probs if p is not None)
         ok &= np.asarray([p is not None for p in probs])
-        stacked.append((np.asarray([p if p is not None else [np.nan] * len(probs[0]) for p in probs], float),
+        entries.append((str(cv), np.asarray([p or [np.nan] * width for p in probs], float),
                         np.concatenate([f["mutual_info"] for f in run])))
+    if len(entries) > 1:
+        entries.append(("ensemble (mean probabilities)", np.mean([p for _, p, _ in entries], 0), None))
     labels = labels[ok]
     pos = labels != 0
     head = "| score | " + " | ".join(f"on {c:.0%}" for c in COVERAGES) + " |\n|---|" + "---:|" * len(COVERAGES)
@@ -132,9 +135,7 @@ def main(argv=None) -> int:
               "failed": int((~ok).sum()), "runs_scored": {}}
     print(f"{pos.sum()} held-out frames with a crossing, {(~pos).sum()} without; confidently wrong (of frames with a "
           f"crossing) at each beacon-on rate, frame level")
-    for name, (probs, mi) in [*((str(r), m) for r, m in zip(runs, stacked)),
-                               *((("ensemble (mean probabilities)", (np.mean([p for p, _ in stacked], 0), None)),)
-                                 if len(runs) > 1 else ())]:
+    for name, probs, mi in entries:
         probs = probs[ok]
         pred = probs.argmax(1)
         acc = float((pred[pos] == labels[pos]).mean())
