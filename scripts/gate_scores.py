@@ -27,10 +27,11 @@ import numpy as np
 
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest
+from crossing_assist.runtime.belief import entropy
 from crossing_assist.runtime.listen import WRONG_STRIPS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from choose_gate import finished_folds, fold_bundle, held_out_parser, held_out_rows  # noqa: E402  (a sibling script)
+from choose_gate import finished_folds, fold_bundle, held_out_parser, held_out_rows, tag  # noqa: E402  (a sibling script)
 
 COVERAGES = (0.5, 0.6, 0.7, 0.8, 0.9)
 
@@ -45,13 +46,9 @@ def window_mass(probs: np.ndarray, k: int = 1) -> np.ndarray:
     return out
 
 
-def entropy(probs: np.ndarray) -> np.ndarray:
-    return -(probs * np.log(np.clip(probs, 1e-12, 1.0))).sum(1)
-
-
 def scores(probs: np.ndarray, mutual_info: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """The per-frame scores compared (lower = surer)."""
-    out = {"entropy": entropy(probs), "1 - max p": 1.0 - probs.max(1), "1 - P(argmax +- 1)": 1.0 - window_mass(probs)}
+    out = {"entropy": np.array([entropy(p) for p in probs]), "1 - max p": 1.0 - probs.max(1), "1 - P(argmax +- 1)": 1.0 - window_mass(probs)}
     if mutual_info is not None:
         out["mutual information"] = np.asarray(mutual_info, float)
     return out
@@ -77,7 +74,7 @@ def fold_outputs(fold: Path, source: str, ptl, neg, used, frames: int, seed: int
     """The fold bundle's outputs on its held-out photos and no-crossing views (cached in the fold)."""
     from crossing_assist.runtime.engine import Engine
 
-    done = fold / f"gate_scores{'_mirror' if mirror else ''}_{frames}.json"
+    done = fold / f"gate_scores{tag(mirror)}_{frames}.json"
     if done.is_file():
         return json.loads(done.read_text())
     engine = Engine(fold_bundle(fold, source, ptl, mirror), threads=1)
@@ -122,7 +119,10 @@ def main(argv=None) -> int:
     entries = []   # (name, probs, mutual information): each run, then their ensemble
     for cv, run in zip(runs, members):
         probs = [p for f in run for p in f["probs"]]   # None where inference failed
-        width = next(len(p) for p in probs if p is not None)
+        width = next((len(p) for p in probs if p is not None), None)
+        if width is None:
+            print(f"error: every inference failed in {cv}", file=sys.stderr)
+            return 2
         ok &= np.asarray([p is not None for p in probs])
         entries.append((str(cv), np.asarray([p or [np.nan] * width for p in probs], float),
                         np.concatenate([f["mutual_info"] for f in run])))
@@ -145,7 +145,7 @@ def main(argv=None) -> int:
         print(f"\n{name}: argmax accuracy {acc:.3f}\n{head}")
         for k, r in rows.items():
             print(table(k, r))
-    (a.cv / f"gate_scores{'_mirror' if a.mirror else ''}.json").write_text(json.dumps(result, indent=1))
+    (a.cv / f"gate_scores{tag(a.mirror)}.json").write_text(json.dumps(result, indent=1))
     return 0
 
 
