@@ -20,6 +20,7 @@ EPOCHS=${EPOCHS:-6}
 UNFREEZE=${UNFREEZE:-8}  # blocks fine-tuned: 8 (since 2026-11-29 evening) vs 4: leave-one-photographer-out 0.677 vs 0.627
 FIELD=${FIELD:-2}       # field views a photo: 2 (since 2026-11-29) vs 1: PTL val 0.728 vs 0.697, held out 0.614 vs 0.618
 HEAD=${HEAD:-spatial_fine}   # columns x2 before the context conv: leave-one-photographer-out 0.618 vs spatial's 0.602
+LR_SCHEDULE=${LR_SCHEDULE:-constant}   # constant | cosine (crossing-train --lr-schedule)
 THREADS=${THREADS:-1}
 # ablations (scripts/augment_ablation.py): field-view steps left out, and whether negatives are added
 FIELD_WITHOUT=${FIELD_WITHOUT:-}   # e.g. roll or corruption (crossing-train --field-without)
@@ -29,7 +30,7 @@ EXTRA=()
 if [ "$NEGATIVES" = 1 ]; then EXTRA+=(--extra-data runs/data/synth --extra-data runs/data/neg_half); fi
 if [ -n "$FIELD_WITHOUT" ]; then EXTRA+=(--field-without "$FIELD_WITHOUT"); fi
 RECIPE=(--data runs/data/ptl "${EXTRA[@]}" --backbone efficientnet_lite0
-    --head "$HEAD" --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --weight-decay 1e-4 --smoothing 0.2
+    --head "$HEAD" --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --lr-schedule "$LR_SCHEDULE" --weight-decay 1e-4 --smoothing 0.2
     --aux-x 1.0 --unfreeze "$UNFREEZE" --input-size 168x224 --fit letterbox --no-mirror --field "$FIELD" --seed 0
     --threads "$THREADS" --quiet)
 if [ "${CV:-0}" = 1 ]; then   # leave-one-photographer-out figures of the same recipe

@@ -170,6 +170,31 @@ def test_unfreeze_trains_the_last_blocks_and_only_them(tiny, tmp_path):
     assert tuned.config.frozen_blocks == len(blocks) - 2
 
 
+def test_cosine_schedule_falls_to_zero_and_constant_stays(tiny, tmp_path):
+    """--lr-schedule cosine: the step size the optimizer last used (saved in last.pt) is near 0 at
+    the end of the run; constant keeps --lr. The curve is a function of the position alone, so a
+    resumed run continues on it."""
+    from crossing_assist.models.train import _set_lr
+
+    def last_lr(run):
+        return load_checkpoint(run / "weights" / "last.pt")["optimizer"]["param_groups"][0]["lr"]
+
+    cosine = train(_cfg(tiny, tmp_path / "cos", lr=1e-3, lr_schedule="cosine", epochs=2))
+    constant = train(_cfg(tiny, tmp_path / "const", lr=1e-3, epochs=2))
+    assert last_lr(constant) == pytest.approx(1e-3)
+    assert 0 < last_lr(cosine) < 0.2e-3   # the last step of epoch 2 of 2, whatever the steps an epoch
+    opt = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=1.0)
+    cfg = _cfg(tiny, tmp_path / "x", lr=1.0, lr_schedule="cosine", epochs=4)
+    curve = []
+    for epoch in range(1, 5):
+        for step in range(10):
+            _set_lr(opt, cfg, epoch, step, 10)
+            curve.append(opt.param_groups[0]["lr"])
+    assert curve[0] == 1.0 and curve[20] == pytest.approx(0.5) and all(np.diff(curve) < 0) and curve[-1] < 0.01
+    with pytest.raises(Exception, match="lr_schedule"):
+        _cfg(tiny, tmp_path / "y", lr_schedule="step")
+
+
 def test_plot_training_writes_results_png_from_results_csv(tmp_path):
     """models.plots.plot_training (what train() calls at the end); blank cells (no val set) are gaps."""
     from crossing_assist.models.plots import plot_training

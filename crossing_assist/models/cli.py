@@ -76,6 +76,8 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--optimizer", default=d["optimizer"], help="rmsprop | adamw")
     p.add_argument("--lr", type=float, default=d["lr"])
     p.add_argument("--weight-decay", type=float, default=d["weight_decay"])
+    p.add_argument("--lr-schedule", default=d["lr_schedule"],
+                   help="constant | cosine: the learning rate falls from --lr to 0 over the run, step by step")
     p.add_argument("--p", "--dropout", dest="p", type=float, default=d["p"],
                    help="MC dropout probability of the head (--dropout under torchrun, whose --print-completion takes --p)")
     p.add_argument("--no-mirror", dest="mirror", action="store_false", help="do not add mirrored frames")
@@ -118,7 +120,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
 
         cfg = TrainConfig(
             data=a.data, out=a.out, extra_data=tuple(a.extra_data), backbone=a.backbone, weights=a.weights, head=a.head, actions=a.actions,
-            epochs=a.epochs, batch_size=a.batch_size, optimizer=a.optimizer, lr=a.lr,
+            epochs=a.epochs, batch_size=a.batch_size, optimizer=a.optimizer, lr=a.lr, lr_schedule=a.lr_schedule,
             weight_decay=a.weight_decay, p=a.p, mirror=a.mirror, yaw=tuple(a.yaw), field=a.field,
             field_without=tuple(a.field_without), fov_deg=a.fov_deg,
             input_size=(224, 298) if a.four_three else a.input_size, fit=a.fit, unfreeze=a.unfreeze, balance=a.balance,

@@ -14,6 +14,7 @@ from .heads import HEAD_KINDS
 
 OPTIMIZERS = ("rmsprop", "adamw")
 SELECT_ON = ("val", "holdout", "last")
+LR_SCHEDULES = ("constant", "cosine")
 BALANCE = ("none", "weights", "sampler")
 
 
@@ -39,6 +40,7 @@ class TrainConfig:
     optimizer: str = "rmsprop"
     lr: float = 2e-4
     weight_decay: float = 0.0
+    lr_schedule: str = "constant"       # constant | cosine (per step, from lr down to 0 at the last epoch)
     p: float = 0.5                      # MC dropout probability of the head
     mirror: bool = True
     yaw: tuple[float, ...] = ()         # fixed yaw angles (degrees), each used as +-angle
@@ -67,6 +69,7 @@ class TrainConfig:
             (self.batch_size >= 1, f"batch_size {self.batch_size}; valid: >= 1"),
             (self.optimizer in OPTIMIZERS, f"optimizer {self.optimizer!r}; valid: {', '.join(OPTIMIZERS)}"),
             (self.lr > 0, f"lr {self.lr}; valid: > 0"),
+            (self.lr_schedule in LR_SCHEDULES, f"lr_schedule {self.lr_schedule!r}; valid: {', '.join(LR_SCHEDULES)}"),
             (0 <= self.p < 1, f"p {self.p}; valid: 0 <= p < 1"),
             (self.unfreeze >= 0, f"unfreeze {self.unfreeze}; valid: >= 0"),
             (self.balance in BALANCE, f"balance {self.balance!r}; valid: {', '.join(BALANCE)}"),

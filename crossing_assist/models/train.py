@@ -188,6 +188,18 @@ def _optimizer(cfg: TrainConfig, policy: Policy) -> torch.optim.Optimizer:
     return torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
 
 
+def _set_lr(opt: torch.optim.Optimizer, cfg: TrainConfig, epoch: int, step: int, steps: int) -> None:
+    """The learning rate of step ``step`` (of ``steps``) in ``epoch``: ``cfg.lr`` throughout, or
+    (cosine) falling from ``cfg.lr`` to 0 over all ``cfg.epochs`` epochs. It is a function of the
+    position alone, so a resumed run continues on the same curve (a larger ``--epochs`` stretches it)."""
+    lr = cfg.lr
+    if cfg.lr_schedule == "cosine":
+        done = (epoch - 1 + step / max(steps, 1)) / cfg.epochs
+        lr = 0.5 * cfg.lr * (1.0 + math.cos(math.pi * done))
+    for group in opt.param_groups:
+        group["lr"] = lr
+
+
 def _score(m: dict | None) -> tuple[float, float]:
     """Higher is better: accuracy, then lower bin MAE."""
     if m is None:
@@ -380,10 +392,11 @@ def _run_epoch(policy: Policy, opt: torch.optim.Optimizer, tr: Split, start: int
     torch.manual_seed(cfg.seed * 100003 + epoch + 7919 * ctx.rank)  # dropout masks, reproducible on resume
     order = _epoch_order(tr, cfg, epoch)
     if ctx.active:
-        return _run_epoch_ddp(opt, tr, cfg, weights, fwd, ctx, order)
+        return _run_epoch_ddp(opt, tr, cfg, epoch, weights, fwd, ctx, order)
     total, count = 0.0, 0
     steps = range(0, len(order), cfg.batch_size)
-    for i in tqdm(steps, desc=f"epoch {epoch}", leave=False, disable=not cfg.progress):
+    for step, i in enumerate(tqdm(steps, desc=f"epoch {epoch}", leave=False, disable=not cfg.progress)):
+        _set_lr(opt, cfg, epoch, step, len(steps))
         idx = torch.from_numpy(order[i:i + cfg.batch_size])
         x = tr.feats[idx].float()
         y = torch.from_numpy(tr.actions[idx.numpy()])
@@ -403,13 +416,15 @@ def _run_epoch(policy: Policy, opt: torch.optim.Optimizer, tr: Split, start: int
     return total / max(count, 1)
 
 
-def _run_epoch_ddp(opt: torch.optim.Optimizer, tr: Split, cfg: TrainConfig, weights: torch.Tensor | None,
+def _run_epoch_ddp(opt: torch.optim.Optimizer, tr: Split, cfg: TrainConfig, epoch: int, weights: torch.Tensor | None,
                    fwd: torch.nn.Module, ctx: distributed.Context, order: np.ndarray) -> float:
     """:func:`_run_epoch` on this rank's part of every global batch. Each rank's loss is its share
     of the global batch's loss (sums over its samples divided by the global counts), times the
     world size because DDP averages the gradients: the step equals the one-process step."""
     total = 0.0
-    for i in range(0, len(order), cfg.batch_size):
+    starts = range(0, len(order), cfg.batch_size)
+    for step, i in enumerate(starts):
+        _set_lr(opt, cfg, epoch, step, len(starts))
         batch = order[i:i + cfg.batch_size]
         part, keep_np = distributed.rank_slice(batch, ctx)
         idx, keep = torch.from_numpy(part), torch.from_numpy(keep_np)
