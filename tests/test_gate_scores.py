@@ -47,3 +47,19 @@ def test_a_score_that_ranks_the_wrong_frames_last_gives_fewer_wrong_at_the_same_
     by_entropy = gs.wrong_at_coverage(s["entropy"], pred, labels, coverages=(0.6,))[0]
     by_window = gs.wrong_at_coverage(s["1 - P(argmax +- 1)"], pred, labels, coverages=(0.6,))[0]
     assert by_entropy["confidently_wrong"] == 0.4 and by_window["confidently_wrong"] == 0.0
+
+
+def test_cv_bundles_fold_metrics_counts_failures_as_wrong_and_skips_no_crossing_frames():
+    """scripts/cv_bundles.py: accuracy, bin MAE and far-x over the frames with a crossing; a failed
+    inference (None) is a wrong answer, never a dropped frame."""
+    import cv_bundles
+
+    right, off = _probs([{4: 1.0}])[0].tolist(), _probs([{7: 1.0}])[0].tolist()
+    out = {"labels": [4, 4, 4, 4, 0], "probs": [right, right, off, None, off]}
+    m = cv_bundles.fold_metrics(out, [0.29, 0.29, 0.29, 0.29])
+    assert m["n"] == 4 and m["failed"] == 1
+    assert m["accuracy"] == 0.5                       # the failure counts against it
+    from crossing_assist.actions import get_space
+    c = get_space(13).action_center_x
+    # the failure has no E[x] (all its mass on unknown): far-x over the three answered frames
+    assert m["far_x_error"] == pytest.approx((2 * abs(c(4) - 0.29) + abs(c(7) - 0.29)) / 3, abs=1e-4)
