@@ -5,8 +5,10 @@ atomically. The graph itself is left as it is.
     .venv/bin/python scripts/stamp_bundle.py SRC OUT --cv runs/default/cv --gate-json gate_mirror.json
         [--rescale-gate] [--view-crop] [--sensor-aspect 4:3]
 
-* Always: ``metrics.leave_one_photographer_out`` from ``CV/cv.json`` and ``metrics.gate_held_out``
-  from ``CV/GATE_JSON`` (scripts/choose_gate.py), where present.
+* Always: ``metrics.leave_one_photographer_out`` from ``CV/cv.json`` (the folds' checkpoints),
+  ``metrics.leave_one_photographer_out_bundle`` from ``CV/cv_bundles_mirror.json`` (the folds'
+  bundles, scripts/cv_bundles.py; ``cv_bundles.json`` with ``--gate-json gate.json``) and
+  ``metrics.gate_held_out`` from ``CV/GATE_JSON`` (scripts/choose_gate.py), where present.
 * ``--rescale-gate``: the gate thresholds become the bundle's fitted threshold times the scales in
   ``GATE_JSON`` (landscape, and portrait where chosen). The fitted threshold is the bundle's
   ``calibration.uncertainty.fitted_threshold`` (bundles exported before it was recorded: their
@@ -81,6 +83,9 @@ def main(argv=None) -> int:
         meta["metrics"]["leave_one_photographer_out"] = {
             "epochs": c["config"]["epochs"], "folds": c["folds"],
             **{k: c[k] for k in ("accuracy", "bin_mae", "far_x_error", "majority_accuracy")}}
+    shipped = a.cv / a.gate_json.replace("gate", "cv_bundles", 1)   # scripts/cv_bundles.py, same TTA as the gate's
+    if shipped.is_file():
+        meta["metrics"]["leave_one_photographer_out_bundle"] = json.loads(shipped.read_text())
     stamped = []
     gate_path = a.cv / a.gate_json
     if gate_path.is_file():

@@ -39,6 +39,7 @@ def shipped(tmp_path):
     (cv / "cv.json").write_text(json.dumps({"config": {"epochs": 2}, "folds": [], "accuracy": {"mean": 0.6, "sd": 0.01},
                                             "bin_mae": {"mean": 0.4, "sd": 0.02}, "far_x_error": {"mean": 0.03, "sd": 0.001},
                                             "majority_accuracy": 0.3}))
+    (cv / "cv_bundles.json").write_text(json.dumps({"folds": {}, "accuracy": {"mean": 0.62, "sd": 0.02}}))
     return src, cv
 
 
@@ -55,6 +56,7 @@ def test_stamp_rescales_the_gate_and_turns_the_view_crop_on(shipped, tmp_path):
     assert unc.threshold == pytest.approx(0.25) and unc.portrait_threshold == pytest.approx(1.5)   # fitted 1.0 x scales
     assert unc.fitted_threshold == pytest.approx(1.0)                    # recorded for the next re-scale
     assert b.metrics["leave_one_photographer_out"]["accuracy"]["mean"] == 0.6
+    assert b.metrics["leave_one_photographer_out_bundle"]["accuracy"]["mean"] == 0.62   # scripts/cv_bundles.py
     assert set(b.metrics["gate_held_out"]) >= {"scale", "accuracy", "portrait", "portrait_window"}
     assert len(b.provenance["stamped"]) == 1 and len(b.provenance["stamped"][0]["what"]) == 2
     Engine(tmp_path / "out")          # the graph's embedded copy matches the new bundle.json
