@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from crossing_assist.data_tools.manifest import read_manifest
+from crossing_assist.data_tools.manifest import atomic_write_text, read_manifest
+from crossing_assist.models.crossval import fold_stats
 from crossing_assist.models.metrics import compute_metrics
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -28,6 +29,7 @@ from choose_gate import finished_folds, held_out_parser, held_out_rows, tag  # n
 from gate_scores import fold_outputs  # noqa: E402
 
 ALL = 100_000   # more photos than any photographer has: every held-out photo
+METRICS = ("accuracy", "bin_mae", "far_x_error")
 
 
 def fold_metrics(out: dict, far_x: list[float | None]) -> dict:
@@ -40,7 +42,7 @@ def fold_metrics(out: dict, far_x: list[float | None]) -> dict:
     fx = np.asarray([np.nan if x is None else x for x in far_x], float)
     m = compute_metrics(probs, labels[pos], width, fx)
     return {"n": int(pos.sum()), "failed": int(sum(p is None for p in out["probs"])),
-            **{k: m[k] for k in ("accuracy", "bin_mae", "far_x_error")}}
+            **{k: m[k] for k in METRICS}}
 
 
 def main(argv=None) -> int:
@@ -48,28 +50,26 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}
-    folds = {}
+    folds = []
     for fold, source in finished_folds(a.cv):
         print(f"fold {source}", file=sys.stderr, flush=True)
         pos, _ = held_out_rows(ptl, neg, source, used, a.frames, a.seed)
         out = fold_outputs(fold, source, ptl, neg, used, a.frames, a.seed, a.mirror)
-        folds[source] = fold_metrics(out, [r.far_x for r in pos])
+        folds.append({"source": source, **fold_metrics(out, [r.far_x for r in pos])})
     if not folds:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
     ckpt = json.loads((a.cv / "cv.json").read_text()) if (a.cv / "cv.json").is_file() else {}
-    ck_folds = {f.get("source"): f for f in ckpt.get("folds", [])}
+    ck_acc = {f.get("source"): f.get("accuracy") for f in ckpt.get("folds", [])}
     print(f"{'held out':<12} {'n':>5} {'bundle acc':>10} {'bin MAE':>8} {'far-x':>7}   {'checkpoint acc':>14}")
-    for s, m in folds.items():
-        ck = ck_folds.get(s, {}).get("accuracy")
-        print(f"{s:<12} {m['n']:>5} {m['accuracy']:>10.3f} {m['bin_mae']:>8.3f} {m['far_x_error']:>7.4f}   "
+    for m in folds:
+        ck = ck_acc.get(m["source"])
+        print(f"{m['source']:<12} {m['n']:>5} {m['accuracy']:>10.3f} {m['bin_mae']:>8.3f} {m['far_x_error']:>7.4f}   "
               f"{'' if ck is None else f'{ck:.3f}':>14}")
-    summary = {k: {"mean": float(np.mean([m[k] for m in folds.values()])),
-                   "sd": float(np.std([m[k] for m in folds.values()], ddof=1)) if len(folds) > 1 else 0.0}
-               for k in ("accuracy", "bin_mae", "far_x_error")}
+    summary = fold_stats(folds, METRICS)
     print(f"bundle{' (mirror TTA)' if a.mirror else ''} over {len(folds)} folds: "
-          + ", ".join(f"{k.replace('_', ' ')} {v['mean']:.4g} +- {v['sd']:.2g}" for k, v in summary.items()))
-    (a.cv / f"cv_bundles{tag(a.mirror)}.json").write_text(json.dumps({"folds": folds, **summary}, indent=1))
+          + ", ".join(f"{k.replace('_', ' ')} {v['mean']:.4g} +- {v['sd'] or 0:.2g}" for k, v in summary.items()))
+    atomic_write_text(a.cv / f"cv_bundles{tag(a.mirror)}.json", json.dumps({"folds": folds, **summary}, indent=1))
     return 0
 
 

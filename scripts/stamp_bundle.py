@@ -7,7 +7,7 @@ atomically. The graph itself is left as it is.
 
 * Always: ``metrics.leave_one_photographer_out`` from ``CV/cv.json`` (the folds' checkpoints),
   ``metrics.leave_one_photographer_out_bundle`` from ``CV/cv_bundles_mirror.json`` (the folds'
-  bundles, scripts/cv_bundles.py; ``cv_bundles.json`` with ``--gate-json gate.json``) and
+  bundles, scripts/cv_bundles.py; ``cv_bundles.json`` for a bundle without mirror TTA) and
   ``metrics.gate_held_out`` from ``CV/GATE_JSON`` (scripts/choose_gate.py), where present.
 * ``--rescale-gate``: the gate thresholds become the bundle's fitted threshold times the scales in
   ``GATE_JSON`` (landscape, and portrait where chosen). The fitted threshold is the bundle's
@@ -83,7 +83,8 @@ def main(argv=None) -> int:
         meta["metrics"]["leave_one_photographer_out"] = {
             "epochs": c["config"]["epochs"], "folds": c["folds"],
             **{k: c[k] for k in ("accuracy", "bin_mae", "far_x_error", "majority_accuracy")}}
-    shipped = a.cv / a.gate_json.replace("gate", "cv_bundles", 1)   # scripts/cv_bundles.py, same TTA as the gate's
+    # scripts/cv_bundles.py's figures for folds exported with this bundle's test-time augmentation
+    shipped = a.cv / f"cv_bundles{'_mirror' if b.mc.mirror else ''}.json"
     if shipped.is_file():
         meta["metrics"]["leave_one_photographer_out_bundle"] = json.loads(shipped.read_text())
     stamped = []

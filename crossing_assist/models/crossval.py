@@ -42,6 +42,17 @@ def _fold_metrics(fold: Path, epochs: int) -> dict | None:
     return dict(state["metrics"]["selection"])
 
 
+def fold_stats(folds: list[dict], keys) -> dict:
+    """Per metric in ``keys``: ``{"mean", "sd"}`` over the folds that have it (None where none do;
+    sd needs two)."""
+    out = {}
+    for k in keys:
+        vals = np.asarray([f[k] for f in folds if f.get(k) is not None and not math.isnan(f[k])], float)
+        out[k] = {"mean": float(vals.mean()) if len(vals) else None,
+                  "sd": float(vals.std(ddof=1)) if len(vals) > 1 else None}
+    return out
+
+
 def cross_validate(cfg: TrainConfig, *, resume: bool = False) -> dict:
     """Run (or finish) every fold of ``cfg`` and return the summary written to ``cv.json``."""
     from .train import train
@@ -62,11 +73,7 @@ def cross_validate(cfg: TrainConfig, *, resume: bool = False) -> dict:
             train(fcfg, resume=(fold / "weights" / "last.pt").is_file())
             m = _fold_metrics(fold, cfg.epochs)
         folds.append({"source": source, **{k: m.get(k) for k in ("n",) + CV_METRICS}})
-    summary = {"cv": "source", "folds": folds, "config": cfg.to_dict()}
-    for k in CV_METRICS:
-        vals = np.asarray([f[k] for f in folds if f.get(k) is not None and not math.isnan(f[k])], float)
-        summary[k] = {"mean": float(vals.mean()) if len(vals) else None,
-                      "sd": float(vals.std(ddof=1)) if len(vals) > 1 else None}
+    summary = {"cv": "source", "folds": folds, "config": cfg.to_dict(), **fold_stats(folds, CV_METRICS)}
     out.mkdir(parents=True, exist_ok=True)
     clean = lambda v: None if isinstance(v, float) and math.isnan(v) else v  # noqa: E731  (strict JSON: null, not NaN)
     summary["folds"] = [{k: clean(v) for k, v in f.items()} for f in folds]
