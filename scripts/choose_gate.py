@@ -55,6 +55,12 @@ def tag(mirror: bool) -> str:
     return "_mirror" if mirror else ""
 
 
+def draw_tag(mirror: bool, frames: int, seed: int) -> str:
+    """File-name suffix of a fold's cached measurement on one held-out draw (:func:`held_out_rows`):
+    another ``--frames`` or ``--seed`` is another draw, never a stale cache."""
+    return f"{tag(mirror)}_{frames}" + (f"_seed{seed}" if seed else "")
+
+
 def fold_bundle(fold: Path, source: str, ptl, mirror: bool = False) -> Path:
     """The fold's model exported as a bundle (once), calibrated on PTL val without ``source``;
     ``mirror``: with mirror test-time augmentation (folder ``bundle_mirror``)."""
@@ -100,7 +106,7 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     engine = None
     out = {}
     for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
-        done = fold / f"gate_curve{tag(mirror)}{'' if view == 'landscape' else f'_{view}{portrait}'}.json"
+        done = fold / f"gate_curve{draw_tag(mirror, n_frames, seed)}{'' if view == 'landscape' else f'_{view}{portrait}'}.json"
         if done.is_file():   # listened to already (the fold does not change once finished)
             out[view] = json.loads(done.read_text())
             continue

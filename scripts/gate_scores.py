@@ -25,13 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
+from crossing_assist.actions import N_BINS, get_space
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest
 from crossing_assist.runtime.belief import entropy
 from crossing_assist.runtime.listen import WRONG_STRIPS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from choose_gate import finished_folds, fold_bundle, held_out_parser, held_out_rows, tag  # noqa: E402  (a sibling script)
+from choose_gate import draw_tag, finished_folds, fold_bundle, held_out_parser, held_out_rows, tag  # noqa: E402  (a sibling script)
 
 COVERAGES = (0.5, 0.6, 0.7, 0.8, 0.9)
 
@@ -54,17 +55,38 @@ def scores(probs: np.ndarray, mutual_info: np.ndarray | None = None) -> dict[str
     return out
 
 
+def beacon_on(score: np.ndarray, pred: np.ndarray, labels: np.ndarray, coverage: float) -> np.ndarray:
+    """Per frame, whether the beacon is on when it is on for the frames with a crossing whose score is
+    among the lowest ``coverage`` of them (an unknown argmax stays off; no-crossing frames under the
+    same threshold are on too)."""
+    pos, known = labels != 0, pred != 0
+    s = np.where(known, score, np.inf)
+    return known & (s <= np.quantile(s[pos], coverage, method="lower"))
+
+
+def confidently_wrong(on: np.ndarray, pred: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Per frame: the beacon on, a crossing in view and the argmax >= 2 strips off its label."""
+    return on & (labels != 0) & (np.abs(pred - labels) >= WRONG_STRIPS)
+
+
+def miss_strips(far_x: np.ndarray, pred: np.ndarray, n_actions: int) -> np.ndarray:
+    """How far the beacon points from the labelled far point: the distance from ``far_x`` to the
+    centre of the predicted action, in strip widths (a frame 2 strips off by label may miss by 1.5)."""
+    space = get_space(n_actions)
+    centre = np.array([space.action_center_x(int(a)) for a in pred])
+    return np.abs(np.asarray(far_x, float) - centre) * N_BINS
+
+
 def wrong_at_coverage(score: np.ndarray, pred: np.ndarray, labels: np.ndarray,
                       coverages=COVERAGES) -> list[dict]:
     """Beacon on for the frames with a crossing whose score is among the lowest ``coverage`` of them
-    (an unknown argmax stays off): per coverage, the beacon-on and confidently-wrong rates over the
-    frames with a crossing and the silence over those without."""
-    pos, known = labels != 0, pred != 0
-    s = np.where(known, score, np.inf)
+    (:func:`beacon_on`): per coverage, the beacon-on and confidently-wrong rates over the frames with
+    a crossing and the silence over those without."""
+    pos = labels != 0
     out = []
     for c in coverages:
-        on = known & (s <= np.quantile(s[pos], c, method="lower"))
-        wrong = on & pos & (np.abs(pred - labels) >= WRONG_STRIPS)
+        on = beacon_on(score, pred, labels, c)
+        wrong = confidently_wrong(on, pred, labels)
         out.append({"coverage": c, "beacon_on": float(on[pos].mean()), "confidently_wrong": float(wrong.sum() / pos.sum()),
                     "silence_no_crossing": float(1 - on[~pos].mean()) if (~pos).any() else None})
     return out
@@ -74,7 +96,7 @@ def fold_outputs(fold: Path, source: str, ptl, neg, used, frames: int, seed: int
     """The fold bundle's outputs on its held-out photos and no-crossing views (cached in the fold)."""
     from crossing_assist.runtime.engine import Engine
 
-    done = fold / f"gate_scores{tag(mirror)}_{frames}.json"
+    done = fold / f"gate_scores{draw_tag(mirror, frames, seed)}.json"
     if done.is_file():
         return json.loads(done.read_text())
     engine = Engine(fold_bundle(fold, source, ptl, mirror), threads=1)
@@ -98,13 +120,19 @@ def main(argv=None) -> int:
     ap = held_out_parser(__doc__.split("\n\n")[0], frames=200)
     ap.add_argument("--with", dest="others", type=Path, action="append", default=[],
                     help="another --cv source run of the same photographers: ensemble members")
+    ap.add_argument("--sheet", action="store_true",
+                    help="also write CV/gate_scores_wrong[_mirror].png: the first run's frames confidently wrong at "
+                         "90 %% beacon on (ranked by entropy, the gate's measure) and how far each misses the far point")
     a = ap.parse_args(argv)
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}
     runs = [a.cv, *a.others]
     members: list[list[dict]] = [[] for _ in runs]
+    held = []   # (dataset, row) of every frame, in the order of the fold outputs
     for fold, source in finished_folds(a.cv):
         print(f"fold {source}", file=sys.stderr, flush=True)
+        pos, negs = held_out_rows(ptl, neg, source, used, a.frames, a.seed)
+        held += [(ptl, r) for r in pos] + [(neg, r) for r in negs]
         for i, cv in enumerate(runs):
             other = cv / fold.name
             if not (other / "weights").is_dir():
@@ -145,8 +173,38 @@ def main(argv=None) -> int:
         print(f"\n{name}: argmax accuracy {acc:.3f}\n{head}")
         for k, r in rows.items():
             print(table(k, r))
+    if a.sheet:
+        probs = entries[0][1][ok]
+        kept = [h for h, k in zip(held, ok) if k]
+        result["wrong_sheet"] = wrong_sheet(probs, labels, kept, a.cv / f"gate_scores_wrong{tag(a.mirror)}.png")
     (a.cv / f"gate_scores{tag(a.mirror)}.json").write_text(json.dumps(result, indent=1))
     return 0
+
+
+def wrong_sheet(probs: np.ndarray, labels: np.ndarray, rows: list, path: Path, coverage: float = 0.9) -> dict:
+    """Draw the frames confidently wrong at ``coverage`` beacon on (ranked by entropy) on one sheet and
+    say how far each misses the labelled far point (:func:`miss_strips`)."""
+    from crossing_assist.models.plots import plot_examples
+
+    pred = probs.argmax(1)
+    on = beacon_on(scores(probs)["entropy"], pred, labels, coverage)
+    idx = np.flatnonzero(confidently_wrong(on, pred, labels))
+    onpos = np.flatnonzero(on & (labels != 0))
+    miss = miss_strips([rows[i][1].far_x for i in onpos], pred[onpos], probs.shape[1])
+    wrong_miss = miss[np.isin(onpos, idx)]
+    out = {"coverage": coverage, "frames": len(idx), "images": [rows[i][1].image for i in idx],
+           "miss_strips_median": float(np.median(wrong_miss)) if len(idx) else None,
+           "miss_strips_max": float(wrong_miss.max()) if len(idx) else None,
+           "beacon_on_missing_by_more_than": {str(k): int((miss > k).sum()) for k in (1.5, 2.0, 2.5, 3.0)}}
+    print(f"\nconfidently wrong at {coverage:.0%} beacon on (entropy): {len(idx)} frames; the beacon misses the far point "
+          f"by a median {out['miss_strips_median'] or 0:.2f} strip widths, at most {out['miss_strips_max'] or 0:.2f}; of the {len(onpos)} "
+          f"frames with the beacon on, missing by more than 1.5 / 2 / 2.5 / 3 strips: "
+          + " / ".join(str(v) for v in out["beacon_on_missing_by_more_than"].values()))
+    if len(idx):
+        images = [load_frame(rows[i][0].image_path(rows[i][1]), rows[i][1].flags) for i in idx]
+        plot_examples(images, probs[idx], labels[idx], probs.shape[1], [None] * len(idx), path, cols=6)
+        print(f"wrote {path}")
+    return out
 
 
 if __name__ == "__main__":

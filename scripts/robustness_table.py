@@ -30,7 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from choose_gate import (  # noqa: E402  (a sibling script)
-    finished_folds, fold_bundle, held_out_parser, held_out_rows, model_accuracy, tag,
+    draw_tag, finished_folds, fold_bundle, held_out_parser, held_out_rows, model_accuracy, tag,
 )
 
 from crossing_assist.data_tools.augment import PORTRAIT_SETS, portrait_sets, roll  # noqa: E402
@@ -62,7 +62,7 @@ def fold_table(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     """Per condition, the fold's rates (cached in the fold folder once measured)."""
     from crossing_assist.runtime.engine import Engine
 
-    done = fold / f"robustness{tag(mirror)}_{n_frames}.json"
+    done = fold / f"robustness{draw_tag(mirror, n_frames, seed)}.json"
     if done.is_file():
         return json.loads(done.read_text())
     engine = Engine(fold_bundle(fold, source, ptl, mirror), threads=1)

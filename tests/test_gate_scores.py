@@ -63,3 +63,30 @@ def test_cv_bundles_fold_metrics_counts_failures_as_wrong_and_skips_no_crossing_
     c = get_space(13).action_center_x
     # the failure has no E[x] (all its mass on unknown): far-x over the three answered frames
     assert m["far_x_error"] == pytest.approx((2 * abs(c(4) - 0.29) + abs(c(7) - 0.29)) / 3, abs=1e-4)
+
+
+def test_miss_strips_is_the_distance_from_the_far_point_to_the_predicted_centre_in_strip_widths():
+    # a far point at the right edge of strip 4 (x 0.332) with the beacon on strip 6 (centre 5.5/12):
+    # 2 strips off by label, 1.5 strip widths off where the user is sent
+    miss = gs.miss_strips([0.332, 0.5, 0.04], np.array([6, 7, 1]), 13)
+    assert miss == pytest.approx([1.516, 0.5, 0.02], abs=1e-3)
+
+
+def test_the_wrong_sheet_lists_the_confidently_wrong_frames_and_draws_them(tmp_path):
+    from types import SimpleNamespace
+
+    p = _probs([{6: 0.9}, {6: 0.9}, {9: 0.9}, {6: 0.4, 7: 0.4}, {0: 0.9}])
+    labels = np.array([6, 6, 6, 6, 0])
+    far_x = [0.45, 0.46, 0.47, 0.45, None]
+    img = np.zeros((30, 40, 3), np.uint8)
+    ds = SimpleNamespace(image_path=lambda r: r.image)
+    rows = [(ds, SimpleNamespace(image=f"f{i}.jpg", far_x=x, flags=())) for i, x in enumerate(far_x)]
+    gs.load_frame, real = (lambda path, flags: img), gs.load_frame
+    try:
+        out = gs.wrong_sheet(p, labels, rows, tmp_path / "sheet.png", coverage=0.75)
+    finally:
+        gs.load_frame = real
+    # the three surest crossing frames are on; the one at strip 9 is 3 strips off its label
+    assert out["frames"] == 1 and out["images"] == ["f2.jpg"]
+    assert out["miss_strips_max"] == pytest.approx(abs(0.47 - 8.5 / 12) * 12)
+    assert (tmp_path / "sheet.png").stat().st_size > 0
