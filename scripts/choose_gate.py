@@ -85,13 +85,17 @@ def held_out_rows(ptl, neg, source: str, used: set[str], n_frames: int, seed: in
     return pos, negs
 
 
-def model_accuracy(lis: Listener) -> dict:
+def model_accuracy(lis: Listener, in_view: list[int] | None = None) -> dict:
     """The model's own accuracy and bin MAE over the clips with a crossing: the argmax of each
-    clip's first frame (a failed inference counts as wrong), no decision logic."""
+    clip's first frame (a failed inference counts as wrong), no decision logic; with ``in_view``
+    (clip indices) also over the clips whose goal is in view (``accuracy_goal_in_view``)."""
     labels = np.asarray(lis.labels)
     first = np.asarray([clip[0].action if clip[0].ok else -1 for clip in lis.clips])
-    err = np.abs(first[labels != 0] - labels[labels != 0])
-    return {"accuracy": float((err == 0).mean()), "bin_mae": float(err.mean())}
+    err = np.abs(first - labels)
+    out = {"accuracy": float((err[labels != 0] == 0).mean()), "bin_mae": float(err[labels != 0].mean())}
+    if in_view:
+        out["accuracy_goal_in_view"] = float((err[in_view] == 0).mean())
+    return out
 
 
 def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, portrait: int,
@@ -126,7 +130,7 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
         labels = np.asarray(lis.labels)
         result = {"source": source, "view": view, "threshold": t0, "frames": int((labels != 0).sum()),
                   "no_crossing_frames": int((labels == 0).sum()), "goal_in_view_frames": len(in_view),
-                  **model_accuracy(lis),
+                  **model_accuracy(lis, in_view),
                   "curve": [{"scale": m, **summarise(lis.heard(m * t0)),
                              "beacon_on_goal_in_view": summarise(lis.heard(m * t0, in_view))["beacon_on"]}
                             for m in SCALES]}
@@ -155,7 +159,11 @@ def pool(folds: list[dict]) -> list[dict]:
 def pooled_accuracy(folds: list[dict]) -> dict:
     """The model's own accuracy and bin MAE (argmax of each clip's first frame), weighted by frames."""
     n = sum(f["frames"] for f in folds)
-    return {k: sum(f[k] * f["frames"] for f in folds) / n for k in ("accuracy", "bin_mae") if all(k in f for f in folds)}
+    out = {k: sum(f[k] * f["frames"] for f in folds) / n for k in ("accuracy", "bin_mae") if all(k in f for f in folds)}
+    if all("accuracy_goal_in_view" in f for f in folds):
+        n = sum(f["goal_in_view_frames"] for f in folds)
+        out["accuracy_goal_in_view"] = sum(f["accuracy_goal_in_view"] * f["goal_in_view_frames"] for f in folds) / n
+    return out
 
 
 def choose(curve: list[dict], max_wrong: float = 0.005, min_silence: float = 0.98) -> tuple[dict, bool]:
@@ -225,7 +233,8 @@ def main(argv=None) -> int:
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
                            a.cv / f"gate_risk_coverage{suffix}.png", f"held out, {view}: gate threshold x scale")
         if model:
-            print(f"{view}: the model's own accuracy {model['accuracy']:.3f}, bin MAE {model['bin_mae']:.3f}")
+            print(f"{view}: the model's own accuracy {model['accuracy']:.3f}, bin MAE {model['bin_mae']:.3f}"
+                  + (f", goal in view {model['accuracy_goal_in_view']:.3f}" if "accuracy_goal_in_view" in model else ""))
         print(f"{view}: fitted threshold (scale 1): {fmt(one)}")
         print(f"{view}: chosen scale {best['scale']:g} ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
     # landscape stays at the top level (what build_default_bundle.sh and older readers take)

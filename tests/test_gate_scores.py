@@ -90,3 +90,17 @@ def test_the_wrong_sheet_lists_the_confidently_wrong_frames_and_draws_them(tmp_p
     assert out["frames"] == 1 and out["images"] == ["f2.jpg"]
     assert out["miss_strips_max"] == pytest.approx(abs(0.47 - 8.5 / 12) * 12)
     assert (tmp_path / "sheet.png").stat().st_size > 0
+
+
+def test_choose_gate_model_accuracy_reports_the_goal_in_view_frames_apart():
+    import choose_gate
+    from types import SimpleNamespace as NS
+
+    frame = lambda a, ok=True: [NS(action=a, ok=ok)]   # noqa: E731  (a clip: its first frame)
+    # four portrait views with a crossing (two with the goal in view) and one no-crossing view
+    lis = NS(labels=[6, 1, 12, 6, 0], clips=[frame(6), frame(3), frame(12), frame(6, ok=False), frame(0)])
+    out = choose_gate.model_accuracy(lis, in_view=[0, 3])
+    assert out["accuracy"] == 0.5                      # 6 and 12 right; 3 for 1 wrong; a failure wrong
+    assert out["accuracy_goal_in_view"] == 0.5         # of views 0 (right) and 3 (failed)
+    assert out["bin_mae"] == (0 + 2 + 0 + 7) / 4
+    assert "accuracy_goal_in_view" not in choose_gate.model_accuracy(lis)
