@@ -7,7 +7,8 @@ the held-out photographer's unseen photos once through the fold's bundle (the sa
 model's own probability of *not* being >= 2 strips off, the confidently-wrong criterion). For each
 score and beacon-on rate (the beacon on for the frames with the lowest scores; an ``unknown`` argmax
 is always off) it prints the confidently-wrong rate (on and >= 2 strips off the label). With several
-runs (``--with``) it scores their ensemble too: the mean of the members' probabilities.
+runs (``--with``) it scores their ensemble too: the mean of the members' probabilities. ``--sheet``
+draws the frames confidently wrong at 90 % beacon on and says how far each misses the far point.
 
 Frame-level ranking, the first frame's outputs without the decision logic's filter: a still clip
 through the runtime sharpens the belief but keeps this order. ``scripts/choose_gate.py`` measures
@@ -116,6 +117,32 @@ def table(name: str, rows: list[dict]) -> str:
     return f"| {name} | " + " | ".join(f"{100 * r['confidently_wrong']:.2f} %" for r in rows) + " |"
 
 
+def wrong_sheet(probs: np.ndarray, labels: np.ndarray, rows: list, path: Path, coverage: float = 0.9) -> dict:
+    """Draw the frames confidently wrong at ``coverage`` beacon on (ranked by entropy) on one sheet and
+    say how far each misses the labelled far point (:func:`miss_strips`)."""
+    from crossing_assist.models.plots import plot_examples
+
+    pred = probs.argmax(1)
+    on = beacon_on(scores(probs)["entropy"], pred, labels, coverage)
+    idx = np.flatnonzero(confidently_wrong(on, pred, labels))
+    onpos = np.flatnonzero(on & (labels != 0))
+    miss = miss_strips([rows[i][1].far_x for i in onpos], pred[onpos], probs.shape[1])
+    wrong_miss = miss[np.isin(onpos, idx)]
+    out = {"coverage": coverage, "frames": len(idx), "images": [rows[i][1].image for i in idx],
+           "miss_strips_median": float(np.median(wrong_miss)) if len(idx) else None,
+           "miss_strips_max": float(wrong_miss.max()) if len(idx) else None,
+           "beacon_on_missing_by_more_than": {str(k): int((miss > k).sum()) for k in (1.5, 2.0, 2.5, 3.0)}}
+    print(f"\nconfidently wrong at {coverage:.0%} beacon on (entropy): {len(idx)} frames; the beacon misses the far point "
+          f"by a median {out['miss_strips_median'] or 0:.2f} strip widths, at most {out['miss_strips_max'] or 0:.2f}; of the {len(onpos)} "
+          f"frames with the beacon on, missing by more than 1.5 / 2 / 2.5 / 3 strips: "
+          + " / ".join(str(v) for v in out["beacon_on_missing_by_more_than"].values()))
+    if len(idx):
+        images = [load_frame(rows[i][0].image_path(rows[i][1]), rows[i][1].flags) for i in idx]
+        plot_examples(images, probs[idx], labels[idx], probs.shape[1], [None] * len(idx), path, cols=6)
+        print(f"wrote {path}")
+    return out
+
+
 def main(argv=None) -> int:
     ap = held_out_parser(__doc__.split("\n\n")[0], frames=200)
     ap.add_argument("--with", dest="others", type=Path, action="append", default=[],
@@ -179,32 +206,6 @@ def main(argv=None) -> int:
         result["wrong_sheet"] = wrong_sheet(probs, labels, kept, a.cv / f"gate_scores_wrong{tag(a.mirror)}.png")
     (a.cv / f"gate_scores{tag(a.mirror)}.json").write_text(json.dumps(result, indent=1))
     return 0
-
-
-def wrong_sheet(probs: np.ndarray, labels: np.ndarray, rows: list, path: Path, coverage: float = 0.9) -> dict:
-    """Draw the frames confidently wrong at ``coverage`` beacon on (ranked by entropy) on one sheet and
-    say how far each misses the labelled far point (:func:`miss_strips`)."""
-    from crossing_assist.models.plots import plot_examples
-
-    pred = probs.argmax(1)
-    on = beacon_on(scores(probs)["entropy"], pred, labels, coverage)
-    idx = np.flatnonzero(confidently_wrong(on, pred, labels))
-    onpos = np.flatnonzero(on & (labels != 0))
-    miss = miss_strips([rows[i][1].far_x for i in onpos], pred[onpos], probs.shape[1])
-    wrong_miss = miss[np.isin(onpos, idx)]
-    out = {"coverage": coverage, "frames": len(idx), "images": [rows[i][1].image for i in idx],
-           "miss_strips_median": float(np.median(wrong_miss)) if len(idx) else None,
-           "miss_strips_max": float(wrong_miss.max()) if len(idx) else None,
-           "beacon_on_missing_by_more_than": {str(k): int((miss > k).sum()) for k in (1.5, 2.0, 2.5, 3.0)}}
-    print(f"\nconfidently wrong at {coverage:.0%} beacon on (entropy): {len(idx)} frames; the beacon misses the far point "
-          f"by a median {out['miss_strips_median'] or 0:.2f} strip widths, at most {out['miss_strips_max'] or 0:.2f}; of the {len(onpos)} "
-          f"frames with the beacon on, missing by more than 1.5 / 2 / 2.5 / 3 strips: "
-          + " / ".join(str(v) for v in out["beacon_on_missing_by_more_than"].values()))
-    if len(idx):
-        images = [load_frame(rows[i][0].image_path(rows[i][1]), rows[i][1].flags) for i in idx]
-        plot_examples(images, probs[idx], labels[idx], probs.shape[1], [None] * len(idx), path, cols=6)
-        print(f"wrote {path}")
-    return out
 
 
 if __name__ == "__main__":
