@@ -39,6 +39,9 @@ from crossing_assist.bundle import SCHEMA_VERSION, BundleError, read_bundle, wri
 from crossing_assist.export.graph import model_bytes, set_metadata
 from crossing_assist.geometry import GeometryError, check_sensor_aspect, parse_ratio
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from choose_gate import tag  # noqa: E402  (a sibling script: the file-name suffix of mirror-TTA measurements)
+
 
 def summary(g: dict) -> dict:
     """One view of choose_gate.py's result, without its curves."""
@@ -84,7 +87,7 @@ def main(argv=None) -> int:
             "epochs": c["config"]["epochs"], "folds": c["folds"],
             **{k: c[k] for k in ("accuracy", "bin_mae", "far_x_error", "majority_accuracy")}}
     # scripts/cv_bundles.py's figures for folds exported with this bundle's test-time augmentation
-    shipped = a.cv / f"cv_bundles{'_mirror' if b.mc.mirror else ''}.json"
+    shipped = a.cv / f"cv_bundles{tag(b.mc.mirror)}.json"
     if shipped.is_file():
         meta["metrics"]["leave_one_photographer_out_bundle"] = json.loads(shipped.read_text())
     stamped = []

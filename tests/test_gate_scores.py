@@ -72,7 +72,7 @@ def test_miss_strips_is_the_distance_from_the_far_point_to_the_predicted_centre_
     assert miss == pytest.approx([1.516, 0.5, 0.02], abs=1e-3)
 
 
-def test_the_wrong_sheet_lists_the_confidently_wrong_frames_and_draws_them(tmp_path):
+def test_the_wrong_sheet_lists_the_confidently_wrong_frames_and_draws_them(tmp_path, monkeypatch):
     from types import SimpleNamespace
 
     p = _probs([{6: 0.9}, {6: 0.9}, {9: 0.9}, {6: 0.4, 7: 0.4}, {0: 0.9}])
@@ -81,11 +81,8 @@ def test_the_wrong_sheet_lists_the_confidently_wrong_frames_and_draws_them(tmp_p
     img = np.zeros((30, 40, 3), np.uint8)
     ds = SimpleNamespace(image_path=lambda r: r.image)
     rows = [(ds, SimpleNamespace(image=f"f{i}.jpg", far_x=x, flags=())) for i, x in enumerate(far_x)]
-    gs.load_frame, real = (lambda path, flags: img), gs.load_frame
-    try:
-        out = gs.wrong_sheet(p, labels, rows, tmp_path / "sheet.png", coverage=0.75)
-    finally:
-        gs.load_frame = real
+    monkeypatch.setattr(gs, "load_frame", lambda path, flags: img)
+    out = gs.wrong_sheet(p, labels, rows, tmp_path / "sheet.png", coverage=0.75)
     # the three surest crossing frames are on; the one at strip 9 is 3 strips off its label
     assert out["frames"] == 1 and out["images"] == ["f2.jpg"]
     assert out["miss_strips_max"] == pytest.approx(abs(0.47 - 8.5 / 12) * 12)
