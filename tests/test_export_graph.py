@@ -233,3 +233,17 @@ def test_mirror_graph_summarises_both_sets_of_mc_samples(policy):
     np.testing.assert_allclose(out["votes"].sum(1), 1.0, atol=1e-6)
     np.testing.assert_allclose(out["votes"] * 8, np.round(out["votes"] * 8), atol=1e-5)
     assert np.all(out["mutual_info"] >= 0) and np.all(np.isfinite(out["entropy"]))
+
+
+def test_stride16_lite0_policy_exports_exactly():
+    """EfficientNet-Lite0 with ``feature_stride=16`` (its stride-16 block beside the upsampled
+    deepest features): the graph's deterministic probs match PyTorch at a frame of another aspect."""
+    torch.manual_seed(0)
+    bb = create_backbone("efficientnet_lite0", weights="none", feature_stride=16)
+    head = create_head("spatial_fine", bb.num_features, 13, p=0.5)
+    policy = Policy(bb, head, policy_config(bb, head.kind, 13, input_size=(48, 64), feature_stride=16)).eval()
+    spec = GraphSpec(size=(48, 64), mean=MEAN, std=STD, samples=1, p=0.0, fit="letterbox")
+    x = frames(n=2, h=64, w=48)
+    with torch.no_grad():
+        want = BundleGraph(policy, spec)(torch.from_numpy(x))[0].numpy()
+    np.testing.assert_allclose(run(session(policy, spec), x)["probs"], want, atol=1e-4)

@@ -88,3 +88,33 @@ def test_efficientnet_lite0_imagenet_weights_are_real():
     # TF-Lite preprocessing travels with the facts
     assert bb.facts.mean == pytest.approx((127 / 255,) * 3) and bb.facts.input_size == (224, 224)
     assert bb.blocks[0].conv.weight.abs().sum() > 1.0
+
+
+def test_lite0_feature_stride_16_keeps_its_last_stride16_block_beside_the_deepest_features():
+    """``feature_stride=16``: the head gets block 11's output (112 channels, stride 16) with the
+    deepest features upsampled onto it; cached-prefix training (``forward_from``) gives the same."""
+    bb = create_backbone("efficientnet_lite0", weights="none", feature_stride=16).eval()
+    assert bb.facts.stride == 16 and bb.skip == 11 and bb.num_features == 1280 + 112
+    x = torch.randn(1, 3, 64, 96)
+    with torch.no_grad():
+        f = bb.forward_features(x)
+        assert f.shape == (1, 1392, 4, 6)
+        deep = bb.forward_until(x, len(bb.blocks))                  # 1280 x 2 x 3, stride 32
+        up = torch.nn.functional.interpolate(deep, scale_factor=2.0, mode="bilinear", align_corners=False)
+        assert torch.allclose(f[:, :1280], up, atol=1e-6)
+        assert torch.allclose(f[:, 1280:], bb.forward_until(x, 12), atol=1e-6)
+        assert torch.allclose(bb.forward_from(bb.forward_until(x, 10), 10), f, atol=1e-5)
+        with pytest.raises(BackboneError, match="skip needs block 11"):
+            bb.forward_from(bb.forward_until(x, 13), 13)
+    head = create_head("spatial_fine", bb.num_features, 13)
+    cfg = policy_config(bb, head.kind, 13, input_size=(64, 96), feature_stride=16)
+    rebuilt = Policy.from_config(cfg.to_dict(), weights="none")
+    assert rebuilt.backbone.skip == 11 and rebuilt.backbone.num_features == 1392
+
+
+@pytest.mark.parametrize("name", ["mobilenet_v3_small", "squeezenet1_1"])
+def test_feature_stride_a_backbone_cannot_give_is_one_clear_error(name):
+    with pytest.raises(BackboneError, match=f"Invalid feature stride 16 for {name}|Invalid feature stride 8"):
+        create_backbone(name, weights="none", feature_stride=16 if name == "mobilenet_v3_small" else 8)
+    own = create_backbone(name, weights="none", feature_stride=create_backbone(name, weights="none").facts.stride)
+    assert own.skip is None

@@ -209,3 +209,12 @@ def test_plot_training_writes_results_png_from_results_csv(tmp_path):
     path = plot_training(tmp_path)
     assert path == tmp_path / "results.png" and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["results.csv", "results.png"]   # no temp file left
+
+
+def test_feature_stride_16_needs_its_skip_block_unfrozen(tiny, tmp_path):
+    from crossing_assist.models.config import ConfigError
+
+    with pytest.raises(ConfigError, match="unfreeze >= 7"):
+        train(_cfg(tiny, tmp_path / "run", backbone="efficientnet_lite0", feature_stride=16, unfreeze=2, epochs=1))
+    with pytest.raises(ConfigError, match="feature_stride 8"):
+        _cfg(tiny, tmp_path / "run", feature_stride=8)

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from crossing_assist.errors import UserError
@@ -46,13 +47,20 @@ class BackboneFacts:
 
 
 class Backbone(nn.Module):
-    """A feature extractor: ``blocks`` run in order map N x 3 x H x W to N x C x h x w."""
+    """A feature extractor: ``blocks`` run in order map N x 3 x H x W to N x C x h x w.
 
-    def __init__(self, blocks: Sequence[nn.Module], num_features: int, facts: BackboneFacts):
+    ``skip`` (a block index, or None): the output of that block (stride 16) is kept, and the
+    last block's output (stride 32) is upsampled x2 (bilinear, cropped to its size) and concatenated in
+    front of it: features at stride 16 that still carry the deepest block's semantics (a
+    one-level feature pyramid, no new weights). ``num_features`` counts both parts."""
+
+    def __init__(self, blocks: Sequence[nn.Module], num_features: int, facts: BackboneFacts,
+                 skip: int | None = None):
         super().__init__()
         self.blocks = nn.ModuleList(blocks)
         self.num_features = int(num_features)
         self.facts = facts
+        self.skip = skip
 
     def forward_features(self, x: torch.Tensor) -> torch.Tensor:
         """x: N x 3 x H x W normalised float -> N x C x h x w (C = ``num_features``)."""
@@ -65,10 +73,21 @@ class Backbone(nn.Module):
         return x
 
     def forward_from(self, x: torch.Tensor, start: int) -> torch.Tensor:
-        """Run blocks ``[start, end)`` on the output of block ``start - 1``."""
-        for block in self.blocks[start:]:
+        """Run blocks ``[start, end)`` on the output of block ``start - 1`` (with ``skip``,
+        ``start`` must not lie past the skip block: its output is needed)."""
+        kept = None
+        for i, block in enumerate(self.blocks[start:], start):
             x = block(x)
-        return x
+            if i == self.skip:
+                kept = x
+        if self.skip is None:
+            return x
+        if kept is None:
+            raise BackboneError(f"cannot run blocks from {start}: the stride-16 skip needs block {self.skip}'s output")
+        # x2 then crop: SAME padding pads bottom/right, so deep cell i covers skip cells 2i, 2i+1
+        # (a fixed scale also exports to a Resize that onnxruntime runs at any batch size)
+        up = F.interpolate(x, scale_factor=2.0, mode="bilinear", align_corners=False)
+        return torch.cat([up[..., :kept.shape[-2], :kept.shape[-1]], kept], 1)
 
     def forward_from_to(self, x: torch.Tensor, start: int, stop: int) -> torch.Tensor:
         """Run blocks ``[start, stop)``."""
@@ -86,6 +105,7 @@ class _Spec:
     split: Callable[[nn.Module], tuple[list[nn.Module], int]]   # -> blocks, num_features
     facts: BackboneFacts
     imagenet: Callable[[nn.Module], str]               # loads ImageNet weights, returns source
+    skip16: tuple[int, int] | None = None              # (block index, channels) of the last stride-16 block
 
 
 BACKBONES: Registry[_Spec] = Registry("backbone", error=BackboneError)
@@ -228,7 +248,7 @@ _register("efficientnet_lite0", _Spec(
     # TF-Lite preprocessing: (x - 127) / 128 on 0..255 pixels.
     _facts("efficientnet_lite0", "Apache-2.0 (TensorFlow TPU EfficientNet-Lite weights)",
            mean=(127 / 255,) * 3, std=(128 / 255,) * 3),
-    _lite0_imagenet))
+    _lite0_imagenet, skip16=(11, 112)))   # [stem, 16 MBConv blocks, head]: block 10 of the 16 ends stride 16
 _register("mobilenet_v2", _Spec(
     _tv("mobilenet_v2"), _split_children("features", 1280), _facts("mobilenet_v2", _TV_LICENCE),
     _torchvision_imagenet("MobileNet_V2_Weights")))
@@ -250,13 +270,19 @@ _register("xception", _Spec(
     _xception_imagenet))
 
 
-def create_backbone(name: str, *, weights: str | Path = "imagenet") -> Backbone:
+def create_backbone(name: str, *, weights: str | Path = "imagenet", feature_stride: int | None = None) -> Backbone:
     """Build backbone ``name`` with ``weights`` = ``"imagenet"``, ``"none"`` or a state-dict path.
 
+    ``feature_stride``: None = the backbone's own; 16 on a stride-32 backbone that names its
+    last stride-16 block = features with that block's output kept (:class:`Backbone` ``skip``).
     Raises :class:`BackboneError` (one clear line) for an unknown name, missing weights
-    (offline), or a weights file that does not fit.
+    (offline), a weights file that does not fit, or a feature stride the backbone cannot give.
     """
     spec = BACKBONES.get(name)
+    if feature_stride not in (None, spec.facts.stride) and (feature_stride != 16 or spec.skip16 is None):
+        raise BackboneError(f"Invalid feature stride {feature_stride} for {name}; valid: {spec.facts.stride}"
+                            + (", 16" if spec.skip16 else ""))
+    skip = spec.skip16 if feature_stride == 16 and spec.facts.stride == 32 else None
     model = spec.build()
     w = str(weights)
     if w == "none":
@@ -266,4 +292,7 @@ def create_backbone(name: str, *, weights: str | Path = "imagenet") -> Backbone:
     else:
         source = _load_file(model, Path(w), name)
     blocks, num_features = spec.split(model)
-    return Backbone(blocks, num_features, replace(spec.facts, weights_source=source))
+    facts = replace(spec.facts, weights_source=source)
+    if skip is None:
+        return Backbone(blocks, num_features, facts)
+    return Backbone(blocks, num_features + skip[1], replace(facts, stride=16), skip=skip[0])

@@ -70,6 +70,8 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--backbone", default=d["backbone"])
     p.add_argument("--weights", default=d["weights"], help="imagenet | none | PATH to a state dict")
     p.add_argument("--head", default=d["head"], help="spatial | spatial_fine | spatial_strips | spatial_mlp | thesis | thesis_fc")
+    p.add_argument("--feature-stride", type=int, default=d["feature_stride"],
+                   help="16: the head also reads the backbone's last stride-16 block (efficientnet_lite0); default: its own 32")
     p.add_argument("--actions", type=int, default=d["actions"], help="4 | 8 | 13")
     p.add_argument("--epochs", type=int, default=d["epochs"])
     p.add_argument("--batch-size", type=int, default=d["batch_size"])
@@ -119,7 +121,8 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         from .train import resume_config, train, trained_epochs
 
         cfg = TrainConfig(
-            data=a.data, out=a.out, extra_data=tuple(a.extra_data), backbone=a.backbone, weights=a.weights, head=a.head, actions=a.actions,
+            data=a.data, out=a.out, extra_data=tuple(a.extra_data), backbone=a.backbone, weights=a.weights, head=a.head,
+            feature_stride=a.feature_stride, actions=a.actions,
             epochs=a.epochs, batch_size=a.batch_size, optimizer=a.optimizer, lr=a.lr, lr_schedule=a.lr_schedule,
             weight_decay=a.weight_decay, p=a.p, mirror=a.mirror, yaw=tuple(a.yaw), field=a.field,
             field_without=tuple(a.field_without), fov_deg=a.fov_deg,

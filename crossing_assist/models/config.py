@@ -34,6 +34,7 @@ class TrainConfig:
     backbone: str = "efficientnet_lite0"
     weights: str = "imagenet"
     head: str = "spatial"
+    feature_stride: int | None = None   # None: the backbone's own (32); 16: its stride-16 block kept too
     actions: int = 13
     epochs: int = 30
     batch_size: int = 64
@@ -63,6 +64,7 @@ class TrainConfig:
     def __post_init__(self) -> None:
         check = [
             (self.backbone in list_backbones(), f"backbone {self.backbone!r}; valid: {', '.join(list_backbones())}"),
+            (self.feature_stride in (None, 16, 32), f"feature_stride {self.feature_stride}; valid: 16, 32"),
             (self.head in HEAD_KINDS, f"head {self.head!r}; valid: {', '.join(HEAD_KINDS)}"),
             (self.actions in VALID_SPACES, f"actions {self.actions}; valid: 4, 8, 13"),
             (self.epochs >= 1, f"epochs {self.epochs}; valid: >= 1"),

@@ -72,6 +72,7 @@ class PolicyConfig:
     weights_source: str | None = None               # where the starting weights came from
     licence: str | None = None                      # their licence
     head: str                                       # a kind in models.heads.HEAD_KINDS
+    feature_stride: int | None = None               # None: the backbone's own; 16: its stride-16 skip kept
     n_actions: int                                  # 4, 8 or 13
     names: tuple[str, ...] | None = None            # action names; None: the n-action space's
     p: float                                        # MC dropout probability of the head
@@ -105,6 +106,7 @@ class PolicyConfig:
         put("std", _seq("std", self.std, 3, _real, "numbers (RGB)"))
         put("fov_deg", _real("fov_deg", self.fov_deg))
         put("frozen_blocks", _int("frozen_blocks", self.frozen_blocks, optional=True))
+        put("feature_stride", _int("feature_stride", self.feature_stride, optional=True))
         put("majority_action", _int("majority_action", self.majority_action, optional=True))
         if _str("fit", self.fit) not in FITS:
             raise _bad("fit", f"one of {', '.join(FITS)}", self.fit)
@@ -174,7 +176,7 @@ class Policy(nn.Module):
     def from_config(cls, config: PolicyConfig | Mapping[str, Any], *, weights: str = "none") -> "Policy":
         """A policy with the architecture of ``config`` (weights random unless ``weights``)."""
         config = as_policy_config(config)
-        backbone = create_backbone(config.backbone, weights=weights)
+        backbone = create_backbone(config.backbone, weights=weights, feature_stride=config.feature_stride)
         head = create_head(config.head, backbone.num_features, config.n_actions, p=config.p)
         return cls(backbone, head, config)
 

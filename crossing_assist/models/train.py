@@ -170,14 +170,18 @@ def _train_mode(policy: Policy, start: int) -> None:
 
 
 def _build(cfg: TrainConfig) -> tuple[Policy, int]:
-    backbone = create_backbone(cfg.backbone, weights=cfg.weights)
+    backbone = create_backbone(cfg.backbone, weights=cfg.weights, feature_stride=cfg.feature_stride)
     n_blocks = len(backbone.blocks)
     if cfg.unfreeze > n_blocks:
         raise ConfigError(f"Invalid unfreeze {cfg.unfreeze}: {cfg.backbone} has {n_blocks} blocks")
+    if backbone.skip is not None and n_blocks - cfg.unfreeze > backbone.skip:
+        raise ConfigError(f"Invalid unfreeze {cfg.unfreeze} with feature stride 16: the skip reads block "
+                          f"{backbone.skip}, so unfreeze >= {n_blocks - backbone.skip}")
     kind = "thesis_fc" if cfg.head == "thesis" and cfg.backbone == "resnet50" else cfg.head
     head = create_head(kind, backbone.num_features, cfg.actions, p=cfg.p)
     conf = policy_config(backbone, kind, cfg.actions, p=cfg.p, input_size=cfg.input_size, fov_deg=cfg.fov_deg,
-                         frozen_blocks=n_blocks - cfg.unfreeze, data=str(cfg.data), fit=cfg.fit)
+                         frozen_blocks=n_blocks - cfg.unfreeze, data=str(cfg.data), fit=cfg.fit,
+                         feature_stride=backbone.facts.stride if backbone.skip is not None else None)
     return Policy(backbone, head, conf), n_blocks - cfg.unfreeze
 
 
