@@ -72,7 +72,6 @@ class PolicyConfig:
     weights_source: str | None = None               # where the starting weights came from
     licence: str | None = None                      # their licence
     head: str                                       # a kind in models.heads.HEAD_KINDS
-    feature_stride: int | None = None               # None: the backbone's own; 16: its stride-16 skip kept
     n_actions: int                                  # 4, 8 or 13
     names: tuple[str, ...] | None = None            # action names; None: the n-action space's
     p: float                                        # MC dropout probability of the head
@@ -81,6 +80,7 @@ class PolicyConfig:
     std: tuple[float, ...]
     fov_deg: float                                  # horizontal FOV of the training photos, degrees
     frozen_blocks: int | None = None                # leading backbone blocks frozen; None: all
+    feature_stride: int | None = None               # None: the backbone's own; 16: its stride-16 skip kept
     data: str | None = None                         # the training dataset folder
     fit: str = "stretch"                            # how a frame met the canvas (geometry.FITS)
     pad_rgb: tuple[int, int, int] = PAD_RGB         # letterbox padding colour, uint8 RGB
