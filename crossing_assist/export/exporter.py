@@ -241,6 +241,7 @@ def _meta(policy, ckpt: Path, spec: GraphSpec, calib: cal.CalibrationResult, pre
         calibration=calib.spec(),
         precision=precision,
         training={"backbone": c.backbone, "head": c.head,
+                  **({"feature_stride": c.feature_stride} if c.feature_stride else {}),
                   "weights_source": c.weights_source, "licence": c.licence,
                   "data": c.data, "counts": dict(c.counts),
                   "majority_action": c.majority_action, "checkpoint": str(ckpt),
