@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from runtime_toy import toy_bundle  # noqa: F401  (fixture)
+
 from crossing_assist.export.graph import export_graph, model_bytes
 from crossing_assist.export.quantize import quantize_convs
 from tests.test_export_graph import frames
@@ -38,3 +40,15 @@ def test_int8_split_matches_the_exporter_and_keeps_unseen_frames():
     assert len(calib) == 50 and len(unseen) == 50 and not set(calib) & set(unseen)
     perm = np.random.default_rng(0).permutation(100)  # crossing-export --int8's pick
     assert list(calib) == sorted(perm[:50])
+
+
+def test_bundle_speed_times_bundles_side_by_side_and_refuses_bad_arguments(toy_bundle, capsys):  # noqa: F811
+    import bundle_speed
+
+    assert bundle_speed.main([f"a={toy_bundle}", f"b={toy_bundle}", "--rounds", "2", "--block", "1", "--frame", "64x48"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert [line.split()[0] for line in out] == ["a", "b"] and "ms a frame" in out[0] and " of a" in out[1]
+    assert bundle_speed.main([str(toy_bundle)]) == 2                          # no NAME=
+    assert bundle_speed.main([f"a={toy_bundle.parent / 'missing'}"]) == 2     # not a bundle
+    err = capsys.readouterr().err
+    assert err.count("error:") == 2 and "NAME=BUNDLE_DIR" in err
