@@ -23,7 +23,8 @@ EPOCHS=${EPOCHS:-2}     # with the cosine schedule: what the leave-one-photograp
 UNFREEZE=${UNFREEZE:-8}  # blocks fine-tuned: 8 (since 2026-11-29 evening) vs 4: leave-one-photographer-out 0.677 vs 0.627
 FIELD=${FIELD:-2}       # field views a photo: 2 (since 2026-11-29) vs 1: PTL val 0.728 vs 0.697, held out 0.614 vs 0.618
 HEAD=${HEAD:-spatial_fine}   # columns x2 before the context conv: leave-one-photographer-out 0.618 vs spatial's 0.602
-FEATURE_STRIDE=${FEATURE_STRIDE:-32}   # 16: the head also reads the last stride-16 block (docs/models.md)
+FEATURE_STRIDE=${FEATURE_STRIDE:-}    # 16: the head also reads the last stride-16 block (measured 2026-12-01, not
+                                      # shipped: docs/models.md); empty: the backbone's own 32
 LR_SCHEDULE=${LR_SCHEDULE:-cosine}   # cosine (since 2026-11-29 night) vs constant: leave-one-photographer-out 0.695 vs 0.677
 THREADS=${THREADS:-1}
 # ablations (scripts/augment_ablation.py): field-view steps left out, and whether negatives are added
@@ -33,8 +34,9 @@ scripts/prepare_default_data.sh "$PTL"
 EXTRA=()
 if [ "$NEGATIVES" = 1 ]; then EXTRA+=(--extra-data runs/data/synth --extra-data runs/data/neg_half); fi
 if [ -n "$FIELD_WITHOUT" ]; then EXTRA+=(--field-without "$FIELD_WITHOUT"); fi
+if [ -n "$FEATURE_STRIDE" ]; then EXTRA+=(--feature-stride "$FEATURE_STRIDE"); fi
 RECIPE=(--data runs/data/ptl "${EXTRA[@]}" --backbone efficientnet_lite0
-    --head "$HEAD" --feature-stride "$FEATURE_STRIDE" --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --lr-schedule "$LR_SCHEDULE" --weight-decay 1e-4 --smoothing 0.2
+    --head "$HEAD" --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --lr-schedule "$LR_SCHEDULE" --weight-decay 1e-4 --smoothing 0.2
     --aux-x 1.0 --unfreeze "$UNFREEZE" --input-size 168x224 --fit letterbox --no-mirror --field "$FIELD" --seed 0
     --threads "$THREADS" --quiet)
 if [ "${CV:-0}" = 1 ]; then   # leave-one-photographer-out figures of the same recipe
