@@ -282,7 +282,7 @@ def create_backbone(name: str, *, weights: str | Path = "imagenet", feature_stri
     if feature_stride not in (None, spec.facts.stride) and (feature_stride != 16 or spec.skip16 is None):
         raise BackboneError(f"Invalid feature stride {feature_stride} for {name}; valid: {spec.facts.stride}"
                             + (", 16" if spec.skip16 else ""))
-    skip = spec.skip16 if feature_stride == 16 and spec.facts.stride == 32 else None
+    skip = None if feature_stride in (None, spec.facts.stride) else spec.skip16   # valid here: 16 with a skip
     model = spec.build()
     w = str(weights)
     if w == "none":
