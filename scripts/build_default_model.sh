@@ -25,6 +25,8 @@ FIELD=${FIELD:-2}       # field views a photo: 2 (since 2026-11-29) vs 1: PTL va
 HEAD=${HEAD:-spatial_fine}   # columns x2 before the context conv: leave-one-photographer-out 0.618 vs spatial's 0.602
 FEATURE_STRIDE=${FEATURE_STRIDE:-}    # 16: the head also reads the last stride-16 block (measured 2026-12-01, not
                                       # shipped: docs/models.md); empty: the backbone's own 32
+SOFT_X=${SOFT_X:-}      # e.g. 0.4: targets from a Gaussian around the goal's x (sd in strip widths) instead of
+                        # smoothing to both neighbours; empty: --smoothing 0.2 alone
 LR_SCHEDULE=${LR_SCHEDULE:-cosine}   # cosine (since 2026-11-29 night) vs constant: leave-one-photographer-out 0.695 vs 0.677
 THREADS=${THREADS:-1}
 # ablations (scripts/augment_ablation.py): field-view steps left out, and whether negatives are added
@@ -35,6 +37,7 @@ EXTRA=()
 if [ "$NEGATIVES" = 1 ]; then EXTRA+=(--extra-data runs/data/synth --extra-data runs/data/neg_half); fi
 if [ -n "$FIELD_WITHOUT" ]; then EXTRA+=(--field-without "$FIELD_WITHOUT"); fi
 if [ -n "$FEATURE_STRIDE" ]; then EXTRA+=(--feature-stride "$FEATURE_STRIDE"); fi
+if [ -n "$SOFT_X" ]; then EXTRA+=(--soft-x "$SOFT_X"); fi
 RECIPE=(--data runs/data/ptl "${EXTRA[@]}" --backbone efficientnet_lite0
     --head "$HEAD" --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --lr-schedule "$LR_SCHEDULE" --weight-decay 1e-4 --smoothing 0.2
     --aux-x 1.0 --unfreeze "$UNFREEZE" --input-size 168x224 --fit letterbox --no-mirror --field "$FIELD" --seed 0

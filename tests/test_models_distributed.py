@@ -36,14 +36,17 @@ def test_rank_slice_splits_every_batch_and_pads_an_empty_rank():
 def test_two_gloo_processes_match_one_process_and_resume(tmp_path):
     """Same global batch (5, so the last batch of 16 samples leaves rank 1 empty), dropout off (its
     masks depend on the per-rank batch), the loss terms that do not split per sample (aux far-x
-    mean) included, one block unfrozen: per-epoch losses and final weights agree within TOL."""
+    mean) and the goal-position targets (--soft-x) included, one block unfrozen: per-epoch losses
+    and final weights agree within TOL."""
     data = make_tiny_dataset(tmp_path / "data")
-    opts = dict(epochs=2, batch_size=5, p=0.0, aux_x=1.0, smoothing=0.1, balance="weights", unfreeze=1, threads=1)
+    opts = dict(epochs=2, batch_size=5, p=0.0, aux_x=1.0, smoothing=0.1, soft_x=0.4, balance="weights", unfreeze=1,
+                threads=1)
     one = train(_cfg(data, tmp_path / "one", **opts))
     out, cache = tmp_path / "two", tmp_path / "cache2"
     args = ["--data", str(data), "--out", str(out), "--backbone", "mobilenet_v3_small", "--weights", "none",
             "--input-size", "64", "--batch-size", "5", "--dropout", "0", "--aux-x", "1", "--smoothing", "0.1",
-            "--balance", "weights", "--unfreeze", "1", "--threads", "1", "--cache-dir", str(cache), "--quiet"]
+            "--soft-x", "0.4", "--balance", "weights", "--unfreeze", "1", "--threads", "1", "--cache-dir", str(cache),
+            "--quiet"]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     r = subprocess.run([*TORCHRUN, *args, "--epochs", "1"], capture_output=True, text=True, env=env, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]

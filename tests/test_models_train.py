@@ -218,3 +218,33 @@ def test_feature_stride_16_needs_its_skip_block_unfrozen(tiny, tmp_path):
         train(_cfg(tiny, tmp_path / "run", backbone="efficientnet_lite0", feature_stride=16, unfreeze=2, epochs=1))
     with pytest.raises(ConfigError, match="feature_stride 8"):
         _cfg(tiny, tmp_path / "run", feature_stride=8)
+
+
+def test_soft_x_targets_lean_toward_the_goal_across_a_strip_edge():
+    from crossing_assist.models.train import _targets
+
+    nan = float("nan")
+    actions = torch.tensor([0, 6, 6, 1, 12, 4])
+    far_x = torch.tensor([nan, 5.5 / 12, 5.95 / 12, 0.0, 1.0, nan])
+    t = _targets(actions, 13, 0.2, far_x, soft_x=0.4)
+    assert torch.allclose(t.sum(1), torch.ones(6))
+    assert t[0, 0] == 1                                           # unknown stays unknown
+    assert abs(float(t[1, 6]) - 0.789) < 1e-3 and torch.isclose(t[1, 5], t[1, 7])   # strip middle: symmetric
+    assert float(t[2, 7]) > 0.4 > float(t[2, 5]) * 20            # near its right edge: leans right
+    assert float(t[3, 1]) > 0.99 and float(t[4, 12]) > 0.99       # edge strips reach past the frame
+    assert torch.allclose(t[5], _targets(actions[5:], 13, 0.2)[0])   # no position: smoothing to both neighbours
+    eight = _targets(torch.tensor([2]), 8, 0.0, torch.tensor([2.0 / 12]), soft_x=0.4)  # on the edge inside action {2,3}
+    assert float(eight[0, 2]) > 0.98
+    assert torch.equal(_targets(actions, 13, 0.2, far_x, soft_x=0.0), _targets(actions, 13, 0.2))
+
+
+def test_soft_x_changes_what_is_learned_and_is_checked(tiny, tmp_path):
+    from crossing_assist.models.config import ConfigError
+
+    a = train(_cfg(tiny, tmp_path / "a", epochs=1, p=0.0))
+    b = train(_cfg(tiny, tmp_path / "b", epochs=1, p=0.0, soft_x=0.4))
+    la, lb = (load_checkpoint(r / "weights" / "last.pt")["state_dict"] for r in (a, b))
+    assert any(not torch.equal(la[k], lb[k]) for k in la)
+    assert load_policy(b / "weights" / "last.pt").config is not None
+    with pytest.raises(ConfigError, match="soft_x 5"):
+        _cfg(tiny, tmp_path / "c", soft_x=5)

@@ -98,6 +98,8 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--balance", default=d["balance"], help="none | weights | sampler")
     p.add_argument("--smoothing", type=float, default=d["smoothing"], help="label mass given to neighbouring bins")
     p.add_argument("--aux-x", type=float, default=d["aux_x"], help="weight of the far_x regression auxiliary loss")
+    p.add_argument("--soft-x", type=float, default=d["soft_x"],
+                   help="targets from a Gaussian around the goal's x, sd in strip widths (0: --smoothing only)")
     p.add_argument("--select-on", default=d["select_on"], help="val | holdout | last: which set picks best.pt")
     p.add_argument("--holdout", type=_names, default=d["holdout"], help="comma-separated train sources held out for selection")
     p.add_argument("--seed", type=int, default=d["seed"])
@@ -127,7 +129,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             weight_decay=a.weight_decay, p=a.p, mirror=a.mirror, yaw=tuple(a.yaw), field=a.field,
             field_without=tuple(a.field_without), fov_deg=a.fov_deg,
             input_size=(224, 298) if a.four_three else a.input_size, fit=a.fit, unfreeze=a.unfreeze, balance=a.balance,
-            smoothing=a.smoothing, aux_x=a.aux_x, select_on=a.select_on,
+            smoothing=a.smoothing, aux_x=a.aux_x, soft_x=a.soft_x, select_on=a.select_on,
             holdout=tuple(a.holdout), seed=a.seed,
             threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
         if a.cv:

@@ -54,6 +54,7 @@ class TrainConfig:
     balance: str = "none"               # none | weights (class-weighted loss) | sampler
     smoothing: float = 0.0              # label mass moved to the neighbouring bins
     aux_x: float = 0.0                  # weight of the |E[x] - far_x| auxiliary loss
+    soft_x: float = 0.0                 # > 0: targets from a Gaussian around far_x (sd in strip widths)
     select_on: str = "val"              # val | holdout | last: which set picks best.pt
     holdout: tuple[str, ...] = ()       # train sources held out for model selection
     seed: int = 0
@@ -77,6 +78,7 @@ class TrainConfig:
             (self.balance in BALANCE, f"balance {self.balance!r}; valid: {', '.join(BALANCE)}"),
             (0 <= self.smoothing < 1, f"smoothing {self.smoothing}; valid: 0 <= s < 1"),
             (self.aux_x >= 0, f"aux_x {self.aux_x}; valid: >= 0"),
+            (0 <= self.soft_x <= 3, f"soft_x {self.soft_x}; valid: 0 <= sd <= 3 strip widths"),
             (self.select_on in SELECT_ON, f"select_on {self.select_on!r}; valid: {', '.join(SELECT_ON)}"),
             (self.select_on != "holdout" or bool(self.holdout), "select_on holdout needs --holdout SOURCE"),
             (all(0 < abs(a) < 45 for a in self.yaw), f"yaw {self.yaw}; valid: angles with 0 < |a| < 45"),
