@@ -25,8 +25,8 @@ FIELD=${FIELD:-2}       # field views a photo: 2 (since 2026-11-29) vs 1: PTL va
 HEAD=${HEAD:-spatial_fine}   # columns x2 before the context conv: leave-one-photographer-out 0.618 vs spatial's 0.602
 FEATURE_STRIDE=${FEATURE_STRIDE:-}    # 16: the head also reads the last stride-16 block (measured 2026-12-01, not
                                       # shipped: docs/models.md); empty: the backbone's own 32
-SOFT_X=${SOFT_X:-}      # e.g. 0.4: targets from a Gaussian around the goal's x (sd in strip widths) instead of
-                        # smoothing to both neighbours; empty: --smoothing 0.2 alone
+SOFT_X=${SOFT_X:-}      # 0.4: targets from a Gaussian around the goal's x (sd in strip widths) instead of
+                        # smoothing to both neighbours (measured 2026-12-01, not shipped: docs/models.md); empty: --smoothing 0.2
 LR_SCHEDULE=${LR_SCHEDULE:-cosine}   # cosine (since 2026-11-29 night) vs constant: leave-one-photographer-out 0.695 vs 0.677
 THREADS=${THREADS:-1}
 # ablations (scripts/augment_ablation.py): field-view steps left out, and whether negatives are added
