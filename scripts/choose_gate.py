@@ -17,7 +17,8 @@ the same angular doubt spreads over more strips and one landscape-fitted thresho
 portrait frames: hence a scale per orientation. Writes ``CV/gate.json`` and
 ``CV/gate_risk_coverage.png`` (``--mirror``: the folds' bundles with mirror test-time
 augmentation, ``CV/gate_mirror.json``); ``scripts/build_default_bundle.sh`` exports with
-``--gate-scale m*_landscape --gate-scale-portrait m*_portrait``.
+``--gate-scale m*_landscape --gate-scale-portrait m*_portrait``. ``--also CV2`` pools the folds of
+another CV run of the same recipe (another ``--seed``) with CV's before choosing.
 
     .venv/bin/python scripts/choose_gate.py runs/default/cv --ptl runs/data/ptl --neg runs/data/neg \
         --used-neg runs/data/neg_half --frames 200 --portrait 3
@@ -206,15 +207,22 @@ def finished_folds(cv: Path):
 def main(argv=None) -> int:
     ap = held_out_parser(__doc__.split("\n\n")[0], frames=200)
     ap.add_argument("--portrait", type=int, default=3, help="portrait views a photo, of each kind (0: landscape only)")
+    ap.add_argument("--also", type=Path, action="append", default=[], metavar="CV2",
+                    help="another --cv source run of the same recipe (e.g. another --seed): its folds are pooled "
+                         "with CV's, so the choice averages over training noise; the result is written in CV")
     a = ap.parse_args(argv)
     from crossing_assist.models.plots import plot_risk_coverage
 
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}   # same names: neg_half links neg's images
     folds = []
-    for fold, source in finished_folds(a.cv):
-        print(f"fold {source}: export + listen", file=sys.stderr, flush=True)
-        folds.append(fold_curve(fold, source, ptl, neg, used, a.frames, a.seed, a.portrait, a.mirror))
+    for i, cv in enumerate([a.cv, *a.also]):
+        for fold, source in finished_folds(cv):
+            print(f"{cv} fold {source}: export + listen", file=sys.stderr, flush=True)
+            curves = fold_curve(fold, source, ptl, neg, used, a.frames, a.seed, a.portrait, a.mirror)
+            if i:   # one key per fold in the pooled per-fold figures
+                curves = {view: {**c, "source": f"{source} ({cv})"} for view, c in curves.items()}
+            folds.append(curves)
     if not folds:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
@@ -229,6 +237,8 @@ def main(argv=None) -> int:
         model = pooled_accuracy([f[view] for f in folds])
         result[view] = {"scale": best["scale"], "targets_met": met, "at_scale": best, "at_fitted_threshold": one,
                         **model, "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
+        if a.also:
+            result[view]["pooled_runs"] = [str(cv) for cv in (a.cv, *a.also)]
         suffix = tag(a.mirror) + ("" if view == "landscape" else f"_{view}")
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
                            a.cv / f"gate_risk_coverage{suffix}.png", f"held out, {view}: gate threshold x scale")

@@ -101,3 +101,39 @@ def test_choose_gate_model_accuracy_reports_the_goal_in_view_frames_apart():
     assert out["accuracy_goal_in_view"] == 0.5         # of views 0 (right) and 3 (failed)
     assert out["bin_mae"] == (0 + 2 + 0 + 7) / 4
     assert "accuracy_goal_in_view" not in choose_gate.model_accuracy(lis)
+
+
+def test_choose_gate_also_pools_another_runs_folds_before_choosing(tmp_path, monkeypatch):
+    """``--also CV2``: the folds of a second CV run of the recipe are pooled with CV's, so a scale
+    that one run allows but the pooled frames do not is not chosen."""
+    import json
+
+    import choose_gate as cg
+
+    n = len(cg.SCALES)
+    hi = cg.SCALES.index(1.0)
+
+    def curve(source, wrong_from):    # beacon on rises with the scale; wrong 2 % from index wrong_from
+        pts = [{"scale": m, "beacon_on": (i + 1) / n, "confidently_wrong": 0.02 if i >= wrong_from else 0.0,
+                "silence_no_crossing": 1.0, "beacon_on_goal_in_view": (i + 1) / n} for i, m in enumerate(cg.SCALES)]
+        return {"landscape": {"source": source, "frames": 100, "no_crossing_frames": 50, "goal_in_view_frames": 100,
+                              "accuracy": 0.7, "bin_mae": 0.3, "curve": pts}}
+
+    runs = {tmp_path / "a": hi + 1, tmp_path / "b": hi}   # run b's folds go wrong one step earlier
+    for cv in runs:
+        cv.mkdir()
+    monkeypatch.setattr(cg, "read_manifest", lambda path: type("M", (), {"rows": []})())
+    monkeypatch.setattr(cg, "finished_folds", lambda cv: [(cv / "fold-ptl_x", "ptl:x"), (cv / "fold-ptl_y", "ptl:y")])
+    monkeypatch.setattr(cg, "fold_curve", lambda fold, source, *a, **k: curve(source, runs[fold.parent]))
+
+    assert cg.main([str(tmp_path / "a"), "--portrait", "0"]) == 0
+    alone = json.loads((tmp_path / "a" / "gate.json").read_text())
+    assert alone["scale"] == cg.SCALES[hi] and "pooled_runs" not in alone
+
+    assert cg.main([str(tmp_path / "a"), "--also", str(tmp_path / "b"), "--portrait", "0"]) == 0
+    pooled = json.loads((tmp_path / "a" / "gate.json").read_text())
+    # pooled, scale 1 is 1 % wrong (2 % in half the folds): the step below is chosen
+    assert pooled["scale"] == cg.SCALES[hi - 1] and pooled["at_scale"]["confidently_wrong"] == 0.0
+    assert next(c for c in pooled["curve"] if c["scale"] == 1.0)["confidently_wrong"] == pytest.approx(0.01)
+    assert len(pooled["at_scale"]["per_fold"]) == 4 and len(pooled["folds"]) == 4
+    assert pooled["pooled_runs"] == [str(tmp_path / "a"), str(tmp_path / "b")]
