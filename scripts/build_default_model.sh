@@ -27,7 +27,7 @@ FEATURE_STRIDE=${FEATURE_STRIDE:-}    # 16: the head also reads the last stride-
                                       # shipped: docs/models.md); empty: the backbone's own 32
 SOFT_X=${SOFT_X:-}      # 0.4: targets from a Gaussian around the goal's x (sd in strip widths) instead of
                         # smoothing to both neighbours (measured 2026-12-01, not shipped: docs/models.md); empty: --smoothing 0.2
-BALANCE=${BALANCE:-none}  # weights: inverse-frequency class weights in the loss (crossing-train --balance)
+BALANCE=${BALANCE:-none}  # weights: inverse-frequency class weights in the loss, sqrt: their square root (crossing-train --balance)
 LR_SCHEDULE=${LR_SCHEDULE:-cosine}   # cosine (since 2026-11-29 night) vs constant: leave-one-photographer-out 0.695 vs 0.677
 THREADS=${THREADS:-1}
 # ablations (scripts/augment_ablation.py): field-view steps left out, and whether negatives are added

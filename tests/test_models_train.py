@@ -248,3 +248,23 @@ def test_soft_x_changes_what_is_learned_and_is_checked(tiny, tmp_path):
     assert load_checkpoint(b / "weights" / "last.pt")["train_config"]["soft_x"] == 0.4   # --resume keeps it
     with pytest.raises(ConfigError, match="soft_x 5"):
         _cfg(tiny, tmp_path / "c", soft_x=5)
+
+
+def test_class_weights_inverse_frequency_and_its_milder_square_root(tiny, tmp_path):
+    from crossing_assist.models.train import _class_weights
+
+    actions = np.array([1] * 9 + [2] * 4 + [3] * 1)      # strips 1, 2, 3; the others absent
+    full, sqrt = _class_weights(actions, 13).numpy(), _class_weights(actions, 13, 0.5).numpy()
+    for w in (full, sqrt):
+        assert w[0] == 0 and w[4:].sum() == 0 and w[1:4].mean() == pytest.approx(1.0)   # mean 1 over present
+    assert full[3] / full[1] == pytest.approx(9.0) and sqrt[3] / sqrt[1] == pytest.approx(3.0)
+    assert sqrt[2] / sqrt[1] == pytest.approx(1.5)
+    # --balance sqrt trains with those weights: another model than --balance weights, from one seed
+    from crossing_assist.models.config import ConfigError
+
+    a = train(_cfg(tiny, tmp_path / "a", epochs=1, p=0.0, balance="weights"))
+    b = train(_cfg(tiny, tmp_path / "b", epochs=1, p=0.0, balance="sqrt"))
+    la, lb = (load_checkpoint(r / "weights" / "last.pt")["state_dict"] for r in (a, b))
+    assert any(not torch.equal(la[k], lb[k]) for k in la)
+    with pytest.raises(ConfigError, match="balance 'cube'"):
+        _cfg(tiny, tmp_path / "c", balance="cube")

@@ -95,7 +95,7 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--fit", default=d["fit"], help="letterbox (default) | stretch: how frames meet the canvas")
     p.add_argument("--four-three", action="store_true", help="shortcut for --input-size 224x298")
     p.add_argument("--unfreeze", type=int, default=d["unfreeze"], help="train the last N backbone blocks")
-    p.add_argument("--balance", default=d["balance"], help="none | weights | sampler")
+    p.add_argument("--balance", default=d["balance"], help="none | weights (inverse-frequency class weights in the loss) | sqrt (their square root, milder) | sampler")
     p.add_argument("--smoothing", type=float, default=d["smoothing"], help="label mass given to neighbouring bins")
     p.add_argument("--aux-x", type=float, default=d["aux_x"], help="weight of the far_x regression auxiliary loss")
     p.add_argument("--soft-x", type=float, default=d["soft_x"],

@@ -15,7 +15,7 @@ from .heads import HEAD_KINDS
 OPTIMIZERS = ("rmsprop", "adamw")
 SELECT_ON = ("val", "holdout", "last")
 LR_SCHEDULES = ("constant", "cosine")
-BALANCE = ("none", "weights", "sampler")
+BALANCE = ("none", "weights", "sqrt", "sampler")
 
 
 class ConfigError(UserError):
@@ -51,7 +51,7 @@ class TrainConfig:
     input_size: tuple[int, int] | None = None   # (H, W) canvas; None = the backbone's own
     fit: str = "letterbox"              # how a frame meets the canvas: letterbox | stretch
     unfreeze: int = 0                   # last backbone blocks trained (0 = frozen backbone)
-    balance: str = "none"               # none | weights (class-weighted loss) | sampler
+    balance: str = "none"               # none | weights (class-weighted loss) | sqrt (weights ** 0.5) | sampler
     smoothing: float = 0.0              # label mass moved to the neighbouring bins
     aux_x: float = 0.0                  # weight of the |E[x] - far_x| auxiliary loss
     soft_x: float = 0.0                 # > 0: targets from a Gaussian around far_x (sd in strip widths)
