@@ -142,9 +142,12 @@ def far_x_loss(logits: torch.Tensor, far_x: torch.Tensor, n_actions: int) -> tor
     return (ex[known] - far_x[known]).abs().mean()
 
 
+CLASS_WEIGHT_POWER = {"weights": 1.0, "sqrt": 0.5}   # --balance: inverse frequency, or its square root
+
+
 def _class_weights(actions: np.ndarray, n: int, power: float = 1.0) -> torch.Tensor:
-    """Inverse-frequency weights to ``power`` (1: ``--balance weights``; 0.5: ``sqrt``, milder),
-    mean 1 over present classes; absent classes 0."""
+    """Inverse-frequency weights to ``power`` (:data:`CLASS_WEIGHT_POWER`), mean 1 over present
+    classes; absent classes 0."""
     counts = np.bincount(actions, minlength=n).astype(np.float64)
     w = np.where(counts > 0, np.maximum(counts, 1) ** -power, 0.0)
     w *= (counts > 0).sum() / max(w.sum(), 1e-12)
@@ -313,8 +316,8 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
         out.mkdir(parents=True, exist_ok=True)
         atomic_write_text(out / "args.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
     rows = _read_results(out / "results.csv", first_epoch - 1)
-    weights = (_class_weights(tr.actions, cfg.actions, 1.0 if cfg.balance == "weights" else 0.5)
-               if cfg.balance in ("weights", "sqrt") else None)
+    power = CLASS_WEIGHT_POWER.get(cfg.balance)
+    weights = _class_weights(tr.actions, cfg.actions, power) if power else None
     fwd = distributed.wrap(policy, start, ctx)
     bar = tqdm(range(first_epoch, cfg.epochs + 1), desc="train", disable=not (cfg.progress and ctx.main),
                initial=first_epoch - 1, total=cfg.epochs, unit="epoch")
