@@ -29,6 +29,7 @@ SOFT_X=${SOFT_X:-}      # 0.4: targets from a Gaussian around the goal's x (sd i
                         # smoothing to both neighbours (measured 2026-12-01, not shipped: docs/models.md); empty: --smoothing 0.2
 BALANCE=${BALANCE:-none}  # weights: inverse-frequency class weights in the loss, sqrt: their square root (crossing-train --balance)
 LR_SCHEDULE=${LR_SCHEDULE:-cosine}   # cosine (since 2026-11-29 night) vs constant: leave-one-photographer-out 0.695 vs 0.677
+SEED=${SEED:-0}          # another seed of the same recipe: its CV can be pooled (choose_gate.py --also)
 THREADS=${THREADS:-1}
 # ablations (scripts/augment_ablation.py): field-view steps left out, and whether negatives are added
 FIELD_WITHOUT=${FIELD_WITHOUT:-}   # e.g. roll or corruption (crossing-train --field-without)
@@ -41,7 +42,7 @@ if [ -n "$FEATURE_STRIDE" ]; then EXTRA+=(--feature-stride "$FEATURE_STRIDE"); f
 if [ -n "$SOFT_X" ]; then EXTRA+=(--soft-x "$SOFT_X"); fi
 RECIPE=(--data runs/data/ptl "${EXTRA[@]}" --backbone efficientnet_lite0
     --head "$HEAD" --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --lr-schedule "$LR_SCHEDULE" --weight-decay 1e-4 --smoothing 0.2 --balance "$BALANCE"
-    --aux-x 1.0 --unfreeze "$UNFREEZE" --input-size 168x224 --fit letterbox --no-mirror --field "$FIELD" --seed "${SEED:-0}"
+    --aux-x 1.0 --unfreeze "$UNFREEZE" --input-size 168x224 --fit letterbox --no-mirror --field "$FIELD" --seed "$SEED"
     --threads "$THREADS" --quiet)
 if [ "${CV:-0}" = 1 ]; then   # leave-one-photographer-out figures of the same recipe
     $PY -m crossing_assist.models.cli train "${RECIPE[@]}" --out "$OUT/cv" --cv source ${RESUME:+--resume}

@@ -251,6 +251,7 @@ def test_soft_x_changes_what_is_learned_and_is_checked(tiny, tmp_path):
 
 
 def test_class_weights_inverse_frequency_and_its_milder_square_root(tiny, tmp_path):
+    from crossing_assist.models.config import ConfigError
     from crossing_assist.models.train import _class_weights
 
     actions = np.array([1] * 9 + [2] * 4 + [3] * 1)      # strips 1, 2, 3; the others absent
@@ -260,8 +261,6 @@ def test_class_weights_inverse_frequency_and_its_milder_square_root(tiny, tmp_pa
     assert full[3] / full[1] == pytest.approx(9.0) and sqrt[3] / sqrt[1] == pytest.approx(3.0)
     assert sqrt[2] / sqrt[1] == pytest.approx(1.5)
     # --balance sqrt trains with those weights: another model than --balance weights, from one seed
-    from crossing_assist.models.config import ConfigError
-
     a = train(_cfg(tiny, tmp_path / "a", epochs=1, p=0.0, balance="weights"))
     b = train(_cfg(tiny, tmp_path / "b", epochs=1, p=0.0, balance="sqrt"))
     la, lb = (load_checkpoint(r / "weights" / "last.pt")["state_dict"] for r in (a, b))

@@ -15,7 +15,8 @@ from .heads import HEAD_KINDS
 OPTIMIZERS = ("rmsprop", "adamw")
 SELECT_ON = ("val", "holdout", "last")
 LR_SCHEDULES = ("constant", "cosine")
-BALANCE = ("none", "weights", "sqrt", "sampler")
+CLASS_WEIGHT_POWER = {"weights": 1.0, "sqrt": 0.5}   # --balance: class weights = inverse frequency ** power
+BALANCE = ("none", *CLASS_WEIGHT_POWER, "sampler")
 
 
 class ConfigError(UserError):

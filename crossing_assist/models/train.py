@@ -36,7 +36,7 @@ from ..fileio import sweep_orphans
 from .backbones import create_backbone
 from .cache import FeatureSet, compute_features
 from .checkpoint import load_checkpoint, save_checkpoint
-from .config import ConfigError, TrainConfig
+from .config import CLASS_WEIGHT_POWER, ConfigError, TrainConfig
 from . import distributed
 from .data import make_variants
 from .heads import create_head
@@ -142,11 +142,8 @@ def far_x_loss(logits: torch.Tensor, far_x: torch.Tensor, n_actions: int) -> tor
     return (ex[known] - far_x[known]).abs().mean()
 
 
-CLASS_WEIGHT_POWER = {"weights": 1.0, "sqrt": 0.5}   # --balance: inverse frequency, or its square root
-
-
 def _class_weights(actions: np.ndarray, n: int, power: float = 1.0) -> torch.Tensor:
-    """Inverse-frequency weights to ``power`` (:data:`CLASS_WEIGHT_POWER`), mean 1 over present
+    """Inverse-frequency weights to ``power`` (``config.CLASS_WEIGHT_POWER``), mean 1 over present
     classes; absent classes 0."""
     counts = np.bincount(actions, minlength=n).astype(np.float64)
     w = np.where(counts > 0, np.maximum(counts, 1) ** -power, 0.0)
