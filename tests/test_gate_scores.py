@@ -137,3 +137,38 @@ def test_choose_gate_also_pools_another_runs_folds_before_choosing(tmp_path, mon
     assert next(c for c in pooled["curve"] if c["scale"] == 1.0)["confidently_wrong"] == pytest.approx(0.01)
     assert len(pooled["at_scale"]["per_fold"]) == 4 and len(pooled["folds"]) == 4
     assert pooled["pooled_runs"] == [str(tmp_path / "a"), str(tmp_path / "b")]
+
+
+def test_choose_gate_draws_portrait_views_from_their_own_number_of_photos(tmp_path, monkeypatch):
+    """``--portrait-frames``: the landscape curve plays ``--frames`` held-out photos, the portrait
+    curves a draw of their own size; each is cached under its own draw."""
+    import choose_gate as cg
+    from PIL import Image
+    from runtime_toy import TOY2, bar_frame, make_toy_bundle
+
+    from crossing_assist.data_tools.manifest import Row, read_manifest, write_manifest
+
+    def dataset(name, rows):
+        root = tmp_path / name
+        (root / "images").mkdir(parents=True)
+        for r in rows:
+            Image.fromarray(bar_frame(None if r.label == 0 else r.far_x)).save(root / r.image)
+        write_manifest(root, rows)
+        return read_manifest(root)
+
+    ptl = dataset("ptl", [Row(f"images/p{i}.png", 2 + i, (1.5 + i) / 12, "ptl:x", "train") for i in range(6)])
+    neg = dataset("neg", [Row(f"images/n{i}.png", 0, None, "ptl:x", "train") for i in range(4)])
+    fold = tmp_path / "cv" / "fold-ptl_x"
+    fold.mkdir(parents=True)
+    bundle = make_toy_bundle(tmp_path / "bundle", TOY2)
+    monkeypatch.setattr(cg, "fold_bundle", lambda *a, **k: bundle)
+
+    curves = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 6, 0, 1, portrait_frames=2)
+    assert curves["landscape"]["frames"] == 6 and curves["landscape"]["no_crossing_frames"] == 3
+    for view in ("portrait", "portrait_window"):   # 2 photos and 1 no-crossing view, one view of each kind
+        assert curves[view]["frames"] == 2 and curves[view]["no_crossing_frames"] == 1
+    assert {p.name for p in fold.glob("gate_curve*.json")} == {
+        "gate_curve_6.json", "gate_curve_2_portrait1.json", "gate_curve_2_portrait_window1.json"}
+    # without it, both come from the same draw
+    again = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 6, 0, 1)
+    assert again["portrait"]["frames"] == 6
