@@ -149,13 +149,15 @@ def pool(folds: list[dict]) -> list[dict]:
     out = []
     for i, m in enumerate(SCALES):
         pts = [(f["curve"][i], f["frames"], f["no_crossing_frames"]) for f in folds]
-        on = sum(c["beacon_on"] * a for c, a, _ in pts) / sum(a for _, a, _ in pts)
-        wrong = sum(c["confidently_wrong"] * a for c, a, _ in pts) / sum(a for _, a, _ in pts)
+        frames = sum(a for _, a, _ in pts)
+        on = sum(c["beacon_on"] * a for c, a, _ in pts) / frames
+        wrong_frames = round(sum(c["confidently_wrong"] * a for c, a, _ in pts))
         sil_n = sum(b for _, _, b in pts)
         sil = sum((c["silence_no_crossing"] or 0) * b for c, _, b in pts) / sil_n if sil_n else None
         vis = [(f["curve"][i].get("beacon_on_goal_in_view"), f.get("goal_in_view_frames", 0)) for f in folds]
         vis_n = sum(n for v, n in vis if v is not None)
-        out.append({"scale": m, "beacon_on": on, "confidently_wrong": wrong, "silence_no_crossing": sil,
+        out.append({"scale": m, "beacon_on": on, "confidently_wrong": wrong_frames / frames,
+                    "confidently_wrong_frames": wrong_frames, "frames": frames, "silence_no_crossing": sil,
                     "beacon_on_goal_in_view": sum(v * n for v, n in vis if v is not None) / vis_n if vis_n else None,
                     "per_fold": {f["source"]: f["curve"][i] for f in folds}})
     return out
@@ -235,7 +237,7 @@ def main(argv=None) -> int:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
     fmt = lambda c: (f"beacon on {c['beacon_on']:.3f} (goal in view {c.get('beacon_on_goal_in_view') or float('nan'):.3f}), "  # noqa: E731
-                     f"confidently wrong {100 * c['confidently_wrong']:.2f} %, "
+                     f"confidently wrong {100 * c['confidently_wrong']:.2f} % ({c['confidently_wrong_frames']} of {c['frames']}), "
                      f"silence off-crossing {c['silence_no_crossing'] if c['silence_no_crossing'] is None else round(c['silence_no_crossing'], 3)}")
     result: dict = {}
     for view in folds[0]:

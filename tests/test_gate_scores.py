@@ -134,7 +134,9 @@ def test_choose_gate_also_pools_another_runs_folds_before_choosing(tmp_path, mon
     pooled = json.loads((tmp_path / "a" / "gate.json").read_text())
     # pooled, scale 1 is 1 % wrong (2 % in half the folds): the step below is chosen
     assert pooled["scale"] == cg.SCALES[hi - 1] and pooled["at_scale"]["confidently_wrong"] == 0.0
-    assert next(c for c in pooled["curve"] if c["scale"] == 1.0)["confidently_wrong"] == pytest.approx(0.01)
+    at_one = next(c for c in pooled["curve"] if c["scale"] == 1.0)
+    assert at_one["confidently_wrong"] == pytest.approx(0.01)
+    assert (at_one["confidently_wrong_frames"], at_one["frames"]) == (4, 400)   # the count the rate rests on
     assert len(pooled["at_scale"]["per_fold"]) == 4 and len(pooled["folds"]) == 4
     assert pooled["pooled_runs"] == [str(tmp_path / "a"), str(tmp_path / "b")]
 
