@@ -35,7 +35,9 @@ def shipped(tmp_path):
     (src / "bundle.json").write_text(json.dumps(meta))
     cv = tmp_path / "cv"
     cv.mkdir()
-    (cv / "gate.json").write_text(json.dumps(_gate(0.25) | {"portrait": _gate(1.5), "portrait_window": _gate(2.0)}))
+    pooled = {"pooled_runs": [str(cv), str(tmp_path / "cv_seed1")]}   # choose_gate.py --also
+    (cv / "gate.json").write_text(json.dumps(_gate(0.25) | pooled | {"portrait": _gate(1.5) | pooled,
+                                                                     "portrait_window": _gate(2.0) | pooled}))
     (cv / "cv.json").write_text(json.dumps({"config": {"epochs": 2}, "folds": [], "accuracy": {"mean": 0.6, "sd": 0.01},
                                             "bin_mae": {"mean": 0.4, "sd": 0.02}, "far_x_error": {"mean": 0.03, "sd": 0.001},
                                             "majority_accuracy": 0.3}))
@@ -58,6 +60,7 @@ def test_stamp_rescales_the_gate_and_turns_the_view_crop_on(shipped, tmp_path):
     assert b.metrics["leave_one_photographer_out"]["accuracy"]["mean"] == 0.6
     assert b.metrics["leave_one_photographer_out_bundle"]["accuracy"]["mean"] == 0.62   # scripts/cv_bundles.py
     assert set(b.metrics["gate_held_out"]) >= {"scale", "accuracy", "portrait", "portrait_window"}
+    assert b.metrics["gate_held_out"]["portrait"]["pooled_runs"] == [str(cv), str(tmp_path / "cv_seed1")]
     assert len(b.provenance["stamped"]) == 1 and len(b.provenance["stamped"][0]["what"]) == 2
     Engine(tmp_path / "out")          # the graph's embedded copy matches the new bundle.json
     r = _stamp(tmp_path / "out", tmp_path / "again", "--cv", cv, "--sensor-aspect", "4:3")
