@@ -20,8 +20,9 @@ augmentation, ``CV/gate_mirror.json``); ``scripts/build_default_bundle.sh`` expo
 ``--gate-scale m*_landscape --gate-scale-portrait m*_portrait``. ``--also CV2`` pools the folds of
 another CV run of the same recipe (another ``--seed``) with CV's before choosing.
 ``--portrait-frames N`` draws the portrait views from N photos a fold instead of ``--frames``: a
-landscape photo is one clip, a portrait one 2 x ``--portrait``, so ``--frames 100000
---portrait-frames 200`` chooses landscape on every held-out photo at a seventh of the cost.
+landscape photo is one clip, its portrait views 2 x ``--portrait`` clips, so ``--frames 100000
+--portrait-frames 200`` chooses landscape on every held-out photo without playing every photo's
+portrait views too.
 
     .venv/bin/python scripts/choose_gate.py runs/default/cv --ptl runs/data/ptl --neg runs/data/neg \
         --used-neg runs/data/neg_half --frames 200 --portrait 3
