@@ -37,6 +37,25 @@ def bar_frame(x: float | None, h: int = 72, w: int = 96, noise: float = 0.0,
     return img
 
 
+def bar_dataset(root: str | Path, n: int = 6, unknown: bool = False, split: str = "val",
+                source: str | None = None) -> Path:
+    """A dataset folder of ``n`` bar frames (strips 1, 6, 11, 4, ...; ``unknown``: no bar, label
+    ``unknown``) in ``split``, from ``source`` (None: two sources, ``src:0`` and ``src:1``)."""
+    from crossing_assist.actions import UNKNOWN, bin_center_x
+    from crossing_assist.data_tools.images import save_rgb
+    from crossing_assist.data_tools.manifest import Row, write_manifest
+
+    root = Path(root)
+    rows = []
+    for i in range(n):
+        strip = 1 + (i * 5) % 12
+        save_rgb(root / "images" / f"f{i}.png", bar_frame(None if unknown else bin_center_x(strip), h=72, w=96))
+        rows.append(Row(f"images/f{i}.png", UNKNOWN if unknown else strip, None if unknown else bin_center_x(strip),
+                        source or f"src:{i % 2}", split, {}, ()))
+    write_manifest(root, rows)
+    return root
+
+
 def write_clip(path: str | Path, xs, fps: float = 30.0, h: int = 72, w: int = 96, noise: float = 0.0,
                seed: int = 0) -> Path:
     """An mp4 (mp4v) of bar frames at positions ``xs`` (None = no bar); returns the path."""

@@ -145,21 +145,12 @@ def test_choose_gate_draws_portrait_views_from_their_own_number_of_photos(tmp_pa
     """``--portrait-frames``: the landscape curve plays ``--frames`` held-out photos, the portrait
     curves a draw of their own size; each is cached under its own draw."""
     import choose_gate as cg
-    from PIL import Image
-    from runtime_toy import TOY2, bar_frame, make_toy_bundle
+    from runtime_toy import TOY2, bar_dataset, make_toy_bundle
 
-    from crossing_assist.data_tools.manifest import Row, read_manifest, write_manifest
+    from crossing_assist.data_tools.manifest import read_manifest
 
-    def dataset(name, rows):
-        root = tmp_path / name
-        (root / "images").mkdir(parents=True)
-        for r in rows:
-            Image.fromarray(bar_frame(None if r.label == 0 else r.far_x)).save(root / r.image)
-        write_manifest(root, rows)
-        return read_manifest(root)
-
-    ptl = dataset("ptl", [Row(f"images/p{i}.png", 2 + i, (1.5 + i) / 12, "ptl:x", "train") for i in range(6)])
-    neg = dataset("neg", [Row(f"images/n{i}.png", 0, None, "ptl:x", "train") for i in range(4)])
+    ptl = read_manifest(bar_dataset(tmp_path / "ptl", 6, split="train", source="ptl:x"))
+    neg = read_manifest(bar_dataset(tmp_path / "neg", 4, unknown=True, split="train", source="ptl:x"))
     fold = tmp_path / "cv" / "fold-ptl_x"
     fold.mkdir(parents=True)
     bundle = make_toy_bundle(tmp_path / "bundle", TOY2)

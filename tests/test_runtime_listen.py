@@ -6,11 +6,9 @@ import subprocess
 import sys
 
 import pytest
-from runtime_toy import TOY2, bar_frame, make_toy_bundle, toy_bundle  # noqa: F401  (fixture)
+from runtime_toy import TOY2, bar_dataset, bar_frame, make_toy_bundle, toy_bundle  # noqa: F401  (fixture)
 
 from crossing_assist.actions import UNKNOWN, bin_center_x
-from crossing_assist.data_tools.images import save_rgb
-from crossing_assist.data_tools.manifest import Row, write_manifest
 from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.listen import Heard, Listener, choose_threshold, summarise
 
@@ -76,21 +74,9 @@ def test_listener_reads_strips_with_the_frames_fov(tmp_path):
     assert all(h.on and h.strip == h.label for h in heard), heard
 
 
-def _bar_dataset(root, n=6, unknown=False):
-    rows = []
-    for i in range(n):
-        strip = 1 + (i * 5) % 12
-        img = bar_frame(None if unknown else bin_center_x(strip), h=72, w=96)
-        save_rgb(root / "images" / f"f{i}.png", img)
-        rows.append(Row(f"images/f{i}.png", UNKNOWN if unknown else strip, None if unknown else bin_center_x(strip),
-                        f"src:{i % 2}", "val", {}, ()))
-    write_manifest(root, rows)
-    return root
-
-
 def test_crossing_eval_bundle_writes_listen_numbers_and_risk_coverage(tmp_path, toy_bundle):  # noqa: F811
-    data = _bar_dataset(tmp_path / "data")
-    neg = _bar_dataset(tmp_path / "neg", n=3, unknown=True)
+    data = bar_dataset(tmp_path / "data")
+    neg = bar_dataset(tmp_path / "neg", n=3, unknown=True)
     out = tmp_path / "eval"
     r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(toy_bundle),
                         "--data", str(data), "--split", "val", "--negatives", str(neg), "--portrait", "2",
@@ -119,7 +105,7 @@ def test_crossing_eval_bundle_writes_listen_numbers_and_risk_coverage(tmp_path, 
 
 
 def test_crossing_eval_bad_listen_options_are_one_line(tmp_path, toy_bundle):  # noqa: F811
-    data = _bar_dataset(tmp_path / "data", n=2)
+    data = bar_dataset(tmp_path / "data", n=2)
     for args in (["--portrait", "13"], ["--clip-seconds", "0"]):
         r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(toy_bundle),
                             "--data", str(data), "--split", "val", "--out", str(tmp_path / "e"), *args],
