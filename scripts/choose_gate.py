@@ -22,7 +22,8 @@ another CV run of the same recipe (another ``--seed``) with CV's before choosing
 ``--portrait-frames N`` draws the portrait views from N photos a fold instead of ``--frames``: a
 landscape photo is one clip, its portrait views 2 x ``--portrait`` clips, so ``--frames 100000
 --portrait-frames 200`` chooses landscape on every held-out photo without playing every photo's
-portrait views too.
+portrait views too. ``--grid 16`` sweeps twice as many scales as crossing-eval (16 a doubling), for
+a curve that jumps between neighbouring scales.
 
     .venv/bin/python scripts/choose_gate.py runs/default/cv --ptl runs/data/ptl --neg runs/data/neg \
         --used-neg runs/data/neg_half --frames 200 --portrait 3
@@ -43,7 +44,10 @@ from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest, write_manifest
 from crossing_assist.runtime.listen import Listener, summarise
 
-from crossing_assist.models.evaluate import GATE_SCALES as SCALES  # noqa: E402  (the same grid as crossing-eval)
+from crossing_assist.models.evaluate import gate_scales  # noqa: E402  (crossing-eval's grid by default)
+
+GRID = 8                    # gate scales a doubling, as crossing-eval sweeps
+SCALES = gate_scales(GRID)
 
 
 def _subset(ds, rows, out: Path) -> Path:
@@ -104,10 +108,11 @@ def model_accuracy(lis: Listener, in_view: list[int] | None = None) -> dict:
 
 
 def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, portrait: int,
-               mirror: bool = False, portrait_frames: int | None = None) -> dict:
+               mirror: bool = False, portrait_frames: int | None = None, grid: int = GRID) -> dict:
     """The fold's held-out curves: ``{"landscape": {...}, "portrait": {...}, "portrait_window": {...}}``
     (the portrait ones only with ``portrait`` > 0 views a photo, on a draw of ``portrait_frames``
-    photos, default ``n_frames``); each cached in the fold folder once listened to."""
+    photos, default ``n_frames``), swept over :func:`gate_scales` ``(grid)``; each cached in the
+    fold folder once listened to (another grid is another cache)."""
     from crossing_assist.runtime.engine import Engine
 
     bundle = fold_bundle(fold, source, ptl, mirror)
@@ -115,7 +120,8 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     out = {}
     for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
         n = n_frames if view == "landscape" or portrait_frames is None else portrait_frames
-        done = fold / f"gate_curve{draw_tag(mirror, n, seed)}{'' if view == 'landscape' else f'_{view}{portrait}'}.json"
+        done = fold / (f"gate_curve{draw_tag(mirror, n, seed)}{'' if view == 'landscape' else f'_{view}{portrait}'}"
+                       f"{'' if grid == GRID else f'_grid{grid}'}.json")
         if done.is_file():   # listened to already (the fold does not change once finished)
             out[view] = json.loads(done.read_text())
             continue
@@ -139,16 +145,19 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
                   **model_accuracy(lis, in_view),
                   "curve": [{"scale": m, **summarise(lis.heard(m * t0)),
                              "beacon_on_goal_in_view": summarise(lis.heard(m * t0, in_view))["beacon_on"]}
-                            for m in SCALES]}
+                            for m in gate_scales(grid)]}
         done.write_text(json.dumps(result, indent=1))
         out[view] = result
     return out
 
 
 def pool(folds: list[dict]) -> list[dict]:
-    """Per scale, the folds' rates weighted by their frame counts."""
+    """Per scale, the folds' rates weighted by their frame counts (the folds share one grid)."""
+    scales = [c["scale"] for c in folds[0]["curve"]]
+    if any([c["scale"] for c in f["curve"]] != scales for f in folds):
+        raise ValueError("the folds' curves were swept over different gate grids")
     out = []
-    for i, m in enumerate(SCALES):
+    for i, m in enumerate(scales):
         pts = [(f["curve"][i], f["frames"], f["no_crossing_frames"]) for f in folds]
         frames = sum(a for _, a, _ in pts)
         on = sum(c["beacon_on"] * a for c, a, _ in pts) / frames
@@ -218,10 +227,15 @@ def main(argv=None) -> int:
                     help="held-out photos per fold for the portrait views (default: --frames); e.g. --frames 100000 "
                          "chooses landscape on every held-out photo (one view a photo) and portrait on a draw "
                          "(2 x --portrait views a photo)")
+    ap.add_argument("--grid", type=int, default=GRID, metavar="STEPS",
+                    help=f"gate scales a doubling, from x1/4 to x4 (default {GRID}, crossing-eval's grid); a finer grid "
+                         "listens again (its own cache)")
     ap.add_argument("--also", type=Path, action="append", default=[], metavar="CV2",
                     help="another --cv source run of the same recipe (e.g. another --seed): its folds are pooled "
                          "with CV's, so the choice averages over training noise; the result is written in CV")
     a = ap.parse_args(argv)
+    if a.grid < 1:
+        ap.error(f"--grid {a.grid}: at least 1 scale a doubling")
     from crossing_assist.models.plots import plot_risk_coverage
 
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
@@ -230,7 +244,8 @@ def main(argv=None) -> int:
     for i, cv in enumerate([a.cv, *a.also]):
         for fold, source in finished_folds(cv):
             print(f"{cv} fold {source}: export + listen", file=sys.stderr, flush=True)
-            curves = fold_curve(fold, source, ptl, neg, used, a.frames, a.seed, a.portrait, a.mirror, a.portrait_frames)
+            curves = fold_curve(fold, source, ptl, neg, used, a.frames, a.seed, a.portrait, a.mirror, a.portrait_frames,
+                                a.grid)
             if i:   # one key per fold in the pooled per-fold figures
                 curves = {view: {**c, "source": f"{source} ({cv})"} for view, c in curves.items()}
             folds.append(curves)

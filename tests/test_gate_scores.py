@@ -165,3 +165,31 @@ def test_choose_gate_draws_portrait_views_from_their_own_number_of_photos(tmp_pa
     # without it, both come from the same draw
     again = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 6, 0, 1)
     assert again["portrait"]["frames"] == 6
+
+
+def test_choose_gate_grid_sweeps_a_finer_grid_under_its_own_cache(tmp_path, monkeypatch):
+    """``--grid 16``: twice as many gate scales (crossing-eval's grid every other point), cached
+    apart from the default grid's curve; curves of two grids are never pooled."""
+    import choose_gate as cg
+    from runtime_toy import TOY2, bar_dataset, make_toy_bundle
+
+    from crossing_assist.data_tools.manifest import read_manifest
+
+    ptl = read_manifest(bar_dataset(tmp_path / "ptl", 4, split="train", source="ptl:x"))
+    neg = read_manifest(bar_dataset(tmp_path / "neg", 2, unknown=True, split="train", source="ptl:x"))
+    fold = tmp_path / "cv" / "fold-ptl_x"
+    fold.mkdir(parents=True)
+    monkeypatch.setattr(cg, "fold_bundle", lambda *a, **k: make_toy_bundle(tmp_path / "bundle", TOY2))
+
+    fine = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 4, 0, 0, grid=16)["landscape"]
+    scales = [c["scale"] for c in fine["curve"]]
+    assert len(scales) == 65 and scales[::2] == list(cg.SCALES) and 2 ** (1 / 16) in scales
+    assert {p.name for p in fold.glob("gate_curve*.json")} == {"gate_curve_4_grid16.json"}
+    coarse = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 4, 0, 0)["landscape"]
+    assert [c["scale"] for c in coarse["curve"]] == list(cg.SCALES)
+    assert (fold / "gate_curve_4.json").is_file()
+    assert len(cg.pool([fine, fine])) == 65
+    with pytest.raises(ValueError, match="different gate grids"):
+        cg.pool([fine, coarse])
+    with pytest.raises(SystemExit):
+        cg.main([str(tmp_path / "cv"), "--grid", "0"])

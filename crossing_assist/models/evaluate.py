@@ -149,8 +149,14 @@ def _bundle_conformal(bundle, probs: np.ndarray, labels: np.ndarray) -> dict:
     return bundle_conformal_report(bundle, probs, labels)
 
 
-#: Gate thresholds swept, as multiples of the bundle's (1 included; the same grid as scripts/choose_gate.py).
-GATE_SCALES = tuple(2.0 ** (j / 8) for j in range(-16, 17))
+def gate_scales(steps: int = 8) -> tuple[float, ...]:
+    """Gate thresholds to sweep, as multiples of the bundle's: ``steps`` a doubling, from 1/4 to 4
+    (1 included)."""
+    return tuple(2.0 ** (j / steps) for j in range(-2 * steps, 2 * steps + 1))
+
+
+#: The gate thresholds crossing-eval sweeps (scripts/choose_gate.py's default grid).
+GATE_SCALES = gate_scales()
 
 
 def _views(cfg: EvalConfig, part: Dataset, geometry) -> dict[str, list[tuple[np.ndarray, float | None, int, bool, float | None]]]:
