@@ -141,21 +141,27 @@ def test_choose_gate_also_pools_another_runs_folds_before_choosing(tmp_path, mon
     assert pooled["pooled_runs"] == [str(tmp_path / "a"), str(tmp_path / "b")]
 
 
-def test_choose_gate_draws_portrait_views_from_their_own_number_of_photos(tmp_path, monkeypatch):
-    """``--portrait-frames``: the landscape curve plays ``--frames`` held-out photos, the portrait
-    curves a draw of their own size; each is cached under its own draw."""
+def _toy_fold(tmp_path, monkeypatch, photos: int, no_crossing: int):
+    """choose_gate with a finished fold ``fold-ptl_x`` whose bundle is the toy bundle, and the
+    held-out photographer's ``photos`` and ``no_crossing`` views: ``(choose_gate, ptl, neg, fold)``."""
     import choose_gate as cg
     from runtime_toy import TOY2, bar_dataset, make_toy_bundle
 
     from crossing_assist.data_tools.manifest import read_manifest
 
-    ptl = read_manifest(bar_dataset(tmp_path / "ptl", 6, split="train", source="ptl:x"))
-    neg = read_manifest(bar_dataset(tmp_path / "neg", 4, unknown=True, split="train", source="ptl:x"))
+    ptl = read_manifest(bar_dataset(tmp_path / "ptl", photos, split="train", source="ptl:x"))
+    neg = read_manifest(bar_dataset(tmp_path / "neg", no_crossing, unknown=True, split="train", source="ptl:x"))
     fold = tmp_path / "cv" / "fold-ptl_x"
     fold.mkdir(parents=True)
     bundle = make_toy_bundle(tmp_path / "bundle", TOY2)
     monkeypatch.setattr(cg, "fold_bundle", lambda *a, **k: bundle)
+    return cg, ptl, neg, fold
 
+
+def test_choose_gate_draws_portrait_views_from_their_own_number_of_photos(tmp_path, monkeypatch):
+    """``--portrait-frames``: the landscape curve plays ``--frames`` held-out photos, the portrait
+    curves a draw of their own size; each is cached under its own draw."""
+    cg, ptl, neg, fold = _toy_fold(tmp_path, monkeypatch, photos=6, no_crossing=4)
     curves = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 6, 0, 1, portrait_frames=2)
     assert curves["landscape"]["frames"] == 6 and curves["landscape"]["no_crossing_frames"] == 3
     for view in ("portrait", "portrait_window"):   # 2 photos and 1 no-crossing view, one view of each kind
@@ -170,17 +176,7 @@ def test_choose_gate_draws_portrait_views_from_their_own_number_of_photos(tmp_pa
 def test_choose_gate_grid_sweeps_a_finer_grid_under_its_own_cache(tmp_path, monkeypatch):
     """``--grid 16``: twice as many gate scales (crossing-eval's grid every other point), cached
     apart from the default grid's curve; curves of two grids are never pooled."""
-    import choose_gate as cg
-    from runtime_toy import TOY2, bar_dataset, make_toy_bundle
-
-    from crossing_assist.data_tools.manifest import read_manifest
-
-    ptl = read_manifest(bar_dataset(tmp_path / "ptl", 4, split="train", source="ptl:x"))
-    neg = read_manifest(bar_dataset(tmp_path / "neg", 2, unknown=True, split="train", source="ptl:x"))
-    fold = tmp_path / "cv" / "fold-ptl_x"
-    fold.mkdir(parents=True)
-    monkeypatch.setattr(cg, "fold_bundle", lambda *a, **k: make_toy_bundle(tmp_path / "bundle", TOY2))
-
+    cg, ptl, neg, fold = _toy_fold(tmp_path, monkeypatch, photos=4, no_crossing=2)
     fine = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 4, 0, 0, grid=16)["landscape"]
     scales = [c["scale"] for c in fine["curve"]]
     assert len(scales) == 65 and scales[::2] == list(cg.SCALES) and 2 ** (1 / 16) in scales
