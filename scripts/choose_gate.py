@@ -151,6 +151,16 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     return out
 
 
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """The Wilson score interval (95 % with z = 1.96) of a rate of ``k`` in ``n``: how far a
+    confidently-wrong rate measured on n frames may be from the rate on many more."""
+    if n <= 0:
+        return 0.0, 1.0
+    p, d = k / n, 1 + z * z / n
+    mid, half = (p + z * z / (2 * n)) / d, z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
+    return float(max(0.0, mid - half)), float(min(1.0, mid + half))
+
+
 def pool(folds: list[dict]) -> list[dict]:
     """Per scale, the folds' rates weighted by their frame counts (the folds share one grid)."""
     scales = [c["scale"] for c in folds[0]["curve"]]
@@ -167,7 +177,8 @@ def pool(folds: list[dict]) -> list[dict]:
         vis = [(f["curve"][i].get("beacon_on_goal_in_view"), f.get("goal_in_view_frames", 0)) for f in folds]
         vis_n = sum(n for v, n in vis if v is not None)
         out.append({"scale": m, "beacon_on": on, "confidently_wrong": wrong_frames / frames,
-                    "confidently_wrong_frames": wrong_frames, "frames": frames, "silence_no_crossing": sil,
+                    "confidently_wrong_frames": wrong_frames, "frames": frames,
+                    "confidently_wrong_95": wilson(wrong_frames, frames), "silence_no_crossing": sil,
                     "beacon_on_goal_in_view": sum(v * n for v, n in vis if v is not None) / vis_n if vis_n else None,
                     "per_fold": {f["source"]: f["curve"][i] for f in folds}})
     return out
@@ -253,7 +264,8 @@ def main(argv=None) -> int:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
     fmt = lambda c: (f"beacon on {c['beacon_on']:.3f} (goal in view {c.get('beacon_on_goal_in_view') or float('nan'):.3f}), "  # noqa: E731
-                     f"confidently wrong {100 * c['confidently_wrong']:.2f} % ({c['confidently_wrong_frames']} of {c['frames']}), "
+                     f"confidently wrong {100 * c['confidently_wrong']:.2f} % ({c['confidently_wrong_frames']} of {c['frames']}; "
+                     f"95 % interval {100 * c['confidently_wrong_95'][0]:.2f}-{100 * c['confidently_wrong_95'][1]:.2f} %), "
                      f"silence off-crossing {c['silence_no_crossing'] if c['silence_no_crossing'] is None else round(c['silence_no_crossing'], 3)}")
     result: dict = {}
     for view in folds[0]:

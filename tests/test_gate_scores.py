@@ -137,6 +137,8 @@ def test_choose_gate_also_pools_another_runs_folds_before_choosing(tmp_path, mon
     at_one = next(c for c in pooled["curve"] if c["scale"] == 1.0)
     assert at_one["confidently_wrong"] == pytest.approx(0.01)
     assert (at_one["confidently_wrong_frames"], at_one["frames"]) == (4, 400)   # the count the rate rests on
+    assert at_one["confidently_wrong_95"] == pytest.approx((0.0039, 0.0254), abs=1e-4)   # Wilson, 4 of 400
+    assert pooled["at_scale"]["confidently_wrong_95"] == pytest.approx((0.0, 0.0095), abs=1e-4)   # 0 of 400
     assert len(pooled["at_scale"]["per_fold"]) == 4 and len(pooled["folds"]) == 4
     assert pooled["pooled_runs"] == [str(tmp_path / "a"), str(tmp_path / "b")]
 
