@@ -82,6 +82,7 @@ def main(argv=None) -> int:
         return 2
     meta = json.loads((a.src / "bundle.json").read_text())
     old_gate = meta["metrics"].get("gate_held_out")
+    read = [f for f in ("cv.json", f"cv_bundles{tag(b.mc.mirror)}.json", a.gate_json) if (a.cv / f).is_file()]
     if (a.cv / "cv.json").is_file():
         c = json.loads((a.cv / "cv.json").read_text())
         meta["metrics"]["leave_one_photographer_out"] = {
@@ -91,7 +92,7 @@ def main(argv=None) -> int:
     shipped = a.cv / f"cv_bundles{tag(b.mc.mirror)}.json"
     if shipped.is_file():
         meta["metrics"]["leave_one_photographer_out_bundle"] = json.loads(shipped.read_text())
-    stamped = []
+    stamped = [f"held-out figures from {a.cv} ({', '.join(read)})"] if read else []
     gate_path = a.cv / a.gate_json
     if gate_path.is_file():
         g = json.loads(gate_path.read_text())

@@ -61,12 +61,19 @@ def test_stamp_rescales_the_gate_and_turns_the_view_crop_on(shipped, tmp_path):
     assert b.metrics["leave_one_photographer_out_bundle"]["accuracy"]["mean"] == 0.62   # scripts/cv_bundles.py
     assert set(b.metrics["gate_held_out"]) >= {"scale", "accuracy", "portrait", "portrait_window"}
     assert b.metrics["gate_held_out"]["portrait"]["pooled_runs"] == [str(cv), str(tmp_path / "cv_seed1")]
-    assert len(b.provenance["stamped"]) == 1 and len(b.provenance["stamped"][0]["what"]) == 2
+    assert len(b.provenance["stamped"]) == 1 and len(b.provenance["stamped"][0]["what"]) == 3
+    assert b.provenance["stamped"][0]["what"][0] == f"held-out figures from {cv} (cv.json, cv_bundles.json, gate.json)"
     Engine(tmp_path / "out")          # the graph's embedded copy matches the new bundle.json
     r = _stamp(tmp_path / "out", tmp_path / "again", "--cv", cv, "--sensor-aspect", "4:3")
     assert r.returncode == 0, r.stderr
     history = read_bundle(tmp_path / "again").provenance["stamped"]
-    assert [len(h["what"]) for h in history] == [2, 1] and "view_crop" in history[0]["what"][1]
+    assert [len(h["what"]) for h in history] == [3, 2] and "view_crop" in history[0]["what"][2]
+    # a stamp of the figures alone is recorded too
+    r = _stamp(tmp_path / "again", tmp_path / "figures", "--cv", cv)
+    assert r.returncode == 0, r.stderr
+    last = read_bundle(tmp_path / "figures").provenance["stamped"][-1]
+    assert len(read_bundle(tmp_path / "figures").provenance["stamped"]) == 3 and last["what"] == [
+        f"held-out figures from {cv} (cv.json, cv_bundles.json, gate.json)"]
 
 
 def test_rescale_starts_from_the_recorded_fitted_threshold_not_a_stale_scale(shipped, tmp_path):
