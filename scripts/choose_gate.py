@@ -47,7 +47,6 @@ from crossing_assist.runtime.listen import Listener, summarise
 from crossing_assist.models.evaluate import gate_scales  # noqa: E402  (crossing-eval's grid by default)
 
 GRID = 8                    # gate scales a doubling, as crossing-eval sweeps
-SCALES = gate_scales(GRID)
 
 
 def _subset(ds, rows, out: Path) -> Path:

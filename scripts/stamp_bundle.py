@@ -82,18 +82,17 @@ def main(argv=None) -> int:
         return 2
     meta = json.loads((a.src / "bundle.json").read_text())
     old_gate = meta["metrics"].get("gate_held_out")
-    read = [f for f in ("cv.json", f"cv_bundles{tag(b.mc.mirror)}.json", a.gate_json) if (a.cv / f).is_file()]
+    shipped, gate_path = a.cv / f"cv_bundles{tag(b.mc.mirror)}.json", a.cv / a.gate_json
+    read = [p.name for p in (a.cv / "cv.json", shipped, gate_path) if p.is_file()]
     if (a.cv / "cv.json").is_file():
         c = json.loads((a.cv / "cv.json").read_text())
         meta["metrics"]["leave_one_photographer_out"] = {
             "epochs": c["config"]["epochs"], "folds": c["folds"],
             **{k: c[k] for k in ("accuracy", "bin_mae", "far_x_error", "majority_accuracy")}}
     # scripts/cv_bundles.py's figures for folds exported with this bundle's test-time augmentation
-    shipped = a.cv / f"cv_bundles{tag(b.mc.mirror)}.json"
     if shipped.is_file():
         meta["metrics"]["leave_one_photographer_out_bundle"] = json.loads(shipped.read_text())
     stamped = [f"held-out figures from {a.cv} ({', '.join(read)})"] if read else []
-    gate_path = a.cv / a.gate_json
     if gate_path.is_file():
         g = json.loads(gate_path.read_text())
         meta["metrics"]["gate_held_out"] = summary(g) | {k: summary(g[k]) for k in ("portrait", "portrait_window") if k in g}

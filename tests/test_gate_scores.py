@@ -110,12 +110,13 @@ def test_choose_gate_also_pools_another_runs_folds_before_choosing(tmp_path, mon
 
     import choose_gate as cg
 
-    n = len(cg.SCALES)
-    hi = cg.SCALES.index(1.0)
+    scales = cg.gate_scales(cg.GRID)
+    n = len(scales)
+    hi = scales.index(1.0)
 
     def curve(source, wrong_from):    # beacon on rises with the scale; wrong 2 % from index wrong_from
         pts = [{"scale": m, "beacon_on": (i + 1) / n, "confidently_wrong": 0.02 if i >= wrong_from else 0.0,
-                "silence_no_crossing": 1.0, "beacon_on_goal_in_view": (i + 1) / n} for i, m in enumerate(cg.SCALES)]
+                "silence_no_crossing": 1.0, "beacon_on_goal_in_view": (i + 1) / n} for i, m in enumerate(scales)]
         return {"landscape": {"source": source, "frames": 100, "no_crossing_frames": 50, "goal_in_view_frames": 100,
                               "accuracy": 0.7, "bin_mae": 0.3, "curve": pts}}
 
@@ -128,12 +129,12 @@ def test_choose_gate_also_pools_another_runs_folds_before_choosing(tmp_path, mon
 
     assert cg.main([str(tmp_path / "a"), "--portrait", "0"]) == 0
     alone = json.loads((tmp_path / "a" / "gate.json").read_text())
-    assert alone["scale"] == cg.SCALES[hi] and "pooled_runs" not in alone
+    assert alone["scale"] == scales[hi] and "pooled_runs" not in alone
 
     assert cg.main([str(tmp_path / "a"), "--also", str(tmp_path / "b"), "--portrait", "0"]) == 0
     pooled = json.loads((tmp_path / "a" / "gate.json").read_text())
     # pooled, scale 1 is 1 % wrong (2 % in half the folds): the step below is chosen
-    assert pooled["scale"] == cg.SCALES[hi - 1] and pooled["at_scale"]["confidently_wrong"] == 0.0
+    assert pooled["scale"] == scales[hi - 1] and pooled["at_scale"]["confidently_wrong"] == 0.0
     at_one = next(c for c in pooled["curve"] if c["scale"] == 1.0)
     assert at_one["confidently_wrong"] == pytest.approx(0.01)
     assert (at_one["confidently_wrong_frames"], at_one["frames"]) == (4, 400)   # the count the rate rests on
@@ -181,10 +182,10 @@ def test_choose_gate_grid_sweeps_a_finer_grid_under_its_own_cache(tmp_path, monk
     cg, ptl, neg, fold = _toy_fold(tmp_path, monkeypatch, photos=4, no_crossing=2)
     fine = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 4, 0, 0, grid=16)["landscape"]
     scales = [c["scale"] for c in fine["curve"]]
-    assert len(scales) == 65 and scales[::2] == list(cg.SCALES) and 2 ** (1 / 16) in scales
+    assert len(scales) == 65 and scales[::2] == list(cg.gate_scales(cg.GRID)) and 2 ** (1 / 16) in scales
     assert {p.name for p in fold.glob("gate_curve*.json")} == {"gate_curve_4_grid16.json"}
     coarse = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 4, 0, 0)["landscape"]
-    assert [c["scale"] for c in coarse["curve"]] == list(cg.SCALES)
+    assert [c["scale"] for c in coarse["curve"]] == list(cg.gate_scales(cg.GRID))
     assert (fold / "gate_curve_4.json").is_file()
     assert len(cg.pool([fine, fine])) == 65
     with pytest.raises(ValueError, match="different gate grids"):
