@@ -42,6 +42,7 @@ import numpy as np
 from crossing_assist.data_tools.augment import PORTRAIT_SETS, portrait_sets
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest, write_manifest
+from crossing_assist.fileio import atomic_write_text
 from crossing_assist.runtime.listen import Listener, summarise
 
 from crossing_assist.models.evaluate import gate_scales  # noqa: E402  (crossing-eval's grid by default)
@@ -106,12 +107,31 @@ def model_accuracy(lis: Listener, in_view: list[int] | None = None) -> dict:
     return out
 
 
+def listen(engine, view: str, ptl, neg, rows: tuple[list, list], portrait: int) -> tuple[Listener, list[int]]:
+    """The held-out ``rows`` (photos, no-crossing views) played through ``engine`` as ``view``
+    (landscape, or ``portrait`` views a photo of a portrait kind), and the indices of the clips
+    whose goal is in view."""
+    geo = engine.bundle.geometry
+    lis, in_view = Listener(engine), []
+    for ds, part in zip((ptl, neg), rows):
+        for r in part:
+            img = load_frame(ds.image_path(r), r.flags)
+            for win, _, lab, inside, fov in ([(img, r.far_x, r.label, r.label != 0, None)] if view == "landscape" else
+                                             portrait_sets(img, r.far_x, r.label, portrait, portrait_fov_deg=
+                                                           geo.camera_fov_deg[1], train_fov_deg=geo.train_fov_deg)[view]):
+                if inside:
+                    in_view.append(len(lis.labels))
+                lis.add(win, lab, fov)
+    return lis, in_view
+
+
 def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, portrait: int,
                mirror: bool = False, portrait_frames: int | None = None, grid: int = GRID) -> dict:
     """The fold's held-out curves: ``{"landscape": {...}, "portrait": {...}, "portrait_window": {...}}``
     (the portrait ones only with ``portrait`` > 0 views a photo, on a draw of ``portrait_frames``
-    photos, default ``n_frames``), swept over :func:`gate_scales` ``(grid)``; each cached in the
-    fold folder once listened to (another grid is another cache)."""
+    photos, default ``n_frames``), swept over :func:`gate_scales` ``(grid)``; each curve cached in
+    the fold folder (another grid is another cache), and the predictions listened to too
+    (``listened…npz``, :meth:`Listener.save`), so another grid is swept without the model."""
     from crossing_assist.runtime.engine import Engine
 
     bundle = fold_bundle(fold, source, ptl, mirror)
@@ -119,24 +139,19 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     out = {}
     for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
         n = n_frames if view == "landscape" or portrait_frames is None else portrait_frames
-        done = fold / (f"gate_curve{draw_tag(mirror, n, seed)}{'' if view == 'landscape' else f'_{view}{portrait}'}"
-                       f"{'' if grid == GRID else f'_grid{grid}'}.json")
+        draw = f"{draw_tag(mirror, n, seed)}{'' if view == 'landscape' else f'_{view}{portrait}'}"
+        done = fold / f"gate_curve{draw}{'' if grid == GRID else f'_grid{grid}'}.json"
         if done.is_file():   # listened to already (the fold does not change once finished)
             out[view] = json.loads(done.read_text())
             continue
         engine = engine or Engine(bundle, threads=1)
-        geo = engine.bundle.geometry
-        lis, in_view = Listener(engine), []
-        pos, negs = held_out_rows(ptl, neg, source, used, n, seed)
-        for ds, rows in ((ptl, pos), (neg, negs)):
-            for r in rows:
-                img = load_frame(ds.image_path(r), r.flags)
-                for win, _, lab, inside, fov in ([(img, r.far_x, r.label, r.label != 0, None)] if view == "landscape" else
-                                                 portrait_sets(img, r.far_x, r.label, portrait, portrait_fov_deg=
-                                                               geo.camera_fov_deg[1], train_fov_deg=geo.train_fov_deg)[view]):
-                    if inside:
-                        in_view.append(len(lis.labels))
-                    lis.add(win, lab, fov)
+        heard = fold / f"listened{draw}.npz"
+        if heard.is_file():
+            lis, extra = Listener.load(engine, heard)
+            in_view = extra["in_view"].tolist()
+        else:
+            lis, in_view = listen(engine, view, ptl, neg, held_out_rows(ptl, neg, source, used, n, seed), portrait)
+            lis.save(heard, in_view=np.asarray(in_view, np.int64))
         t0 = engine.decision_config().threshold
         labels = np.asarray(lis.labels)
         result = {"source": source, "view": view, "threshold": t0, "frames": int((labels != 0).sum()),
@@ -145,7 +160,7 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
                   "curve": [{"scale": m, **summarise(lis.heard(m * t0)),
                              "beacon_on_goal_in_view": summarise(lis.heard(m * t0, in_view))["beacon_on"]}
                             for m in gate_scales(grid)]}
-        done.write_text(json.dumps(result, indent=1))
+        atomic_write_text(done, json.dumps(result, indent=1))
         out[view] = result
     return out
 

@@ -178,14 +178,23 @@ def test_choose_gate_draws_portrait_views_from_their_own_number_of_photos(tmp_pa
 
 def test_choose_gate_grid_sweeps_a_finer_grid_under_its_own_cache(tmp_path, monkeypatch):
     """``--grid 16``: twice as many gate scales (crossing-eval's grid every other point), cached
-    apart from the default grid's curve; curves of two grids are never pooled."""
+    apart from the default grid's curve; another grid is swept from the predictions saved when the
+    fold was listened to, without the model; curves of two grids are never pooled."""
+    from crossing_assist.runtime.engine import Engine
+
     cg, ptl, neg, fold = _toy_fold(tmp_path, monkeypatch, photos=4, no_crossing=2)
     fine = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 4, 0, 0, grid=16)["landscape"]
     scales = [c["scale"] for c in fine["curve"]]
     assert len(scales) == 65 and scales[::2] == list(cg.gate_scales(cg.GRID)) and 2 ** (1 / 16) in scales
     assert {p.name for p in fold.glob("gate_curve*.json")} == {"gate_curve_4_grid16.json"}
+    assert (fold / "listened_4.npz").is_file()
+
+    def no_model(*a, **k):
+        raise AssertionError("another grid replays the saved predictions")
+
+    monkeypatch.setattr(Engine, "predict", no_model)
     coarse = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 4, 0, 0)["landscape"]
-    assert [c["scale"] for c in coarse["curve"]] == list(cg.gate_scales(cg.GRID))
+    assert coarse["curve"] == fine["curve"][::2]     # the same clips, decided again at every other scale
     assert (fold / "gate_curve_4.json").is_file()
     assert len(cg.pool([fine, fine])) == 65
     with pytest.raises(ValueError, match="different gate grids"):

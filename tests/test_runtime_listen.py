@@ -113,3 +113,31 @@ def test_crossing_eval_bad_listen_options_are_one_line(tmp_path, toy_bundle):  #
         assert r.returncode != 0
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("error:"), r.stderr
+
+
+def test_listener_saved_and_loaded_replays_the_same_decisions(tmp_path, toy_bundle):  # noqa: F811
+    """``save`` / ``load``: the predictions kept on disk replay every gate threshold exactly as the
+    clips listened to, a failed inference and a portrait frame's FOV included, without the model."""
+    import numpy as np
+
+    engine = Engine(toy_bundle)
+    lis = Listener(engine, seconds=0.3)
+    for strip in (2, 6, 11):
+        lis.add(bar_frame(bin_center_x(strip)), strip)
+    lis.add(bar_frame(None, noise=0.3), UNKNOWN)
+    lis.add(np.ascontiguousarray(bar_frame(bin_center_x(9)).transpose(1, 0, 2)), 9, fov_deg=50.0)  # portrait
+    lis.add(np.zeros((4, 4), np.uint8), 4)                                                     # fails
+    assert not any(p.ok for p in lis.clips[-1]) and lis.clips[-2][0].orientation == "portrait"
+    lis.save(tmp_path / "heard.npz", in_view=np.asarray([0, 2]))
+
+    class NoModel(Engine):
+        def predict(self, *a, **k):
+            raise AssertionError("replayed from disk, not run")
+
+    again, extra = Listener.load(NoModel(toy_bundle), tmp_path / "heard.npz")
+    assert list(extra) == ["in_view"] and extra["in_view"].tolist() == [0, 2]
+    assert again.labels == lis.labels and (again.seconds, again.fps) == (lis.seconds, lis.fps)
+    assert again.clips[-2][0].fov_deg == 50.0 and not again.clips[-1][0].ok
+    for t in (None, 0.01, 0.5, 2.0):
+        assert again.heard(t) == lis.heard(t)
+    assert again.risk_coverage([0.1, 1.0], idx=[0, 2]) == lis.risk_coverage([0.1, 1.0], idx=[0, 2])

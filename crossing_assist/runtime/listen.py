@@ -15,12 +15,14 @@ label; a frame with no crossing (label ``unknown``) should be *silent* (beacon o
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, replace
 from typing import Iterable, Sequence
 
 import numpy as np
 
 from crossing_assist.actions import UNKNOWN, heading_to_x, x_to_bin
+from crossing_assist.fileio import atomic_path
 from crossing_assist.geometry import ORIENTATIONS
 from crossing_assist.runtime.decide import Decider, DecisionConfig
 from crossing_assist.runtime.engine import Engine, Prediction
@@ -94,6 +96,47 @@ class Listener:
     def add(self, frame: np.ndarray, label: int, fov_deg: float | None = None) -> None:
         self.clips.append(play_still(self.engine, frame, self.seconds, self.fps, fov_deg))
         self.labels.append(int(label))
+
+    def save(self, path: str | os.PathLike, **extra: np.ndarray) -> None:
+        """The clips' predictions, as far as the decision logic and the model's own accuracy read
+        them (probs, uncertainty, ok, argmax, FOV, orientation), their labels and ``extra``
+        arrays, in one ``.npz`` written atomically: :meth:`load` replays any gate threshold or
+        decision setting without running the model again."""
+        n, a = len(self.clips), self.engine.space.n
+        frames = max((len(c) for c in self.clips), default=0)
+        if any(len(c) != frames for c in self.clips):
+            raise ValueError("clips of different lengths; one Listener plays every clip for the same time")
+
+        def at(get, fill, dtype, *shape) -> np.ndarray:   # one value a frame: [clip, frame, *shape]
+            return np.asarray([[get(p) if p.ok else fill for p in clip] for clip in self.clips],
+                              dtype).reshape(n, frames, *shape)
+
+        probs = at(lambda p: p.probs, np.full(a, np.nan), np.float64, a)
+        with atomic_path(path) as tmp:
+            np.savez_compressed(
+                tmp, seconds=self.seconds, fps=self.fps, labels=np.asarray(self.labels, np.int64), probs=probs,
+                ok=at(lambda p: True, False, bool), uncertainty=at(lambda p: p.uncertainty, np.inf, np.float64),
+                action=at(lambda p: p.action, 0, np.int64),
+                fov_deg=at(lambda p: np.nan if p.fov_deg is None else p.fov_deg, np.nan, np.float64),
+                orientation=at(lambda p: p.orientation or "", "", str), **extra)
+
+    @classmethod
+    def load(cls, engine: Engine, path: str | os.PathLike) -> tuple["Listener", dict[str, np.ndarray]]:
+        """A Listener over the predictions :meth:`save` wrote (decisions replayed with ``engine``'s
+        bundle: its decision settings and gate thresholds), and the saved ``extra`` arrays."""
+        with np.load(path) as z:
+            lis = cls(engine, float(z["seconds"]), float(z["fps"]))
+            d = {k: z[k] for k in z.files}
+        for k, label in enumerate(d["labels"]):
+            lis.clips.append([
+                Prediction(ok=True, probs=d["probs"][k, i], uncertainty=float(d["uncertainty"][k, i]),
+                           action=int(d["action"][k, i]), orientation=str(d["orientation"][k, i]) or None,
+                           fov_deg=None if np.isnan(d["fov_deg"][k, i]) else float(d["fov_deg"][k, i]))
+                if d["ok"][k, i] else Prediction(ok=False, error="failed when listened to")
+                for i in range(d["probs"].shape[1])])
+            lis.labels.append(int(label))
+        saved = {"seconds", "fps", "labels", "probs", "ok", "uncertainty", "action", "fov_deg", "orientation"}
+        return lis, {k: v for k, v in d.items() if k not in saved}
 
     def heard(self, threshold: float | None = None, idx: Sequence[int] | None = None) -> list[Heard]:
         """The last decisions at the bundle's gate threshold for each clip's orientation (or
