@@ -125,6 +125,12 @@ def listen(engine, view: str, ptl, neg, rows: tuple[list, list], portrait: int) 
     return lis, in_view
 
 
+def sweep_point(heard: list, in_view: list[int]) -> dict:
+    """One point of a curve: the rates of ``heard`` (:func:`summarise`) and the beacon-on rate
+    over the clips whose goal is in view (``in_view``, indices into ``heard``)."""
+    return {**summarise(heard), "beacon_on_goal_in_view": summarise([heard[i] for i in in_view])["beacon_on"]}
+
+
 def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, portrait: int,
                mirror: bool = False, portrait_frames: int | None = None, grid: int = GRID) -> dict:
     """The fold's held-out curves: ``{"landscape": {...}, "portrait": {...}, "portrait_window": {...}}``
@@ -157,9 +163,7 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
         result = {"source": source, "view": view, "threshold": t0, "frames": int((labels != 0).sum()),
                   "no_crossing_frames": int((labels == 0).sum()), "goal_in_view_frames": len(in_view),
                   **model_accuracy(lis, in_view),
-                  "curve": [{"scale": m, **summarise(lis.heard(m * t0)),
-                             "beacon_on_goal_in_view": summarise(lis.heard(m * t0, in_view))["beacon_on"]}
-                            for m in gate_scales(grid)]}
+                  "curve": [{"scale": m, **sweep_point(lis.heard(m * t0), in_view)} for m in gate_scales(grid)]}
         atomic_write_text(done, json.dumps(result, indent=1))
         out[view] = result
     return out
