@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from crossing_assist.data_tools.augment import PORTRAIT_SETS, portrait_sets
+from crossing_assist.data_tools.augment import PORTRAIT_SETS, user_views
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest, write_manifest
 from crossing_assist.fileio import atomic_write_text
@@ -111,14 +111,12 @@ def listen(engine, view: str, ptl, neg, rows: tuple[list, list], portrait: int) 
     """The held-out ``rows`` (photos, no-crossing views) played through ``engine`` as ``view``
     (landscape, or ``portrait`` views a photo of a portrait kind), and the indices of the clips
     whose goal is in view."""
-    geo = engine.bundle.geometry
     lis, in_view = Listener(engine), []
     for ds, part in zip((ptl, neg), rows):
         for r in part:
             img = load_frame(ds.image_path(r), r.flags)
-            for win, _, lab, inside, fov in ([(img, r.far_x, r.label, r.label != 0, None)] if view == "landscape" else
-                                             portrait_sets(img, r.far_x, r.label, portrait, portrait_fov_deg=
-                                                           geo.camera_fov_deg[1], train_fov_deg=geo.train_fov_deg)[view]):
+            for win, _, lab, inside, fov in user_views(img, r.far_x, r.label, 0 if view == "landscape" else portrait,
+                                                       engine.bundle.geometry)[view]:
                 if inside:
                     in_view.append(len(lis.labels))
                 lis.add(win, lab, fov)
@@ -257,8 +255,8 @@ def main(argv=None) -> int:
                          "chooses landscape on every held-out photo (one view a photo) and portrait on a draw "
                          "(2 x --portrait views a photo)")
     ap.add_argument("--grid", type=int, default=GRID, metavar="STEPS",
-                    help=f"gate scales a doubling, from x1/4 to x4 (default {GRID}, crossing-eval's grid); a finer grid "
-                         "listens again (its own cache)")
+                    help=f"gate scales a doubling, from x1/4 to x4 (default {GRID}, crossing-eval's grid); another grid "
+                         "is a curve cache of its own, swept from the fold's saved predictions (listened*.npz)")
     ap.add_argument("--also", type=Path, action="append", default=[], metavar="CV2",
                     help="another --cv source run of the same recipe (e.g. another --seed): its folds are pooled "
                          "with CV's, so the choice averages over training noise; the result is written in CV")

@@ -33,7 +33,7 @@ from choose_gate import (  # noqa: E402  (a sibling script)
     draw_tag, finished_folds, fold_bundle, held_out_parser, held_out_rows, model_accuracy, tag,
 )
 
-from crossing_assist.data_tools.augment import PORTRAIT_SETS, portrait_sets, roll  # noqa: E402
+from crossing_assist.data_tools.augment import PORTRAIT_SETS, roll, user_views  # noqa: E402
 from crossing_assist.data_tools.corrupt import CORRUPTIONS, corrupt  # noqa: E402
 from crossing_assist.data_tools.images import flag_value, load_frame  # noqa: E402
 from crossing_assist.data_tools.manifest import read_manifest  # noqa: E402
@@ -51,8 +51,7 @@ def render(condition: str, img: np.ndarray, far_x: float | None, far_y: float, l
         view, _, lab = roll(img, far_x, far_y, label, float(rng.choice([-1, 1]) * rng.uniform(10, 15)))
         return view, lab, None
     if condition in PORTRAIT_SETS:
-        views = portrait_sets(img, far_x, label, 3, portrait_fov_deg=geometry.camera_fov_deg[1],
-                              train_fov_deg=geometry.train_fov_deg)[condition]
+        views = user_views(img, far_x, label, 3, geometry)[condition]
         view, _, lab, _, fov = views[int(rng.integers(len(views)))]
         return view, lab, fov
     return corrupt(img, condition, rng), label, None

@@ -129,6 +129,9 @@ def test_listener_saved_and_loaded_replays_the_same_decisions(tmp_path, toy_bund
     lis.add(np.zeros((4, 4), np.uint8), 4)                                                     # fails
     assert not any(p.ok for p in lis.clips[-1]) and lis.clips[-2][0].orientation == "portrait"
     lis.save(tmp_path / "heard.npz", in_view=np.asarray([0, 2]))
+    with pytest.raises(ValueError, match="named like saved fields"):   # would overwrite the labels
+        lis.save(tmp_path / "bad.npz", labels=np.zeros(6))
+    assert not (tmp_path / "bad.npz").exists()
 
     class NoModel(Engine):
         def predict(self, *a, **k):

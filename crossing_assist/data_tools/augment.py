@@ -342,3 +342,16 @@ def portrait_sets(image: np.ndarray, far_x: float | None, label: int, n: int, *,
     phone = phone_views(image, far_x, label, n, fov_deg=portrait_fov_deg, train_fov_deg=train_fov_deg)
     return {"portrait": [v + (portrait_fov_deg,) for v in phone],
             "portrait_window": [v + (win_fov,) for v in windows]}
+
+
+def user_views(image: np.ndarray, far_x: float | None, label: int, n: int,
+               geometry) -> dict[str, list[tuple[np.ndarray, float | None, int, bool, float | None]]]:
+    """What a user's phone gives of one labelled photo, for a bundle of ``geometry`` (its
+    ``camera_fov_deg`` and ``train_fov_deg``): ``landscape``, the photo as taken (FOV None = the
+    bundle's), and with ``n`` > 0 views a photo the :func:`portrait_sets` at the bundle's portrait
+    FOV; each view ``(frame, far_x, label, goal in view, FOV)``."""
+    views = {"landscape": [(image, far_x, label, label != 0, None)]}
+    if n:
+        views.update(portrait_sets(image, far_x, label, n, portrait_fov_deg=geometry.camera_fov_deg[1],
+                                   train_fov_deg=geometry.train_fov_deg))
+    return views

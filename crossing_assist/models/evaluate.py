@@ -162,9 +162,9 @@ GATE_SCALES = gate_scales()
 def _views(cfg: EvalConfig, part: Dataset, geometry) -> dict[str, list[tuple[np.ndarray, float | None, int, bool, float | None]]]:
     """The frames a user's phone would give, each with its camera FOV (None = the bundle's
     default): each photo as taken (landscape) and, with ``cfg.portrait``, its portrait views
-    (:func:`~crossing_assist.data_tools.augment.portrait_sets`: a phone held in portrait at the
+    (:func:`~crossing_assist.data_tools.augment.user_views`: a phone held in portrait at the
     bundle's portrait FOV, and 3:4 windows); no-crossing frames from ``cfg.negatives`` in all."""
-    from ..data_tools.augment import PORTRAIT_SETS, portrait_sets
+    from ..data_tools.augment import PORTRAIT_SETS, user_views
 
     rows = [(part, r) for r in part.rows]
     if cfg.negatives:
@@ -172,12 +172,9 @@ def _views(cfg: EvalConfig, part: Dataset, geometry) -> dict[str, list[tuple[np.
         rows += [(neg, r) for r in neg.rows if r.label == 0]
     views: dict[str, list] = {"landscape": [], **({k: [] for k in PORTRAIT_SETS} if cfg.portrait else {})}
     for ds, r in rows:
-        img = load_frame(ds.image_path(r), r.flags)
-        views["landscape"].append((img, r.far_x, r.label, r.label != 0, None))
-        if cfg.portrait:
-            for name, vs in portrait_sets(img, r.far_x, r.label, cfg.portrait, portrait_fov_deg=
-                                          geometry.camera_fov_deg[1], train_fov_deg=geometry.train_fov_deg).items():
-                views[name] += vs
+        for name, vs in user_views(load_frame(ds.image_path(r), r.flags), r.far_x, r.label, cfg.portrait,
+                                   geometry).items():
+            views[name] += vs
     return views
 
 

@@ -28,6 +28,8 @@ from crossing_assist.runtime.decide import Decider, DecisionConfig
 from crossing_assist.runtime.engine import Engine, Prediction
 
 WRONG_STRIPS = 2     # >= this many strips off with the beacon on: confidently wrong
+#: What :meth:`Listener.save` writes besides its ``extra`` arrays.
+SAVED = ("seconds", "fps", "labels", "probs", "ok", "uncertainty", "action", "fov_deg", "orientation")
 
 
 @dataclass(frozen=True)
@@ -102,6 +104,8 @@ class Listener:
         them (probs, uncertainty, ok, argmax, FOV, orientation), their labels and ``extra``
         arrays, in one ``.npz`` written atomically: :meth:`load` replays any gate threshold or
         decision setting without running the model again."""
+        if clash := set(extra) & set(SAVED):
+            raise ValueError(f"extra arrays named like saved fields: {sorted(clash)}")
         n, a = len(self.clips), self.engine.space.n
         frames = max((len(c) for c in self.clips), default=0)
         if any(len(c) != frames for c in self.clips):
@@ -135,8 +139,7 @@ class Listener:
                 if d["ok"][k, i] else Prediction(ok=False, error="failed when listened to")
                 for i in range(d["probs"].shape[1])])
             lis.labels.append(int(label))
-        saved = {"seconds", "fps", "labels", "probs", "ok", "uncertainty", "action", "fov_deg", "orientation"}
-        return lis, {k: v for k, v in d.items() if k not in saved}
+        return lis, {k: v for k, v in d.items() if k not in SAVED}
 
     def heard(self, threshold: float | None = None, idx: Sequence[int] | None = None) -> list[Heard]:
         """The last decisions at the bundle's gate threshold for each clip's orientation (or
