@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from crossing_assist.actions import UNKNOWN, bin_center_x, x_to_bin
-from crossing_assist.data_tools.augment import crop_window, field_view, portrait_views, roll
+from crossing_assist.data_tools.augment import crop_window, field_view, magnify, portrait_views, roll
 from crossing_assist.data_tools.corrupt import CORRUPTIONS, corrupt
 from crossing_assist.data_tools.images import flag_value, load_frame, load_rgb, save_rgb, true_aspect
 from crossing_assist.data_tools.manifest import Row, read_manifest, write_manifest
@@ -127,6 +127,51 @@ def test_field_view_without_a_step_leaves_only_that_step_out():
         one = next((t for t in tags if t in CORRUPTIONS), None)
         if one:   # one corruption by name: only that one goes
             assert one not in field_view(img, 0.4, 0.6, x_to_bin(0.4), np.random.default_rng(s), (one,))[3].split()
+
+
+@pytest.mark.parametrize("far_x, scale, xo, yo", [(0.5, 1.5, 0.5, 0.5), (0.3, 1.25, 0.0, 0.25), (0.9, 1.7, 1.0, 0.75)])
+def test_magnify_keeps_the_aspect_and_moves_the_goal_exactly(far_x, scale, xo, yo):
+    img = _photo()
+    win, x, b = magnify(img, far_x, x_to_bin(far_x), scale, xo, yo)
+    cw, ch = round(W / scale), round(H / scale)
+    x0, y0 = round(xo * (W - cw)), round(yo * (H - ch))
+    np.testing.assert_array_equal(win, img[y0:y0 + ch, x0:x0 + cw])
+    assert x == pytest.approx(min(max((far_x * W - x0) / cw, 1e-6), 1 - 1e-6)) and b == x_to_bin(x)
+
+
+def test_magnify_out_of_view_goes_to_the_edge_strip_and_refuses_shrinking():
+    img = _photo()
+    _, x, b = magnify(img, 0.02, 1, 1.6, 1.0)            # window from 60 px; goal at 3 px: left of it
+    assert b == 1 and 0 < x < 1 / 12
+    _, x, b = magnify(img, 0.98, 12, 1.6, 0.0)           # window 0..100 px; goal at 157 px: right of it
+    assert b == 12 and 11 / 12 < x < 1
+    _, x, b = magnify(img, None, UNKNOWN, 1.5, 0.5)
+    assert x is None and b == UNKNOWN
+    with pytest.raises(ValueError, match="magnification"):
+        magnify(img, 0.5, 7, 0.8, 0.5)
+
+
+def test_field_view_zoom_magnifies_some_views_and_without_it_the_recipe_is_unchanged():
+    """``zoom`` = 1 draws nothing more (so the default recipe's views stay what they were); with a
+    zoom, the mirror, roll and aspect drawn are the zoomless ones, and some views are magnified by
+    at most it (a window of the same aspect)."""
+    img = _photo()
+    geometric = lambda tag: [t for t in tag.split() if t == "m" or t.startswith(("roll=", "aspect="))]  # noqa: E731
+    zoomed = 0
+    for s in range(24):
+        plain = field_view(img, 0.4, 0.6, x_to_bin(0.4), np.random.default_rng(s))
+        again = field_view(img, 0.4, 0.6, x_to_bin(0.4), np.random.default_rng(s), zoom=1.0)
+        np.testing.assert_array_equal(plain[0], again[0])
+        z = field_view(img, 0.4, 0.6, x_to_bin(0.4), np.random.default_rng(s), zoom=1.7)
+        assert geometric(z[3]) == geometric(plain[3])
+        scale = [float(t[5:]) for t in z[3].split() if t.startswith("zoom=")]
+        if scale:
+            zoomed += 1
+            assert 1.0 <= scale[0] <= 1.7
+            assert z[0].shape[1] == pytest.approx(plain[0].shape[1] / scale[0], abs=1)
+            assert z[0].shape[1] / z[0].shape[0] == pytest.approx(plain[0].shape[1] / plain[0].shape[0], rel=0.03)
+            assert 1 <= z[2] <= 12 and z[2] == x_to_bin(z[1])
+    assert 4 <= zoomed <= 20
 
 
 def test_field_view_keeps_unknown_unknown():

@@ -113,6 +113,9 @@ def test_field_view_features_are_keyed_by_the_field_recipe(ds, monkeypatch):
     before = cache_key(bb, k, CANVAS, fields, 67.0, ds, "letterbox"), cache_key(bb, k, CANVAS, ident, 67.0, ds)
     ablated = make_variants(False, (), 2, ("roll",))   # an ablation leaves a step out: other views
     assert cache_key(bb, k, CANVAS, ablated, 67.0, ds, "letterbox") != before[0]
+    zoomed = make_variants(False, (), 2, (), 1.7)      # magnified views: other views
+    assert cache_key(bb, k, CANVAS, zoomed, 67.0, ds, "letterbox") != before[0]
+    assert cache_key(bb, k, CANVAS, make_variants(False, (), 2, (), 1.0), 67.0, ds, "letterbox") == before[0]
     monkeypatch.setattr(augment, "FIELD_ASPECTS", ((3 / 4, 1.0),))
     assert cache_key(bb, k, CANVAS, fields, 67.0, ds, "letterbox") != before[0]
     assert cache_key(bb, k, CANVAS, ident, 67.0, ds) == before[1]
@@ -147,8 +150,10 @@ def test_predict_split_reads_strips_inside_each_samples_window(ds, tmp_path):
 @pytest.mark.parametrize("argv, message", [
     (["--field", "2", "--field-without", "roll,sky"], "Invalid field_without roll,sky; valid: mirror, roll, aspect, corruption, night"),
     (["--field-without", "roll"], "Invalid field_without needs --field >= 1"),
+    (["--field", "2", "--field-zoom", "0.5"], "Invalid field_zoom 0.5; valid: 1..4"),
+    (["--field-zoom", "1.5"], "Invalid field_zoom needs --field >= 1"),
 ])
-def test_crossing_train_refuses_a_bad_field_without_in_one_line(tmp_path, capsys, argv, message):
+def test_crossing_train_refuses_a_bad_field_without_or_zoom_in_one_line(tmp_path, capsys, argv, message):
     from crossing_assist.models.cli import train_main
 
     assert train_main(["--data", str(tmp_path), "--out", str(tmp_path / "run"), *argv]) == 2

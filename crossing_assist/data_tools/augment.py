@@ -194,7 +194,7 @@ def field_steps() -> tuple[str, ...]:
     return FIELD_STEPS + tuple(CORRUPTIONS)
 
 
-def field_recipe(without: tuple[str, ...] = ()) -> dict:
+def field_recipe(without: tuple[str, ...] = (), zoom: float = 1.0) -> dict:
     """What :func:`field_view` draws from, as a cache key part: features of field views cached under
     another recipe are stale."""
     from crossing_assist.data_tools.corrupt import CORRUPTIONS
@@ -203,6 +203,8 @@ def field_recipe(without: tuple[str, ...] = ()) -> dict:
               "version": FIELD_VERSION}
     if without:   # keys of the full recipe unchanged
         recipe["without"] = sorted(without)
+    if zoom > 1:
+        recipe["zoom"] = round(float(zoom), 6)
     return recipe
 
 
@@ -250,14 +252,40 @@ def crop_window(image: np.ndarray, far_x: float | None, label: int, aspect: floa
     return np.ascontiguousarray(image[y0:y0 + ch]), far_x, label
 
 
+def magnify(image: np.ndarray, far_x: float | None, label: int, scale: float, x_offset: float,
+            y_offset: float = 0.5) -> tuple[np.ndarray, float | None, int]:
+    """The frame seen ``scale`` (>= 1) times magnified: a window of the same aspect, ``1 / scale``
+    of its width and height, at ``x_offset`` / ``y_offset`` (0..1) of the free width / height, as a
+    narrower camera (or a portrait frame shown filling the canvas) would show it. The goal moves
+    exactly; a goal outside the window lies in the edge strip (rows are not checked: the
+    direction of a goal above or below the window is still its strip)."""
+    image = _check_image(image)
+    if not scale >= 1:
+        raise ValueError(f"Invalid magnification {scale}; valid: >= 1")
+    h, w = image.shape[:2]
+    cw, ch = max(1, int(round(w / scale))), max(1, int(round(h / scale)))
+    x0, y0 = int(round(x_offset * (w - cw))), int(round(y_offset * (h - ch)))
+    out = np.ascontiguousarray(image[y0:y0 + ch, x0:x0 + cw])
+    label = parse_label(label)
+    if far_x is None and label != UNKNOWN:   # a voted bin: move its centre
+        far_x = bin_center_x(label)
+    if far_x is None or label == UNKNOWN:
+        return out, None, label
+    x = window_x(far_x, x0 / w, cw / w)
+    return out, x, x_to_bin(x)
+
+
 def field_view(image: np.ndarray, far_x: float | None, far_y: float, label: int,
-               rng: np.random.Generator, without: tuple[str, ...] = ()) -> tuple[np.ndarray, float | None, int, str]:
+               rng: np.random.Generator, without: tuple[str, ...] = (), zoom: float = 1.0,
+               ) -> tuple[np.ndarray, float | None, int, str]:
     """One random view of a (true-aspect) photo as a user's phone might take it: mirrored
     (p 0.5), rolled by up to 15 degrees (p 0.7), cut to a phone aspect (:data:`FIELD_ASPECTS`,
-    p 0.7) and corrupted (:mod:`.corrupt`, p 0.7). Returns the view, its goal, bin and a tag.
+    p 0.7), with ``zoom`` > 1 magnified by 1..``zoom`` (:func:`magnify`, p 0.5), and corrupted
+    (:mod:`.corrupt`, p 0.7). Returns the view, its goal, bin and a tag.
 
     ``without`` names steps (:data:`FIELD_STEPS`) or corruptions left out, for an ablation: their
-    random draws are still made, so every other step draws exactly what the full recipe does."""
+    random draws are still made, so every other step draws exactly what the full recipe does.
+    ``zoom`` = 1 draws nothing for the magnification, so the recipe without it is unchanged."""
     from crossing_assist.data_tools.corrupt import CORRUPTIONS, corrupt
 
     tags = []
@@ -276,6 +304,10 @@ def field_view(image: np.ndarray, far_x: float | None, far_y: float, label: int,
         if "aspect" not in without:
             image, far_x, label = crop_window(image, far_x, label, aspect, offset)
             tags.append(f"aspect={aspect:.2f}")
+    if zoom > 1 and rng.random() < 0.5:
+        scale, x_off, y_off = float(rng.uniform(1.0, zoom)), float(rng.random()), float(rng.uniform(0.25, 0.75))
+        image, far_x, label = magnify(image, far_x, label, scale, x_off, y_off)
+        tags.append(f"zoom={scale:.2f}")
     if rng.random() < 0.7:
         name = str(rng.choice(list(CORRUPTIONS)))
         if "corruption" not in without and name not in without:

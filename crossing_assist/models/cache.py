@@ -73,7 +73,7 @@ def cache_key(backbone: Backbone, frozen_blocks: int, size: tuple[int, int],
         spec.update(fit=fit, fields=[v.field for v in variants], seed=seed, version=2)
     views = [v for v in variants if v.field >= 0]
     if views:
-        spec["field_recipe"] = field_recipe(views[0].without)
+        spec["field_recipe"] = field_recipe(views[0].without, views[0].zoom)
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:24]
 
 

@@ -89,6 +89,9 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--field-without", type=_names, default=d["field_without"],
                    help="field-view steps left out, comma-separated, for an ablation: mirror, roll, aspect, "
                         "corruption, or one corruption (night, rain, ...)")
+    p.add_argument("--field-zoom", type=float, default=d["field_zoom"],
+                   help="> 1: half the field views magnified by 1..this, as a narrower camera shown filling "
+                        "the canvas sees the scene (1 = none)")
     p.add_argument("--fov", dest="fov_deg", type=float, default=d["fov_deg"],
                    help="horizontal field of view of the training photos (deg)")
     p.add_argument("--input-size", type=_canvas_size, default=d["input_size"], help="canvas H or HxW, e.g. 168x224 (4:3)")
@@ -127,7 +130,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             feature_stride=a.feature_stride, actions=a.actions,
             epochs=a.epochs, batch_size=a.batch_size, optimizer=a.optimizer, lr=a.lr, lr_schedule=a.lr_schedule,
             weight_decay=a.weight_decay, p=a.p, mirror=a.mirror, yaw=tuple(a.yaw), field=a.field,
-            field_without=tuple(a.field_without), fov_deg=a.fov_deg,
+            field_without=tuple(a.field_without), field_zoom=a.field_zoom, fov_deg=a.fov_deg,
             input_size=(224, 298) if a.four_three else a.input_size, fit=a.fit, unfreeze=a.unfreeze, balance=a.balance,
             smoothing=a.smoothing, aux_x=a.aux_x, soft_x=a.soft_x, select_on=a.select_on,
             holdout=tuple(a.holdout), seed=a.seed,

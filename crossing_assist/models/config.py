@@ -48,6 +48,7 @@ class TrainConfig:
     yaw: tuple[float, ...] = ()         # fixed yaw angles (degrees), each used as +-angle
     field: int = 0                      # random field views per frame (roll, phone aspect, corruption)
     field_without: tuple[str, ...] = ()  # field-view steps or corruptions left out (an ablation)
+    field_zoom: float = 1.0             # > 1: half the field views magnified by 1..field_zoom
     fov_deg: float = TRAIN_FOV_DEG      # horizontal FOV assumed for the training photos
     input_size: tuple[int, int] | None = None   # (H, W) canvas; None = the backbone's own
     fit: str = "letterbox"              # how a frame meets the canvas: letterbox | stretch
@@ -89,6 +90,8 @@ class TrainConfig:
             (set(self.field_without) <= set(field_steps()),
              f"field_without {','.join(self.field_without)}; valid: {', '.join(field_steps())}"),
             (not self.field_without or self.field > 0, "field_without needs --field >= 1"),
+            (1 <= self.field_zoom <= 4, f"field_zoom {self.field_zoom}; valid: 1..4"),
+            (self.field_zoom == 1 or self.field > 0, "field_zoom needs --field >= 1"),
             (self.input_size is None or min(self.input_size) >= 16, f"input_size {self.input_size}; valid: >= 16 px"),
         ]
         for ok, msg in check:

@@ -37,6 +37,7 @@ class Variant:
     yaw_deg: float = 0.0
     field: int = -1          # >= 0: the field-th random field view (mirror/yaw unused)
     without: tuple[str, ...] = ()   # field-view steps left out (an ablation; augment.field_view)
+    zoom: float = 1.0               # > 1: field views may be magnified up to this (augment.field_view)
 
     @property
     def tag(self) -> str:
@@ -46,13 +47,14 @@ class Variant:
 
 
 def make_variants(mirror: bool, yaw_angles: tuple[float, ...] = (), field: int = 0,
-                  field_without: tuple[str, ...] = ()) -> tuple[Variant, ...]:
+                  field_without: tuple[str, ...] = (), field_zoom: float = 1.0) -> tuple[Variant, ...]:
     """Identity (+ mirrored) x (0 and +-each yaw angle), then ``field`` random field views
-    (``field_without``: their steps left out); identity first."""
+    (``field_without``: their steps left out; ``field_zoom``: their largest magnification);
+    identity first."""
     flips = (False, True) if mirror else (False,)
     angles = (0.0,) + tuple(s * float(a) for a in yaw_angles for s in (1, -1) if a)
     return (tuple(Variant(f, a) for f in flips for a in angles)
-            + tuple(Variant(field=i, without=tuple(field_without)) for i in range(field)))
+            + tuple(Variant(field=i, without=tuple(field_without), zoom=float(field_zoom)) for i in range(field)))
 
 
 def resize_rgb(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -106,7 +108,7 @@ def load_variants(ds: Dataset, row: Row, size: tuple[int, int], variants: tuple[
     for v in variants:
         if v.field >= 0:
             img, fx, lab, _ = augment.field_view(base, row.far_x, far_y, row.label, _field_rng(seed, v.field, row.image),
-                                                  v.without)
+                                                  v.without, v.zoom)
         else:
             img, fx, lab = apply_variant(base, row.far_x, row.label, v, fov_deg)
         window = content_window(img.shape[0], img.shape[1], size)

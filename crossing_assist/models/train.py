@@ -275,7 +275,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     train_ds, val_ds = _check_sets(cfg, ds)
     policy, start = _build(cfg)
     size = policy.config.input_size
-    variants = make_variants(cfg.mirror, cfg.yaw, cfg.field, cfg.field_without)
+    variants = make_variants(cfg.mirror, cfg.yaw, cfg.field, cfg.field_without, cfg.field_zoom)
     cache = Path(cfg.cache_dir)
     fs = lambda d, v, name: compute_features(policy.backbone, start, d, size, v, cfg.fov_deg, cache,  # noqa: E731
                                              progress=cfg.progress, desc=f"features {name}",
