@@ -34,12 +34,15 @@ THREADS=${THREADS:-1}
 # ablations (scripts/augment_ablation.py): field-view steps left out, and whether negatives are added
 FIELD_WITHOUT=${FIELD_WITHOUT:-}   # e.g. roll or corruption (crossing-train --field-without)
 NEGATIVES=${NEGATIVES:-1}          # 0: no synthetic corners and no PTL negatives
+FIELD_ZOOM=${FIELD_ZOOM:-}   # e.g. 1.7: half the field views magnified by 1..1.7 (crossing-train --field-zoom; measured
+                             # 2026-12-02, not shipped: docs/models.md, "Magnified views")
 scripts/prepare_default_data.sh "$PTL"
 EXTRA=()
 if [ "$NEGATIVES" = 1 ]; then EXTRA+=(--extra-data runs/data/synth --extra-data runs/data/neg_half); fi
 if [ -n "$FIELD_WITHOUT" ]; then EXTRA+=(--field-without "$FIELD_WITHOUT"); fi
 if [ -n "$FEATURE_STRIDE" ]; then EXTRA+=(--feature-stride "$FEATURE_STRIDE"); fi
 if [ -n "$SOFT_X" ]; then EXTRA+=(--soft-x "$SOFT_X"); fi
+if [ -n "$FIELD_ZOOM" ]; then EXTRA+=(--field-zoom "$FIELD_ZOOM"); fi
 RECIPE=(--data runs/data/ptl "${EXTRA[@]}" --backbone efficientnet_lite0
     --head "$HEAD" --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --lr-schedule "$LR_SCHEDULE" --weight-decay 1e-4 --smoothing 0.2 --balance "$BALANCE"
     --aux-x 1.0 --unfreeze "$UNFREEZE" --input-size 168x224 --fit letterbox --no-mirror --field "$FIELD" --seed "$SEED"

@@ -23,7 +23,9 @@ another CV run of the same recipe (another ``--seed``) with CV's before choosing
 landscape photo is one clip, its portrait views 2 x ``--portrait`` clips, so ``--frames 100000
 --portrait-frames 200`` chooses landscape on every held-out photo without playing every photo's
 portrait views too. ``--grid 16`` sweeps twice as many scales as crossing-eval (16 a doubling), for
-a curve that jumps between neighbouring scales.
+a curve that jumps between neighbouring scales. ``--zoom Z`` is a study for models trained with
+``crossing-train --field-zoom``: the portrait views are shown magnified up to Z instead of at the
+training scale (:func:`magnify_view_crop`; no bundle field says so yet), cached and written apart.
 
     .venv/bin/python scripts/choose_gate.py runs/default/cv --ptl runs/data/ptl --neg runs/data/neg \
         --used-neg runs/data/neg_half --frames 200 --portrait 3
@@ -33,8 +35,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +66,11 @@ def _subset(ds, rows, out: Path) -> Path:
 def tag(mirror: bool) -> str:
     """File-name suffix of what was measured with the folds' mirror-TTA bundles."""
     return "_mirror" if mirror else ""
+
+
+def zoom_tag(zoom: float) -> str:
+    """File-name suffix of portrait views magnified up to ``zoom`` (:func:`magnify_view_crop`)."""
+    return f"_zoom{zoom:g}" if zoom > 1 else ""
 
 
 def draw_tag(mirror: bool, frames: int, seed: int) -> str:
@@ -107,20 +116,33 @@ def model_accuracy(lis: Listener, in_view: list[int] | None = None) -> dict:
     return out
 
 
-def listen(engine, view: str, ptl, neg, rows: tuple[list, list], portrait: int) -> tuple[Listener, list[int]]:
+def listen(engine, view: str, ptl, neg, rows: tuple[list, list], portrait: int,
+           geometry=None) -> tuple[Listener, list[int]]:
     """The held-out ``rows`` (photos, no-crossing views) played through ``engine`` as ``view``
     (landscape, or ``portrait`` views a photo of a portrait kind), and the indices of the clips
-    whose goal is in view."""
+    whose goal is in view. The views are cut for ``geometry`` (default: the engine's bundle's)."""
     lis, in_view = Listener(engine), []
     for ds, part in zip((ptl, neg), rows):
         for r in part:
             img = load_frame(ds.image_path(r), r.flags)
             for win, _, lab, inside, fov in user_views(img, r.far_x, r.label, 0 if view == "landscape" else portrait,
-                                                       engine.bundle.geometry)[view]:
+                                                       geometry or engine.bundle.geometry)[view]:
                 if inside:
                     in_view.append(len(lis.labels))
                 lis.add(win, lab, fov)
     return lis, in_view
+
+
+def magnify_view_crop(engine, zoom: float):
+    """A study (``--zoom``): ``engine``'s view crop shows a frame narrower than the training camera
+    magnified by up to ``zoom`` instead of at the training scale: :func:`crossing_assist.geometry.view_rows`
+    with ``t = max(1, tan(train / 2) / tan(fov / 2) / zoom)`` (a large zoom fills the canvas with
+    the frame's middle rows). No bundle field says this yet: the engine's copy of the geometry is
+    replaced in this process only. Returns the bundle's own geometry (to cut the views with)."""
+    geometry = engine.bundle.geometry
+    train = math.degrees(2 * math.atan(math.tan(math.radians(geometry.train_fov_deg) / 2) / zoom))
+    engine.bundle = replace(engine.bundle, geometry=replace(geometry, train_fov_deg=train))
+    return geometry
 
 
 def sweep_point(heard: list, in_view: list[int]) -> dict:
@@ -130,31 +152,36 @@ def sweep_point(heard: list, in_view: list[int]) -> dict:
 
 
 def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, portrait: int,
-               mirror: bool = False, portrait_frames: int | None = None, grid: int = GRID) -> dict:
+               mirror: bool = False, portrait_frames: int | None = None, grid: int = GRID, zoom: float = 1.0) -> dict:
     """The fold's held-out curves: ``{"landscape": {...}, "portrait": {...}, "portrait_window": {...}}``
     (the portrait ones only with ``portrait`` > 0 views a photo, on a draw of ``portrait_frames``
     photos, default ``n_frames``), swept over :func:`gate_scales` ``(grid)``; each curve cached in
     the fold folder (another grid is another cache), and the predictions listened to too
-    (``listened…npz``, :meth:`Listener.save`), so another grid is swept without the model."""
+    (``listened…npz``, :meth:`Listener.save`), so another grid is swept without the model.
+    ``zoom`` > 1: the portrait views magnified up to it (:func:`magnify_view_crop`), cached apart;
+    landscape frames at the training FOV are not magnified, so their curve is the same."""
     from crossing_assist.runtime.engine import Engine
 
     bundle = fold_bundle(fold, source, ptl, mirror)
-    engine = None
+    engine = geometry = None
     out = {}
     for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
         n = n_frames if view == "landscape" or portrait_frames is None else portrait_frames
-        draw = f"{draw_tag(mirror, n, seed)}{'' if view == 'landscape' else f'_{view}{portrait}'}"
+        draw = draw_tag(mirror, n, seed) + ("" if view == "landscape" else f"_{view}{portrait}{zoom_tag(zoom)}")
         done = fold / f"gate_curve{draw}{'' if grid == GRID else f'_grid{grid}'}.json"
         if done.is_file():   # listened to already (the fold does not change once finished)
             out[view] = json.loads(done.read_text())
             continue
-        engine = engine or Engine(bundle, threads=1)
+        if engine is None:
+            engine = Engine(bundle, threads=1)
+            geometry = magnify_view_crop(engine, zoom) if zoom > 1 else engine.bundle.geometry
         heard = fold / f"listened{draw}.npz"
         if heard.is_file():
             lis, extra = Listener.load(engine, heard)
             in_view = extra["in_view"].tolist()
         else:
-            lis, in_view = listen(engine, view, ptl, neg, held_out_rows(ptl, neg, source, used, n, seed), portrait)
+            lis, in_view = listen(engine, view, ptl, neg, held_out_rows(ptl, neg, source, used, n, seed), portrait,
+                                  geometry)
             lis.save(heard, in_view=np.asarray(in_view, np.int64))
         t0 = engine.decision_config().threshold
         labels = np.asarray(lis.labels)
@@ -260,9 +287,15 @@ def main(argv=None) -> int:
     ap.add_argument("--also", type=Path, action="append", default=[], metavar="CV2",
                     help="another --cv source run of the same recipe (e.g. another --seed): its folds are pooled "
                          "with CV's, so the choice averages over training noise; the result is written in CV")
+    ap.add_argument("--zoom", type=float, default=1.0, metavar="Z",
+                    help="a study: portrait frames (narrower than the training camera) shown magnified up to Z "
+                         "instead of at the training scale (for models trained with crossing-train --field-zoom; "
+                         "no bundle says so yet); results are written apart (gate…_zoomZ.json)")
     a = ap.parse_args(argv)
     if a.grid < 1:
         ap.error(f"--grid {a.grid}: at least 1 scale a doubling")
+    if not 1 <= a.zoom <= 4:
+        ap.error(f"--zoom {a.zoom}: valid 1..4")
     from crossing_assist.models.plots import plot_risk_coverage
 
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
@@ -272,7 +305,7 @@ def main(argv=None) -> int:
         for fold, source in finished_folds(cv):
             print(f"{cv} fold {source}: export + listen", file=sys.stderr, flush=True)
             curves = fold_curve(fold, source, ptl, neg, used, a.frames, a.seed, a.portrait, a.mirror, a.portrait_frames,
-                                a.grid)
+                                a.grid, a.zoom)
             if i:   # one key per fold in the pooled per-fold figures
                 curves = {view: {**c, "source": f"{source} ({cv})"} for view, c in curves.items()}
             folds.append(curves)
@@ -293,7 +326,7 @@ def main(argv=None) -> int:
                         **model, "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
         if a.also:
             result[view]["pooled_runs"] = [str(cv) for cv in (a.cv, *a.also)]
-        suffix = tag(a.mirror) + ("" if view == "landscape" else f"_{view}")
+        suffix = tag(a.mirror) + ("" if view == "landscape" else f"_{view}") + zoom_tag(a.zoom)
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
                            a.cv / f"gate_risk_coverage{suffix}.png", f"held out, {view}: gate threshold x scale")
         if model:
@@ -303,7 +336,7 @@ def main(argv=None) -> int:
         print(f"{view}: chosen scale {best['scale']:g} ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
     # landscape stays at the top level (what build_default_bundle.sh and older readers take)
     portrait = {k: result[k] for k in PORTRAIT_SETS if k in result}   # "portrait" sets the portrait threshold
-    (a.cv / f"gate{tag(a.mirror)}.json").write_text(json.dumps({**result["landscape"], **portrait}, indent=1))
+    (a.cv / f"gate{tag(a.mirror)}{zoom_tag(a.zoom)}.json").write_text(json.dumps({**result["landscape"], **portrait}, indent=1))
     return 0
 
 

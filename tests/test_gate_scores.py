@@ -201,3 +201,41 @@ def test_choose_gate_grid_sweeps_a_finer_grid_under_its_own_cache(tmp_path, monk
         cg.pool([fine, coarse])
     with pytest.raises(SystemExit):
         cg.main([str(tmp_path / "cv"), "--grid", "0"])
+
+
+def test_choose_gate_zoom_magnifies_narrow_frames_up_to_z_and_caches_them_apart(tmp_path, monkeypatch):
+    """``--zoom Z`` (a study): a frame narrower than the training camera keeps the rows of a view
+    magnified ``min(t, Z)`` times (``t = tan(train / 2) / tan(fov / 2)``), so a large Z fills the
+    canvas; a 4:3 frame at the training FOV is not touched; the views are still cut for the
+    bundle's own geometry; portrait curves under a zoom are cached apart, the landscape one is shared."""
+    import math
+    from dataclasses import dataclass
+    from types import SimpleNamespace
+
+    from crossing_assist.geometry import Geometry
+
+    import choose_gate as cg
+
+    @dataclass(frozen=True)
+    class _Bundle:
+        geometry: Geometry
+
+    geo, canvas = Geometry(fit="letterbox", view_crop=True), (168, 224)
+    t = math.tan(math.radians(67.0) / 2) / math.tan(math.radians(53.0) / 2)
+    for zoom in (1.0, 1.2, 4.0):
+        engine = SimpleNamespace(bundle=_Bundle(geo))
+        assert cg.magnify_view_crop(engine, zoom) is geo
+        seen = engine.bundle.geometry
+        assert seen.rows_seen(640, 480, 53.0, canvas)[1] == math.floor(480 * 168 / 224 * max(1.0, t / zoom) + 0.5)
+        assert seen.rows_seen(480, 640, 67.0, canvas) == (0, 480)
+    assert geo.rows_seen(640, 480, 53.0, canvas)[1] == 478 and seen.rows_seen(640, 480, 53.0, canvas)[1] == 360
+
+    cg, ptl, neg, fold = _toy_fold(tmp_path, monkeypatch, photos=2, no_crossing=2)
+    plain = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 2, 0, 1)
+    zoomed = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 2, 0, 1, zoom=1.5)
+    assert zoomed["landscape"] == plain["landscape"] and zoomed["portrait"]["frames"] == 2
+    assert {p.name for p in fold.glob("gate_curve*.json")} == {
+        "gate_curve_2.json", "gate_curve_2_portrait1.json", "gate_curve_2_portrait_window1.json",
+        "gate_curve_2_portrait1_zoom1.5.json", "gate_curve_2_portrait_window1_zoom1.5.json"}
+    with pytest.raises(SystemExit):
+        cg.main([str(tmp_path / "cv"), "--zoom", "0.5"])
