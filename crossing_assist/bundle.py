@@ -8,7 +8,7 @@ never leaves half a bundle. :func:`check_session` compares an opened onnxruntime
 in, never imported here) with the json: input name and dtype, output names, action count and
 the facts embedded in the graph's metadata.
 
-Schema (version 3; versions 1 and 2 are still read), see docs/contracts.md section 3. Version 2
+Schema (version 4; versions 1 to 3 are still read), see docs/contracts.md section 3. Version 2
 adds ``geometry`` (:class:`crossing_assist.geometry.Geometry`: how the graph fits a frame onto its
 canvas, and the default camera field of view per orientation); a version-1 bundle reads as
 ``fit = stretch`` with ``fov_deg`` for both orientations. Version 3 adds ``geometry.view_crop``
@@ -17,7 +17,10 @@ the graph, :func:`crossing_assist.geometry.view_rows`); a version-2 bundle reads
 ``geometry.sensor_aspect`` (optional, schema 2 and 3, 1..3; absent or null = none) is the long /
 short side of the sensor ``camera_fov_deg`` describes: the default FOV of a frame narrower than
 it is its crop's (:func:`crossing_assist.geometry.default_fov`); older readers ignore it.
-Readers that predate a version refuse it, so no consumer silently skips the crop. Two fields depend on the model bytes and
+Version 4 adds ``geometry.view_zoom`` (with the view crop, 1..4, absent = 1): a frame from a camera
+narrower than the training one is shown magnified by up to this much instead of at the training
+scale. A bundle is written as version 4 only when its ``view_zoom`` is not 1 (:func:`schema_for`),
+so bundles without it stay readable by version-3 readers. Readers that predate a version refuse it, so no consumer silently skips the crop. Two fields depend on the model bytes and
 are filled in by :func:`write_bundle`: ``model_sha256`` and ``model_size`` (bytes). They are the
 only fields left out of the copy embedded in the ONNX metadata (``bundle_json``).
 """
@@ -38,10 +41,10 @@ from crossing_assist import __version__
 from crossing_assist.actions import DEFAULT_FOV_DEG, VALID_SPACES, ActionSpace, get_space
 from crossing_assist.errors import UserError
 from crossing_assist.errors import short_repr as _short  # one cut-to-length repr for every error line
-from crossing_assist.geometry import FITS, SENSOR_ASPECT_RANGE, Geometry, GeometryError, check_fov
+from crossing_assist.geometry import FITS, SENSOR_ASPECT_RANGE, VIEW_ZOOM_RANGE, Geometry, GeometryError, check_fov
 
-SCHEMA_VERSION = 3
-READABLE_SCHEMAS = (1, 2, 3)
+SCHEMA_VERSION = 4
+READABLE_SCHEMAS = (1, 2, 3, 4)
 BUNDLE_JSON = "bundle.json"
 MODEL_FILE = "model.onnx"
 INPUT_NAME = "frames"
@@ -363,8 +366,13 @@ def _parse_geometry(d: Any, fov_deg: float, version: int) -> Geometry:
     aspect = d.get("sensor_aspect")
     if aspect is not None:
         aspect = _num(aspect, "geometry.sensor_aspect", *SENSOR_ASPECT_RANGE)
+    zoom = 1.0
+    if version >= 4 and d.get("view_zoom") is not None:
+        zoom = _num(d["view_zoom"], "geometry.view_zoom", *VIEW_ZOOM_RANGE)
+        if zoom != 1 and not crop:
+            raise BundleError(f"bundle.json: geometry.view_zoom = {_short(d['view_zoom'])} needs geometry.view_crop true")
     return Geometry(fit=fit, pad_rgb=tuple(pad), camera_fov_deg=(fovs[0], fovs[1]), train_fov_deg=train,
-                    view_crop=crop, sensor_aspect=aspect)
+                    view_crop=crop, sensor_aspect=aspect, view_zoom=zoom)
 
 
 def _str(value: Any, name: str) -> str:
@@ -504,6 +512,14 @@ def graph_metadata(meta: Mapping[str, Any]) -> dict[str, str]:
             "schema_version": str(meta["schema_version"])}
 
 
+def schema_for(geometry: Geometry | None) -> int:
+    """The schema version a bundle of ``geometry`` is written as: 1 without a geometry block, 4 with
+    a ``view_zoom`` other than 1, else 3 (the oldest version that holds everything it says)."""
+    if geometry is None:
+        return 1
+    return SCHEMA_VERSION if geometry.view_zoom != 1 else 3
+
+
 def make_meta(*, n_actions: int, input: InputSpec, mc: McSpec, calibration: Calibration,
               geometry: Geometry | None, precision: str = "fp32", training: Mapping[str, Any] | None = None,
               metrics: Mapping[str, Any] | None = None, provenance: Mapping[str, Any] | None = None,
@@ -513,7 +529,7 @@ def make_meta(*, n_actions: int, input: InputSpec, mc: McSpec, calibration: Cali
     bundle (stretched frames, one FOV of 90 degrees), which readers still accept; otherwise the
     current schema, whose ``fov_deg`` is the landscape camera FOV. Validated before it is returned."""
     meta: dict[str, Any] = {
-        "schema_version": 1 if geometry is None else SCHEMA_VERSION,
+        "schema_version": schema_for(geometry),
         "model_file": model_file,
         "actions": ActionsSpec.of(n_actions).to_json(),
         "fov_deg": DEFAULT_FOV_DEG if geometry is None else geometry.camera_fov_deg[0],

@@ -51,21 +51,24 @@ SENSOR_ASPECT_RANGE = (1.0, 3.0)
 DEFAULT_CANVAS = (168, 224)            # (H, W): 4:3 landscape
 PAD_RGB = (124, 116, 104)              # ImageNet mean in uint8: normalises to ~0
 MAX_ASPECT = 8.0                       # frames more elongated than 8:1 are refused
+VIEW_ZOOM_RANGE = (1.0, 4.0)           # geometry.view_zoom (schema 4): 1 = the training scale
 
 
 def view_rows(height: int, width: int, fov_deg: float, canvas: tuple[int, int],
-              train_fov_deg: float = TRAIN_FOV_DEG) -> tuple[int, int]:
+              train_fov_deg: float = TRAIN_FOV_DEG, zoom: float = 1.0) -> tuple[int, int]:
     """The rows of a ``height x width`` frame (horizontal FOV ``fov_deg``) that the canvas shows
-    at the training camera's angular scale: ``(top, rows)``, centred.
+    at the training camera's angular scale (``zoom`` = 1), or magnified by up to ``zoom``:
+    ``(top, rows)``, centred.
 
     ``rows = min(height, max(1, floor(width * H * t / W + 0.5)))`` for the canvas (H, W), with
-    ``t = max(1, tan(train / 2) / tan(fov / 2))``; ``top = (height - rows) // 2``. A camera wider
-    than the training one (``t`` would be < 1) cannot reach the training scale without losing
+    ``t = max(1, tan(train / 2) / tan(fov / 2) / zoom)``; ``top = (height - rows) // 2``. A camera
+    wider than the training one (``t`` would be < 1) cannot reach the training scale without losing
     columns, so its frame is fitted by its width and keeps the rows the canvas shows at that
-    scale. The phone app computes the same (android_demo/www/js/geometry.js); the shared test
-    vectors hold both to it."""
+    scale. A narrower camera's frame is shown ``min(tan(train / 2) / tan(fov / 2), zoom)`` times
+    magnified (a large zoom: its middle rows fill the canvas). The phone app computes the same
+    (android_demo/www/js/geometry.js); the shared test vectors hold both to it."""
     ch, cw = canvas
-    t = max(1.0, math.tan(math.radians(train_fov_deg) / 2) / math.tan(math.radians(fov_deg) / 2))
+    t = max(1.0, math.tan(math.radians(train_fov_deg) / 2) / math.tan(math.radians(fov_deg) / 2) / zoom)
     rows = min(int(height), max(1, math.floor(width * ch * t / cw + 0.5)))
     return (int(height) - rows) // 2, rows
 
@@ -130,7 +133,10 @@ class Geometry:
     orientation; ``train_fov_deg``: the FOV assumed for the training photos; ``view_crop``
     (schema 3): crop the rows beyond the training camera's view before fitting (:func:`view_rows`);
     ``sensor_aspect`` (optional, 1..3; None = absent): long side / short side of the sensor
-    ``camera_fov_deg`` describes, so narrower frames get their crop's FOV (:func:`default_fov`).
+    ``camera_fov_deg`` describes, so narrower frames get their crop's FOV (:func:`default_fov`);
+    ``view_zoom`` (schema 4, 1..4, with ``view_crop``): a frame from a camera narrower than the
+    training one is shown magnified by up to this much instead of at the training scale (for a
+    model trained on magnified views, ``crossing-train --field-zoom``); 1 = the training scale.
     """
 
     fit: str = "letterbox"
@@ -139,6 +145,14 @@ class Geometry:
     train_fov_deg: float = TRAIN_FOV_DEG
     view_crop: bool = False
     sensor_aspect: float | None = None
+    view_zoom: float = 1.0
+
+    def __post_init__(self) -> None:
+        lo, hi = VIEW_ZOOM_RANGE
+        if not lo <= self.view_zoom <= hi:
+            raise GeometryError(f"Invalid view zoom: {self.view_zoom!r}; valid: {lo:g}..{hi:g} (1 = the training scale)")
+        if self.view_zoom != 1 and not self.view_crop:
+            raise GeometryError(f"Invalid view zoom: {self.view_zoom:g} needs the view crop (geometry.view_crop)")
 
     def to_json(self) -> dict:
         d = {"fit": self.fit, "strips": "frame",
@@ -147,14 +161,18 @@ class Geometry:
         if self.fit == "letterbox":
             d["pad_rgb"] = list(self.pad_rgb)
             d["view_crop"] = self.view_crop
+        if self.view_zoom != 1:   # schema 4; schema-3 geometries are written as before
+            d["view_zoom"] = self.view_zoom
         if self.sensor_aspect is not None:
             d["sensor_aspect"] = self.sensor_aspect
         return d
 
     def rows_seen(self, height: int, width: int, fov_deg: float, canvas: tuple[int, int]) -> tuple[int, int]:
         """``(top, rows)`` of a ``height x width`` frame (horizontal FOV ``fov_deg``) that the graph
-        sees: :func:`view_rows` with ``view_crop``, else all of them."""
-        return view_rows(height, width, fov_deg, canvas, self.train_fov_deg) if self.view_crop else (0, int(height))
+        sees: :func:`view_rows` (magnified up to ``view_zoom``) with ``view_crop``, else all of them."""
+        if not self.view_crop:
+            return 0, int(height)
+        return view_rows(height, width, fov_deg, canvas, self.train_fov_deg, self.view_zoom)
 
     def view(self, frame: np.ndarray, fov_deg: float, canvas: tuple[int, int]) -> np.ndarray:
         """The part of an H x W x C frame (horizontal FOV ``fov_deg``) the graph should see

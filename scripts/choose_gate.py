@@ -23,9 +23,10 @@ another CV run of the same recipe (another ``--seed``) with CV's before choosing
 landscape photo is one clip, its portrait views 2 x ``--portrait`` clips, so ``--frames 100000
 --portrait-frames 200`` chooses landscape on every held-out photo without playing every photo's
 portrait views too. ``--grid 16`` sweeps twice as many scales as crossing-eval (16 a doubling), for
-a curve that jumps between neighbouring scales. ``--zoom Z`` is a study for models trained with
+a curve that jumps between neighbouring scales. ``--zoom Z`` is for models trained with
 ``crossing-train --field-zoom``: the portrait views are shown magnified up to Z instead of at the
-training scale (:func:`magnify_view_crop`; no bundle field says so yet), cached and written apart.
+training scale, as ``crossing-export --view-zoom Z`` bundles show them (:func:`magnify_view_crop`),
+cached and written apart.
 
     .venv/bin/python scripts/choose_gate.py runs/default/cv --ptl runs/data/ptl --neg runs/data/neg \
         --used-neg runs/data/neg_half --frames 200 --portrait 3
@@ -35,7 +36,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 from dataclasses import replace
@@ -134,14 +134,13 @@ def listen(engine, view: str, ptl, neg, rows: tuple[list, list], portrait: int,
 
 
 def magnify_view_crop(engine, zoom: float):
-    """A study (``--zoom``): ``engine``'s view crop shows a frame narrower than the training camera
-    magnified by up to ``zoom`` instead of at the training scale: :func:`crossing_assist.geometry.view_rows`
-    with ``t = max(1, tan(train / 2) / tan(fov / 2) / zoom)`` (a large zoom fills the canvas with
-    the frame's middle rows). No bundle field says this yet: the engine's copy of the geometry is
-    replaced in this process only. Returns the bundle's own geometry (to cut the views with)."""
+    """``--zoom``: ``engine`` shows a frame narrower than the training camera magnified by up to
+    ``zoom`` instead of at the training scale, as a bundle exported with ``crossing-export
+    --view-zoom`` would (``geometry.view_zoom``, :func:`crossing_assist.geometry.view_rows`), without
+    exporting the fold again: the engine's copy of the geometry is replaced in this process.
+    Returns the bundle's own geometry (to cut the views with)."""
     geometry = engine.bundle.geometry
-    train = math.degrees(2 * math.atan(math.tan(math.radians(geometry.train_fov_deg) / 2) / zoom))
-    engine.bundle = replace(engine.bundle, geometry=replace(geometry, train_fov_deg=train))
+    engine.bundle = replace(engine.bundle, geometry=replace(geometry, view_zoom=zoom))
     return geometry
 
 
@@ -288,9 +287,9 @@ def main(argv=None) -> int:
                     help="another --cv source run of the same recipe (e.g. another --seed): its folds are pooled "
                          "with CV's, so the choice averages over training noise; the result is written in CV")
     ap.add_argument("--zoom", type=float, default=1.0, metavar="Z",
-                    help="a study: portrait frames (narrower than the training camera) shown magnified up to Z "
-                         "instead of at the training scale (for models trained with crossing-train --field-zoom; "
-                         "no bundle says so yet); results are written apart (gate…_zoomZ.json)")
+                    help="portrait frames (narrower than the training camera) shown magnified up to Z instead of at "
+                         "the training scale, as crossing-export --view-zoom Z bundles show them (for models trained "
+                         "with crossing-train --field-zoom); results are written apart (gate…_zoomZ.json)")
     a = ap.parse_args(argv)
     if a.grid < 1:
         ap.error(f"--grid {a.grid}: at least 1 scale a doubling")

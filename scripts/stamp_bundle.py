@@ -35,7 +35,7 @@ from pathlib import Path
 
 import onnx
 
-from crossing_assist.bundle import SCHEMA_VERSION, BundleError, read_bundle, write_bundle
+from crossing_assist.bundle import BundleError, read_bundle, write_bundle
 from crossing_assist.export.graph import model_bytes, set_metadata
 from crossing_assist.geometry import GeometryError, check_sensor_aspect, parse_ratio
 
@@ -118,9 +118,9 @@ def main(argv=None) -> int:
         if b.geometry.fit != "letterbox":
             print(f"error: {a.src} is not letterboxed (geometry.fit = {b.geometry.fit}); no view crop", file=sys.stderr)
             return 2
-        meta["schema_version"] = SCHEMA_VERSION
+        meta["schema_version"] = max(3, b.schema_version)
         meta["geometry"]["view_crop"] = True
-        stamped.append(f"schema {SCHEMA_VERSION}, geometry.view_crop")
+        stamped.append(f"schema {meta['schema_version']}, geometry.view_crop")
     if aspect is not None:
         if b.schema_version < 2:
             print(f"error: {a.src} is schema {b.schema_version} (no geometry block); re-export it", file=sys.stderr)

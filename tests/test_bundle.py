@@ -98,7 +98,7 @@ def test_the_writer_writes_schema2_with_geometry_and_portrait_threshold():
     cal = B.Calibration(1.0, B.ConformalSpec(0.9, 0.1, 5), B.UncertaintySpec("mutual_info", 0.3, 0.5))
     inp = B.InputSpec((168, 224), (0.5, 0.5, 0.5), (0.5, 0.5, 0.5), resize="bilinear, antialiased")
     meta = B.make_meta(**_typed_parts(geometry=geo, calibration=cal, input=inp, precision="int8"))
-    assert meta["schema_version"] == B.SCHEMA_VERSION and meta["fov_deg"] == 70.0
+    assert meta["schema_version"] == 3 == B.schema_for(geo) and meta["fov_deg"] == 70.0
     b = B.parse_meta(meta, need_bytes=False)
     assert (b.geometry, b.calibration, b.input, b.precision) == (geo, cal, inp, "int8")
     assert b.calibration.uncertainty.threshold_for("portrait") == 0.5
@@ -184,7 +184,7 @@ def test_invalid_json_text(bundle_dir):
 @pytest.mark.parametrize(
     "edit, match",
     [
-        (lambda m: m.update(schema_version=4), "schema_version 4 unsupported.*upgrade"),
+        (lambda m: m.update(schema_version=5), "schema_version 5 unsupported.*upgrade"),
         (lambda m: m.update(schema_version=0), "schema_version 0 unsupported.*re-export"),
         (lambda m: m.pop("fov_deg"), "missing field 'fov_deg'"),
         (lambda m: m["actions"].update(n=5), "actions.n = 5 invalid; valid: 4, 8, 13"),

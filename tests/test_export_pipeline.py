@@ -203,6 +203,8 @@ def test_config_rejects_bad_options():
         ExportConfig(run="r", out="o", int8=True)
     with pytest.raises(ExportError, match="--p 1.0"):
         ExportConfig(run="r", out="o", p=1.0)
+    with pytest.raises(ExportError, match="--view-zoom 0.5; valid: 1..4"):
+        ExportConfig(run="r", out="o", view_zoom=0.5)
 
 
 def _cli(*args):
@@ -299,3 +301,24 @@ def test_letterbox_exports_state_the_phone_sensor():
         g = _geometry(SimpleNamespace(fov_deg=67.0), GraphSpec(size=(32, 32), mean=(0.5,) * 3, std=(0.25,) * 3, fit=fit))
         assert g.sensor_aspect == aspect and g.view_crop == (fit == "letterbox")
         assert g.to_json().get("sensor_aspect") == aspect
+
+
+def test_view_zoom_makes_a_schema4_letterbox_geometry_and_is_refused_for_a_stretch_model(work, tmp_path):
+    """--view-zoom Z: a letterbox model's geometry carries view_zoom (schema 4); a stretched model
+    (the toy run) is refused in one line before any calibration, and nothing is written."""
+    from types import SimpleNamespace
+
+    from crossing_assist.bundle import schema_for
+    from crossing_assist.export.exporter import _geometry
+    from crossing_assist.export.graph import GraphSpec
+
+    spec = GraphSpec(size=(32, 32), mean=(0.5,) * 3, std=(0.25,) * 3, fit="letterbox")
+    g = _geometry(SimpleNamespace(fov_deg=67.0), spec, 1.3)
+    assert g.view_zoom == 1.3 and g.view_crop and g.to_json()["view_zoom"] == 1.3 and schema_for(g) == 4
+    assert schema_for(_geometry(SimpleNamespace(fov_deg=67.0), spec)) == 3
+    root, _ = work
+    cfg = ExportConfig(run=str(root / "run"), out=str(tmp_path / "z"), samples=8, calib_data=str(root / "data"),
+                       batch=8, parity_frames=4, progress=False, view_zoom=1.3)
+    with pytest.raises(ExportError, match="--view-zoom 1.3: the checkpoint stretches frames"):
+        export_bundle(cfg, log=lambda m: None)
+    assert not (tmp_path / "z").exists()

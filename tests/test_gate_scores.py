@@ -204,10 +204,11 @@ def test_choose_gate_grid_sweeps_a_finer_grid_under_its_own_cache(tmp_path, monk
 
 
 def test_choose_gate_zoom_magnifies_narrow_frames_up_to_z_and_caches_them_apart(tmp_path, monkeypatch):
-    """``--zoom Z`` (a study): a frame narrower than the training camera keeps the rows of a view
-    magnified ``min(t, Z)`` times (``t = tan(train / 2) / tan(fov / 2)``), so a large Z fills the
-    canvas; a 4:3 frame at the training FOV is not touched; the views are still cut for the
-    bundle's own geometry; portrait curves under a zoom are cached apart, the landscape one is shared."""
+    """``--zoom Z``: the engine's geometry gets ``view_zoom`` Z, so a frame narrower than the training
+    camera keeps the rows of a view magnified ``min(t, Z)`` times (``t = tan(train / 2) / tan(fov / 2)``)
+    and a large Z fills the canvas; a 4:3 frame at the training FOV is not touched; the views are
+    still cut for the bundle's own geometry; portrait curves under a zoom are cached apart, the
+    landscape one is shared."""
     import math
     from dataclasses import dataclass
     from types import SimpleNamespace
@@ -226,11 +227,18 @@ def test_choose_gate_zoom_magnifies_narrow_frames_up_to_z_and_caches_them_apart(
         engine = SimpleNamespace(bundle=_Bundle(geo))
         assert cg.magnify_view_crop(engine, zoom) is geo
         seen = engine.bundle.geometry
+        assert seen.view_zoom == zoom
         assert seen.rows_seen(640, 480, 53.0, canvas)[1] == math.floor(480 * 168 / 224 * max(1.0, t / zoom) + 0.5)
         assert seen.rows_seen(480, 640, 67.0, canvas) == (0, 480)
     assert geo.rows_seen(640, 480, 53.0, canvas)[1] == 478 and seen.rows_seen(640, 480, 53.0, canvas)[1] == 360
 
+    from runtime_toy import make_toy_bundle
+
+    from crossing_assist.testing.toy_bundle import Toy
+
     cg, ptl, neg, fold = _toy_fold(tmp_path, monkeypatch, photos=2, no_crossing=2)
+    cropped = make_toy_bundle(tmp_path / "cropped", Toy(samples=1, drop_p=0.0, geometry=geo))
+    monkeypatch.setattr(cg, "fold_bundle", lambda *a, **k: cropped)
     plain = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 2, 0, 1)
     zoomed = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 2, 0, 1, zoom=1.5)
     assert zoomed["landscape"] == plain["landscape"] and zoomed["portrait"]["frames"] == 2

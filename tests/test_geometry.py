@@ -122,12 +122,12 @@ def test_schema2_geometry_errors_are_one_line(edit, words):
     assert words in _err(meta)
 
 
-def test_schema2_without_geometry_is_refused_and_schema4_unsupported():
+def test_schema2_without_geometry_is_refused_and_schema5_unsupported():
     meta = toy_meta(TOY2)
     del meta["geometry"]
     assert "geometry" in _err(meta)
     assert "geometry" in _err(meta | {"schema_version": 2})
-    assert "unsupported" in _err(toy_meta(TOY2) | {"schema_version": 4})
+    assert "unsupported" in _err(toy_meta(TOY2) | {"schema_version": 5})
 
 
 def test_schema1_reads_as_stretch_with_one_fov(tmp_path):
@@ -194,6 +194,49 @@ def test_geometry_view_crops_only_when_the_bundle_says_so():
     assert Geometry().view(frame, 53.0, (168, 224)) is frame
     assert Geometry(view_crop=True).rows_seen(640, 480, 53.0, (168, 224)) == (81, 478)
     assert Geometry().rows_seen(640, 480, 53.0, (168, 224)) == (0, 640)
+
+
+def test_view_zoom_magnifies_a_narrower_cameras_frame_up_to_it():
+    """Schema 4, ``view_zoom``: a portrait phone (53 deg, t = 1.33 at a 67-deg training camera) keeps
+    fewer rows, shown magnified min(t, zoom) times; a large zoom fills the canvas with a 4:3 band;
+    the training camera and wider ones are not touched; columns never go."""
+    import math
+
+    from crossing_assist.geometry import view_rows
+
+    canvas = (168, 224)
+    t = math.tan(math.radians(33.5)) / math.tan(math.radians(26.5))
+    for zoom in (1.0, 1.2, 1.3, 2.0, 4.0):
+        rows = math.floor(480 * 0.75 * max(1.0, t / zoom) + 0.5)
+        assert view_rows(640, 480, 53.0, canvas, zoom=zoom) == ((640 - rows) // 2, rows)
+        assert view_rows(480, 640, 67.0, canvas, zoom=zoom) == (0, 480)       # the training camera
+        assert view_rows(640, 480, 100.0, canvas, zoom=zoom) == (140, 360)    # a wider one: as before
+    assert view_rows(640, 480, 53.0, canvas, zoom=2.0) == (140, 360)          # filled: 4:3 rows
+    assert Geometry(view_crop=True, view_zoom=2.0).rows_seen(640, 480, 53.0, canvas) == (140, 360)
+    with pytest.raises(GeometryError, match="view zoom"):
+        Geometry(view_crop=True, view_zoom=0.5)
+    with pytest.raises(GeometryError, match="needs the view crop"):
+        Geometry(view_zoom=1.3)
+
+
+def test_schema4_carries_view_zoom_and_only_a_zoom_makes_a_bundle_schema4():
+    """The writer keeps schema 3 (readable by older apps) unless the bundle has a view zoom;
+    a reader takes view_zoom from schema 4 only, with the view crop, in 1..4."""
+    from crossing_assist.bundle import schema_for
+
+    plain = Geometry(fit="letterbox", view_crop=True)
+    zoomed = Geometry(fit="letterbox", view_crop=True, view_zoom=1.3)
+    assert schema_for(None) == 1 and schema_for(plain) == 3 and schema_for(zoomed) == 4
+    assert "view_zoom" not in plain.to_json() and zoomed.to_json()["view_zoom"] == 1.3
+    meta = toy_meta(TOY2) | {"schema_version": 4}
+    meta["geometry"].update(fit="letterbox", pad_rgb=[1, 2, 3], view_crop=True, view_zoom=1.3)
+    assert parse_meta(meta, need_bytes=False).geometry.view_zoom == 1.3
+    assert parse_meta(meta | {"schema_version": 3}, need_bytes=False).geometry.view_zoom == 1.0   # schema 3: never
+    for bad, words in ((0.9, "geometry.view_zoom"), (5.0, "geometry.view_zoom"), ("2", "geometry.view_zoom")):
+        meta["geometry"]["view_zoom"] = bad
+        assert words in _err(meta)
+    meta["geometry"].update(view_zoom=1.3, view_crop=False)
+    assert "needs geometry.view_crop" in _err(meta)
 
 
 @pytest.mark.parametrize("crop", [True, False])

@@ -101,7 +101,7 @@ def test_vectors_replay_from_json_alone(stored):
 
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == 5
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == 6
     assert "decision steps" in capsys.readouterr().out
 
 
@@ -140,6 +140,28 @@ def test_view_crop_vectors_cover_orientations_aspects_and_fovs(stored):
         t = max(1.0, math.tan(math.radians(c["train_fov_deg"]) / 2) / math.tan(math.radians(c["fov_deg"]) / 2))
         assert c["rows"] == min(h, max(1, math.floor(w * c["canvas"][0] * t / c["canvas"][1] + 0.5)))
         assert c["top"] == (h - c["rows"]) // 2
+
+
+def test_view_zoom_vectors_magnify_narrow_frames_up_to_their_zoom(stored):
+    """Version 6 (schema 4's geometry.view_zoom): each case replays from its JSON with the formula
+    in docs; zoom 1 is the view crop's own rows, a portrait phone keeps fewer rows the larger the
+    zoom until a 4:3 band fills the canvas, and a landscape frame at the training FOV never changes."""
+    section = stored["geometry"]["view_rows_zoom"]
+    assert section["geometry"]["view_zoom"] > 1 and section["geometry"]["view_crop"] is True
+    cases = section["cases"]
+    assert {1.0, 4.0} < {c["zoom"] for c in cases}
+    for c in cases:
+        w, h = c["frame"]
+        t = max(1.0, math.tan(math.radians(c["train_fov_deg"]) / 2) / math.tan(math.radians(c["fov_deg"]) / 2) / c["zoom"])
+        assert c["rows"] == min(h, max(1, math.floor(w * c["canvas"][0] * t / c["canvas"][1] + 0.5)))
+        assert c["top"] == (h - c["rows"]) // 2
+        if c["zoom"] == 1.0:
+            assert [c["top"], c["rows"]] == list(view_rows(h, w, c["fov_deg"], tuple(c["canvas"]), c["train_fov_deg"]))
+    phone = sorted((c["zoom"], c["rows"]) for c in cases
+                   if c["frame"] == [480, 640] and c["override"] is None and c["canvas"] == [168, 224])
+    assert [r for _, r in phone] == sorted((r for _, r in phone), reverse=True) and phone[0][1] > phone[-1][1] == 360
+    assert {c["rows"] for c in cases if c["frame"] == [640, 480] and c["override"] is None
+            and c["canvas"] == [168, 224]} == {480}
 
 
 def test_sensor_aspect_vectors_give_crops_their_fov(stored):

@@ -143,9 +143,11 @@ test('bundle.json validation accepts a good bundle and names the bad field', () 
   delete v1.geometry;
   assert.deepEqual(parseBundleMeta(v1).geometry,
     { fit: 'stretch', pad_rgb: null, strips: 'frame', camera_fov_deg: { landscape: 90, portrait: 90 }, train_fov_deg: 90,
-      view_crop: false, sensor_aspect: null });
+      view_crop: false, sensor_aspect: null, view_zoom: 1 });
   const bad = [
-    [(m) => { m.schema_version = 4; }, /schema_version 4 unsupported \(this app reads 1, 2, 3\); update the app/],
+    [(m) => { m.schema_version = 5; }, /schema_version 5 unsupported \(this app reads 1, 2, 3, 4\); update the app/],
+    [(m) => { m.schema_version = 4; m.geometry.view_crop = true; m.geometry.view_zoom = 0.5; }, /geometry.view_zoom = 0.5 is out of range; valid: \[1, 4\]/],
+    [(m) => { m.schema_version = 4; m.geometry.view_zoom = 1.3; }, /geometry.view_zoom = 1.3 needs geometry.view_crop true/],
     [(m) => { m.schema_version = 3; m.geometry.view_crop = 'yes'; }, /geometry.view_crop = "yes" must be true or false/],
     [(m) => { m.schema_version = 3; m.geometry.view_crop = null; }, /geometry.view_crop = null/],
     [(m) => { m.geometry.train_fov_deg = 180; }, /train_fov_deg = 180 is out of range/],
@@ -183,6 +185,38 @@ test('bundle.json schema 3: view_crop is read for letterbox bundles only, absent
   const noTrain = validMeta();
   delete noTrain.geometry.train_fov_deg; // optional, as in Python: the landscape FOV
   assert.equal(parseBundleMeta(noTrain).geometry.train_fov_deg, 67);
+});
+
+test('bundle.json schema 4: view_zoom is read from schema 4 with the view crop, absent = 1', () => {
+  const zoom = (change) => {
+    const m = validMeta();
+    m.geometry.view_crop = true;
+    change(m);
+    return parseBundleMeta(m).geometry.view_zoom;
+  };
+  assert.equal(zoom((m) => { m.schema_version = 4; }), 1);
+  assert.equal(zoom((m) => { m.schema_version = 4; m.geometry.view_zoom = 1.3; }), 1.3);
+  assert.equal(zoom((m) => { m.schema_version = 3; m.geometry.view_zoom = 1.3; }), 1); // schema 3: never (as Python)
+});
+
+test('viewRows with a view zoom: a portrait phone magnified up to it, a filled 4:3 band at most', async () => {
+  const { frameView, viewRows } = await import('../www/js/geometry.js');
+  const canvas = [168, 224];
+  assert.deepEqual(viewRows(640, 480, 53, canvas, 67, 1), viewRows(640, 480, 53, canvas, 67)); // 1: the view crop
+  assert.deepEqual(viewRows(640, 480, 53, canvas, 67, 1.2), [121, 398]); // magnified 1.2 times
+  assert.deepEqual(viewRows(640, 480, 53, canvas, 67, 2), [140, 360]); // filled: 4:3 rows
+  assert.deepEqual(viewRows(480, 640, 67, canvas, 67, 2), [0, 480]); // the training camera: untouched
+  const rgb = new Uint8Array(640 * 480 * 3);
+  const v = frameView({ rgb, width: 480, height: 640 }, { view_crop: true, train_fov_deg: 67, view_zoom: 2 }, 53, canvas);
+  assert.deepEqual([v.top, v.rows], [140, 360]);
+});
+
+test('the shared vectors hold the view zoom, and a port that ignores it is caught', { skip: noVectors }, () => {
+  const v = loadVectors();
+  assert.ok(v.version >= 6 && v.geometry.view_rows_zoom.cases.length > 500);
+  for (const c of v.geometry.view_rows_zoom.cases) delete c.zoom; // a port that ignores the field
+  const r = replayVectors(v);
+  assert.ok(r.nFailures > 0 && r.failures.every((f) => f.scenario === 'geometry.view_rows_zoom'), JSON.stringify(r.failures[0]));
 });
 
 test('bundle.json geometry.sensor_aspect: optional (absent or null = null), any schema >= 2, in 1..3', () => {

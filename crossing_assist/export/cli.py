@@ -24,6 +24,7 @@ HELP = {
     "measure": "the gate's uncertainty measure: entropy | mutual_info",
     "gate_scale": "multiply the fitted gate threshold by this (pick it on held-out sources' risk-coverage curve: scripts/choose_gate.py)",
     "gate_scale_portrait": "the same for portrait frames, written as calibration.uncertainty.portrait_threshold (default: portrait uses --gate-scale's)",
+    "view_zoom": "show frames from a camera narrower than the training one (a phone in portrait) magnified by up to this instead of at the training scale (bundle schema 4); for models trained with crossing-train --field-zoom; 1 = the training scale",
     "int8": "quantise the convolutions to int8 (static QDQ, calibrated on real frames)",
     "int8_mode": "static: int8 weights and activations in the backbone's convolutions; weights: int8 weights only (float activations)",
     "int8_frames": "calibration frames for the int8 ranges",

@@ -49,7 +49,7 @@ from crossing_assist.errors import UserError
 from crossing_assist.export import calibrate as cal
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
 from crossing_assist.export.quantize import INT8_MODES, quantize_convs
-from crossing_assist.geometry import SENSOR_ASPECT, Geometry
+from crossing_assist.geometry import SENSOR_ASPECT, VIEW_ZOOM_RANGE, Geometry
 
 if TYPE_CHECKING:  # annotations only: models is imported where it is used (_load_policy)
     from crossing_assist.models.policy import PolicyConfig
@@ -77,6 +77,7 @@ class ExportConfig:
     measure: str = "entropy"
     gate_scale: float = 1.0         # multiplies the fitted gate threshold (chosen on held-out sources)
     gate_scale_portrait: float | None = None   # the same for portrait frames (None: portrait uses gate_scale's)
+    view_zoom: float = 1.0          # > 1: narrower cameras' frames shown magnified up to this (schema 4)
     int8: bool = False
     int8_mode: str = "static"       # static: weights + activations; weights: int8 weights only
     int8_frames: int = 128
@@ -97,6 +98,8 @@ class ExportConfig:
             (0.05 <= self.gate_scale <= 20, f"--gate-scale {self.gate_scale}; valid: 0.05..20"),
             (self.gate_scale_portrait is None or 0.05 <= self.gate_scale_portrait <= 20,
              f"--gate-scale-portrait {self.gate_scale_portrait}; valid: 0.05..20"),
+            (VIEW_ZOOM_RANGE[0] <= self.view_zoom <= VIEW_ZOOM_RANGE[1],
+             f"--view-zoom {self.view_zoom}; valid: {VIEW_ZOOM_RANGE[0]:g}..{VIEW_ZOOM_RANGE[1]:g}"),
             (self.measure in ("entropy", "mutual_info"), f"--measure {self.measure!r}; valid: entropy, mutual_info"),
             (self.int8_mode in INT8_MODES, f"--int8-mode {self.int8_mode!r}; valid: {', '.join(INT8_MODES)}"),
             (not self.int8 or self.calib_data, "--int8 needs --calib-data (real frames to calibrate the int8 ranges)"),
@@ -189,13 +192,17 @@ def _spec(config: PolicyConfig, samples: int, p: float, temperature: float = 1.0
                      temperature=temperature, fit=config.fit, pad_rgb=config.pad_rgb, mirror=mirror)
 
 
-def _geometry(config: PolicyConfig, spec: GraphSpec) -> Geometry:
+def _geometry(config: PolicyConfig, spec: GraphSpec, view_zoom: float = 1.0) -> Geometry:
     """Letterboxed models see the training camera's view: consumers crop rows beyond it (schema 3),
     and frames narrower than the phone's 4:3 sensor (9:16 video) get their crop's FOV
-    (``sensor_aspect``)."""
+    (``sensor_aspect``); ``view_zoom`` > 1 shows narrower cameras' frames magnified up to it
+    (schema 4). A stretched model with a view zoom is an ExportError."""
     letterbox = spec.fit == "letterbox"
+    if view_zoom != 1 and not letterbox:
+        raise ExportError(f"Invalid --view-zoom {view_zoom}: the checkpoint stretches frames (fit {spec.fit}); "
+                          "a view zoom needs a letterbox model")
     return Geometry(fit=spec.fit, pad_rgb=spec.pad_rgb, train_fov_deg=config.fov_deg, view_crop=letterbox,
-                    sensor_aspect=SENSOR_ASPECT if letterbox else None)
+                    sensor_aspect=SENSOR_ASPECT if letterbox else None, view_zoom=view_zoom)
 
 
 def parity_check(policy, spec: GraphSpec, frames: np.ndarray) -> float:
@@ -236,7 +243,7 @@ def _meta(policy, ckpt: Path, spec: GraphSpec, calib: cal.CalibrationResult, pre
     return make_meta(
         n_actions=policy.n_actions,
         input=InputSpec(size=spec.size, mean=spec.mean, std=spec.std, resize="bilinear, antialiased"),
-        geometry=_geometry(c, spec),
+        geometry=_geometry(c, spec, cfg.view_zoom),
         mc=McSpec(spec.samples, spec.p, spec.mirror),
         calibration=calib.spec(),
         precision=precision,
@@ -297,6 +304,7 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     check_replaceable(cfg.out, force=cfg.force)  # before minutes of work, and again when writing
     torch.set_num_threads(max(1, cfg.threads))
     policy, ckpt = _load_policy(cfg.run)
+    _geometry(policy.config, _spec(policy.config, 1, 0.0), cfg.view_zoom)   # a bad --view-zoom: before minutes of work
     n = policy.n_actions
     p = policy.config.p if cfg.p is None else cfg.p
     majority = policy.config.majority_action or None   # 0 (unknown): runs whose baseline counted negatives

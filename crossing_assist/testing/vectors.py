@@ -52,6 +52,11 @@ with and without the field (refused where a crop's FOV falls below 20 degrees);
 ``geometry.view_rows_sensor`` is ``view_rows`` under :data:`GEOMETRY_V3_SENSOR` (the rows seen at
 the per-aspect default FOV); one more decision scenario (own generator, appended) has a phone
 filming 9:16 video upright, turned to landscape and back. The vectors above are those of version 4.
+
+Version 6: ``geometry.view_zoom`` (bundle schema 4): ``geometry.view_rows_zoom`` is ``view_rows``
+under :data:`GEOMETRY_V4` with each case's ``zoom`` (frames from a camera narrower than the
+training one shown magnified up to it; a large zoom fills the canvas). Its own cases, no
+generator: the vectors above are those of version 5.
 """
 
 from __future__ import annotations
@@ -79,7 +84,7 @@ from crossing_assist.runtime.status import status_message
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 5
+VERSION = 6
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -171,6 +176,8 @@ GEOMETRY_V2 = {"fit": "letterbox", "pad_rgb": [124, 116, 104], "strips": "frame"
 GEOMETRY_V3 = {**GEOMETRY_V2, "view_crop": True}
 #: Schema 3 with ``sensor_aspect`` (version 5): the exporter's letterbox geometry.
 GEOMETRY_V3_SENSOR = {**GEOMETRY_V3, "sensor_aspect": 4 / 3}
+#: Schema 4 (version 6): the same magnifying narrower cameras' frames up to a zoom (cases carry theirs).
+GEOMETRY_V4 = {**GEOMETRY_V3_SENSOR, "view_zoom": 1.3}
 #: Frame sizes (width, height) for the sensor-aspect FOV vectors: 9:16, 3:4, 1:1, 4:3, 16:9 and
 #: extremes (1:10, 1:8 and their landscape twins), a frame just wider than 3:4 and one just narrower.
 ASPECT_SIZES = ((1080, 1920), (720, 1280), (480, 640), (3, 4), (600, 640), (479, 640), (480, 480), (640, 480),
@@ -268,6 +275,21 @@ def _view_rows_sensor() -> list[dict]:
                     top, rows = view_rows(h, w, fov, canvas, train)
                     cases.append({"frame": [w, h], "override": override, "fov_deg": fov, "canvas": list(canvas),
                                   "train_fov_deg": train, "top": top, "rows": rows})
+    return cases
+
+
+def _view_rows_zoom() -> list[dict]:
+    """The view crop magnified up to a zoom (version 6): frames of several aspects at the
+    per-aspect default FOV (or an override) x canvas x zoom -> the rows the graph sees."""
+    cases = []
+    for w, h in ASPECT_SIZES[:12]:
+        for override in (None, 40.0, 60.0, 100.0):
+            fov = camera_fov(GEOMETRY_V4, w, h, override)
+            for canvas in VIEW_CANVASES:
+                for zoom in (1.0, 1.1, 1.3, 1.7, 4.0):
+                    top, rows = view_rows(h, w, fov, canvas, GEOMETRY_V4["train_fov_deg"], zoom)
+                    cases.append({"frame": [w, h], "override": override, "fov_deg": fov, "canvas": list(canvas),
+                                  "train_fov_deg": GEOMETRY_V4["train_fov_deg"], "zoom": zoom, "top": top, "rows": rows})
     return cases
 
 
@@ -388,7 +410,8 @@ def build_vectors(seed: int = 20240601) -> dict:
         "status": _status_vectors(),
         "geometry": {"fov_range_deg": list(FOV_RANGE_DEG), "fov_choice": _fov_choices(),
                      "view_rows": {"geometry": GEOMETRY_V3, "cases": _view_rows()},
-                     "view_rows_sensor": {"geometry": GEOMETRY_V3_SENSOR, "cases": _view_rows_sensor()}},
+                     "view_rows_sensor": {"geometry": GEOMETRY_V3_SENSOR, "cases": _view_rows_sensor()},
+                     "view_rows_zoom": {"geometry": GEOMETRY_V4, "cases": _view_rows_zoom()}},
     }
 
 

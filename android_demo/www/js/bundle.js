@@ -6,8 +6,8 @@
 import { DEFAULT_FOV_DEG, spaceGroups, spaceNames } from './actions.js';
 import { FOV_RANGE_DEG } from './geometry.js';
 
-export const SCHEMA_VERSION = 3;
-export const SCHEMA_VERSIONS = [1, 2, 3];
+export const SCHEMA_VERSION = 4;
+export const SCHEMA_VERSIONS = [1, 2, 3, 4];
 export const FITS = ['letterbox', 'stretch'];
 export const INPUT_NAME = 'frames';
 export const OUTPUT_NAMES = ['probs', 'entropy', 'mutual_info', 'variance', 'votes'];
@@ -112,19 +112,21 @@ function parseCalibration(d) {
 }
 
 /**
- * The geometry block (schema 2; schema 3 adds view_crop), or schema 1's implied one: fit
- * 'stretch' and one field of view (fov_deg) for both orientations. Returns {fit, pad_rgb,
- * strips, camera_fov_deg: {landscape, portrait}, train_fov_deg, view_crop, sensor_aspect}.
+ * The geometry block (schema 2; schema 3 adds view_crop, schema 4 view_zoom), or schema 1's implied
+ * one: fit 'stretch' and one field of view (fov_deg) for both orientations. Returns {fit, pad_rgb,
+ * strips, camera_fov_deg: {landscape, portrait}, train_fov_deg, view_crop, sensor_aspect, view_zoom}.
  * view_crop (crop the frame's rows to the training camera's view, geometry.js viewRows) is read
  * only for a letterbox bundle of schema >= 3 (absent = false), as crossing_assist/bundle.py
  * reads it; train_fov_deg is optional (default: the landscape FOV) in (0, 180); sensor_aspect
  * (long / short side of the sensor camera_fov_deg describes, geometry.js defaultFov) is optional
- * in 1..3 (absent or null = null: every frame gets its orientation's FOV).
+ * in 1..3 (absent or null = null: every frame gets its orientation's FOV); view_zoom (frames from a
+ * camera narrower than the training one shown magnified up to it, geometry.js viewRows) is read
+ * only from schema >= 4, in 1..4, and needs view_crop (absent or null = 1).
  */
 export function parseGeometry(meta, version, fovDeg) {
   if (version < 2) {
     return { fit: 'stretch', pad_rgb: null, strips: 'frame', camera_fov_deg: { landscape: fovDeg, portrait: fovDeg },
-      train_fov_deg: fovDeg, view_crop: false, sensor_aspect: null };
+      train_fov_deg: fovDeg, view_crop: false, sensor_aspect: null, view_zoom: 1 };
   }
   const g = get(meta, 'geometry', '');
   const fit = get(g, 'fit', 'geometry');
@@ -146,7 +148,13 @@ export function parseGeometry(meta, version, fovDeg) {
     { loOpen: true, hiOpen: true });
   const crop = fit === 'letterbox' && version >= 3 && bool(g.view_crop === undefined ? false : g.view_crop, 'geometry.view_crop');
   const aspect = g.sensor_aspect == null ? null : num(g.sensor_aspect, 'geometry.sensor_aspect', 1, 3);
-  return { fit, pad_rgb: pad, strips, camera_fov_deg: camera, train_fov_deg: train, view_crop: crop, sensor_aspect: aspect };
+  let zoom = 1;
+  if (version >= 4 && g.view_zoom != null) {
+    zoom = num(g.view_zoom, 'geometry.view_zoom', 1, 4);
+    if (zoom !== 1 && !crop) throw new BundleError(`bundle.json: geometry.view_zoom = ${JSON.stringify(g.view_zoom)} needs geometry.view_crop true`);
+  }
+  return { fit, pad_rgb: pad, strips, camera_fov_deg: camera, train_fov_deg: train, view_crop: crop, sensor_aspect: aspect,
+    view_zoom: zoom };
 }
 
 /**

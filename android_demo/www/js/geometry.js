@@ -133,16 +133,17 @@ export function zoomedFov(fov, settings = {}, capabilities = {}) {
 
 /**
  * The rows of a height x width frame (horizontal FOV `fovDeg`) that the canvas [H, W] (bundle.json
- * input.size) shows at the training camera's angular scale: [top, rows], centred. Python:
- * crossing_assist/geometry.py view_rows, the same integers (the shared test vectors check it):
- *   t = max(1, tan(train / 2) / tan(fov / 2))
+ * input.size) shows at the training camera's angular scale, or magnified by up to `zoom`
+ * (geometry.view_zoom, schema 4): [top, rows], centred. Python: crossing_assist/geometry.py
+ * view_rows, the same integers (the shared test vectors check it):
+ *   t = max(1, tan(train / 2) / tan(fov / 2) / zoom)
  *   rows = min(height, max(1, floor(width * H * t / W + 0.5))), top = (height - rows) // 2
  * (a camera wider than the training one, t < 1, is fitted by its width: no further crop).
  */
-export function viewRows(height, width, fovDeg, canvas, trainFovDeg) {
+export function viewRows(height, width, fovDeg, canvas, trainFovDeg, zoom = 1) {
   const [ch, cw] = canvas;
   const rad = Math.PI / 180; // as Python's math.radians: x * (pi / 180)
-  const t = Math.max(1, Math.tan((trainFovDeg * rad) / 2) / Math.tan((fovDeg * rad) / 2));
+  const t = Math.max(1, Math.tan((trainFovDeg * rad) / 2) / Math.tan((fovDeg * rad) / 2) / zoom);
   const rows = Math.min(height, Math.max(1, Math.floor((width * ch * t) / cw + 0.5)));
   return [Math.floor((height - rows) / 2), rows];
 }
@@ -155,6 +156,6 @@ export function viewRows(height, width, fovDeg, canvas, trainFovDeg) {
 export function frameView(frame, geometry, fovDeg, canvas) {
   const { rgb, width, height } = frame;
   if (!geometry.view_crop) return { rgb, width, height, top: 0, rows: height };
-  const [top, rows] = viewRows(height, width, fovDeg, canvas, geometry.train_fov_deg);
+  const [top, rows] = viewRows(height, width, fovDeg, canvas, geometry.train_fov_deg, geometry.view_zoom ?? 1);
   return { rgb: rgb.subarray(top * width * 3, (top + rows) * width * 3), width, height: rows, top, rows };
 }

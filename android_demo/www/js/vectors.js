@@ -12,7 +12,7 @@ import { isFresh, sameFrame, Watchdog } from './live.js';
 import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains } from './logic.js';
 import { statusMessage } from './view.js';
 
-const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5];
+const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6];
 
 function close(a, b, tol) {
   return Math.abs(a - b) <= tol * Math.max(1, Math.abs(b));
@@ -171,15 +171,16 @@ export function replayVectors(vectors) {
   }
   // version 4: the view crop (schema 3); version 5: the same at the per-aspect default FOV
   // (geometry.sensor_aspect). The rows are integers, exactly; the FOV within the tolerance.
-  for (const name of ['view_rows', 'view_rows_sensor']) {
+  // version 6: magnified up to geometry.view_zoom (schema 4; cases carry their zoom).
+  for (const name of ['view_rows', 'view_rows_sensor', 'view_rows_zoom']) {
     const crop = vectors.geometry?.[name];
     for (const v of crop?.cases || []) {
       checks += 1;
       const [w, h] = v.frame;
       const fov = cameraFov(crop.geometry, w, h, v.override);
-      const got = viewRows(h, w, fov, v.canvas, v.train_fov_deg);
+      const got = viewRows(h, w, fov, v.canvas, v.train_fov_deg, v.zoom ?? 1);
       if (!close(fov, v.fov_deg, tol) || got[0] !== v.top || got[1] !== v.rows) {
-        fail({ scenario: `geometry.${name}`, field: `${w}x${h} fov ${fov} canvas ${v.canvas} train ${v.train_fov_deg}`,
+        fail({ scenario: `geometry.${name}`, field: `${w}x${h} fov ${fov} canvas ${v.canvas} train ${v.train_fov_deg} zoom ${v.zoom ?? 1}`,
           got: [fov, ...got], expected: [v.fov_deg, v.top, v.rows] });
       }
     }
