@@ -21,8 +21,13 @@ OUT=${OUT:-crossing_assist/assets/default_bundle}
 SAMPLES=${SAMPLES:-16}
 MIRROR=${MIRROR:-1}                             # mirror test-time augmentation in the graph (0: off)
 MIRROR_ARGS=()
-GATE_JSON=gate.json
-if [ "$MIRROR" = 1 ]; then MIRROR_ARGS=(--mirror); GATE_JSON=gate_mirror.json; fi
+GATE_JSON=gate
+if [ "$MIRROR" = 1 ]; then MIRROR_ARGS=(--mirror); GATE_JSON=gate_mirror; fi
+VIEW_ZOOM=${VIEW_ZOOM:-1}   # > 1: portrait frames shown magnified up to it (crossing-export --view-zoom, bundle schema 4),
+                            # for a run trained with --field-zoom; the gate choice is choose_gate.py --zoom's
+ZOOM_ARGS=(--view-zoom "$VIEW_ZOOM")
+if [ "$VIEW_ZOOM" != 1 ]; then GATE_JSON="${GATE_JSON}_zoom$VIEW_ZOOM"; fi
+GATE_JSON="$GATE_JSON.json"
 MAX_INT8_DROP=${MAX_INT8_DROP:-0.01}
 MAX_INT8_SLOWDOWN=${MAX_INT8_SLOWDOWN:-1.10}   # int8 latency / fp32 latency, one frame, this machine
 
@@ -63,7 +68,8 @@ trap 'rm -rf "$TMP"' EXIT
 SRC=""
 for MODE in static weights; do
     "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/$MODE" --samples "$SAMPLES" "${MIRROR_ARGS[@]}" \
-        --calib-data "$DATA" --calib-split val --int8 --int8-mode "$MODE" --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" --quiet
+        --calib-data "$DATA" --calib-split val --int8 --int8-mode "$MODE" --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" \
+        "${ZOOM_ARGS[@]}" --quiet
     KEEP=$("$PY" - "$TMP/$MODE/bundle.json" "$MAX_INT8_DROP" "$MAX_INT8_SLOWDOWN" <<'PYEOF'
 import json, sys
 m = json.load(open(sys.argv[1]))["metrics"]["int8_vs_fp32"]
@@ -80,7 +86,7 @@ done
 if [ -z "$SRC" ]; then
     echo "shipping fp32" >&2
     "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/fp32" --samples "$SAMPLES" "${MIRROR_ARGS[@]}" \
-        --calib-data "$DATA" --calib-split val --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" --quiet
+        --calib-data "$DATA" --calib-split val --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" "${ZOOM_ARGS[@]}" --quiet
     SRC="$TMP/fp32"
 fi
 
