@@ -20,7 +20,8 @@ it is its crop's (:func:`crossing_assist.geometry.default_fov`); older readers i
 Version 4 adds ``geometry.view_zoom`` (with the view crop, 1..4, absent = 1): a frame from a camera
 narrower than the training one is shown magnified by up to this much instead of at the training
 scale. A bundle is written as version 4 only when its ``view_zoom`` is not 1 (:func:`schema_for`),
-so bundles without it stay readable by version-3 readers. Readers that predate a version refuse it, so no consumer silently skips the crop. Two fields depend on the model bytes and
+so bundles without it stay readable by version-3 readers. Readers that predate a version refuse
+it, so no consumer silently skips the crop or the zoom. Two fields depend on the model bytes and
 are filled in by :func:`write_bundle`: ``model_sha256`` and ``model_size`` (bytes). They are the
 only fields left out of the copy embedded in the ONNX metadata (``bundle_json``).
 """
