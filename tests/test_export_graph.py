@@ -194,6 +194,20 @@ def test_real_pretrained_backbone_keeps_dropout_random(kind):
     np.testing.assert_allclose(out["probs"], want, atol=1e-4)
 
 
+@pytest.mark.parametrize("kind", HEAD_KINDS)
+def test_every_head_runs_batches_of_any_size_in_the_graph(kind):
+    """The graph takes any number of frames: a head whose export hard-codes the traced batch (an
+    ONNX Resize given output sizes) would fail on 1 or 3 frames in onnxruntime."""
+    policy = tiny_policy(kind)
+    spec = GraphSpec(size=(32, 32), mean=MEAN, std=STD, samples=1, p=0.0)
+    sess = session(policy, spec)
+    for n in (1, 3):
+        x = frames(n=n)
+        with torch.no_grad():
+            want = BundleGraph(policy, spec)(torch.from_numpy(x))[0].numpy()
+        np.testing.assert_allclose(run(sess, x)["probs"], want, atol=1e-4)
+
+
 def test_default_head_exports_random_and_exact():
     from crossing_assist.models.config import TrainConfig
 

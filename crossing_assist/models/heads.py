@@ -121,9 +121,13 @@ class SpatialMLPHead(Head):
         self.fc2 = nn.Linear(hidden, n_actions)
 
     def trunk(self, features: torch.Tensor) -> torch.Tensor:
-        z = F.relu(self.reduce(pool_rows(features))).unsqueeze(2)         # N x W x 1 x w
-        z = F.interpolate(z, size=(1, self.columns), mode="bilinear", align_corners=False)
-        return z.flatten(1)                                               # N x (width * 12)
+        z = F.relu(self.reduce(pool_rows(features)))                      # N x W x w
+        # linear resampling of the w columns to 12 as one constant matrix (w x 12): the same numbers
+        # as interpolating each row, and an ONNX Resize on a batch of frames (whose size the traced
+        # graph would hard-code) is avoided
+        eye = torch.eye(z.shape[-1], dtype=z.dtype, device=z.device).unsqueeze(0)
+        resample = F.interpolate(eye, size=self.columns, mode="linear", align_corners=False)[0]
+        return (z @ resample).flatten(1)                                  # N x (width * 12)
 
     def tail(self, z: torch.Tensor, mc: bool, window: torch.Tensor | None = None) -> torch.Tensor:
         z = F.relu(self.fc1(mc_dropout(z, self.p, mc)))
