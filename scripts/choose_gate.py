@@ -47,6 +47,7 @@ from crossing_assist.data_tools.augment import PORTRAIT_SETS, user_views
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest, write_manifest
 from crossing_assist.fileio import atomic_write_text
+from crossing_assist.geometry import VIEW_ZOOM_RANGE
 from crossing_assist.runtime.listen import Listener, summarise
 
 from crossing_assist.models.evaluate import gate_scales  # noqa: E402  (crossing-eval's grid by default)
@@ -173,7 +174,7 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
             continue
         if engine is None:
             engine = Engine(bundle, threads=1)
-            geometry = magnify_view_crop(engine, zoom) if zoom > 1 else engine.bundle.geometry
+            geometry = magnify_view_crop(engine, zoom)
         heard = fold / f"listened{draw}.npz"
         if heard.is_file():
             lis, extra = Listener.load(engine, heard)
@@ -293,8 +294,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     if a.grid < 1:
         ap.error(f"--grid {a.grid}: at least 1 scale a doubling")
-    if not 1 <= a.zoom <= 4:
-        ap.error(f"--zoom {a.zoom}: valid 1..4")
+    if not VIEW_ZOOM_RANGE[0] <= a.zoom <= VIEW_ZOOM_RANGE[1]:
+        ap.error(f"--zoom {a.zoom}: valid {VIEW_ZOOM_RANGE[0]:g}..{VIEW_ZOOM_RANGE[1]:g}")
     from crossing_assist.models.plots import plot_risk_coverage
 
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)

@@ -208,14 +208,31 @@ def field_recipe(without: tuple[str, ...] = (), zoom: float = 1.0) -> dict:
     return recipe
 
 
+def _goal(far_x: float | None, label: int) -> tuple[float | None, int]:
+    """``(far_x, bin)`` with the label parsed; a voted bin without ``far_x`` stands at its centre."""
+    label = parse_label(label)
+    if far_x is None and label != UNKNOWN:
+        far_x = bin_center_x(label)
+    return far_x, label
+
+
+def _in_window(far_x: float | None, label: int, x0: int, cw: int, w: int) -> tuple[float | None, int]:
+    """The goal of a frame ``w`` px wide seen through its columns ``x0 .. x0 + cw``: its x in the
+    window (:func:`window_x`: out of view, the edge strip) and bin; unknown stays unknown."""
+    far_x, label = _goal(far_x, label)
+    if far_x is None or label == UNKNOWN:
+        return None, label
+    x = window_x(far_x, x0 / w, cw / w)
+    return x, x_to_bin(x)
+
+
 def roll(image: np.ndarray, far_x: float | None, far_y: float, label: int, roll_deg: float,
          ) -> tuple[np.ndarray, float | None, int]:
     """Rotate the frame by ``roll_deg`` about its centre (the phone tilted sideways; positive =
     counter-clockwise), borders reflected. The goal at (far_x, far_y) rotates with it; a goal
     rotated out of the frame goes to the edge strip it left by (out of view, inferable)."""
     image = _check_image(image)
-    if far_x is None and parse_label(label) != UNKNOWN:   # a voted bin: move its centre
-        far_x = bin_center_x(parse_label(label))
+    far_x, _ = _goal(far_x, label)
     h, w = image.shape[:2]
     m = cv2.getRotationMatrix2D((w / 2 - 0.5, h / 2 - 0.5), float(roll_deg), 1.0)
     out = cv2.warpAffine(np.ascontiguousarray(image), m, (w, h), flags=cv2.INTER_LINEAR,
@@ -236,20 +253,13 @@ def crop_window(image: np.ndarray, far_x: float | None, label: int, aspect: floa
     exactly (``x' = (x - x0) / w'``); a goal outside the window lies in the edge strip."""
     image = _check_image(image)
     h, w = image.shape[:2]
-    label = parse_label(label)
-    if far_x is None and label != UNKNOWN:   # a voted bin: move its centre
-        far_x = bin_center_x(label)
     if aspect * h <= w:   # narrower than the frame: a vertical slice
         cw = max(1, int(round(aspect * h)))
         x0 = int(round(offset * (w - cw)))
-        out = image[:, x0:x0 + cw]
-        if far_x is None or label == UNKNOWN:
-            return np.ascontiguousarray(out), None, label
-        x = window_x(far_x, x0 / w, cw / w)
-        return np.ascontiguousarray(out), x, x_to_bin(x)
+        return (np.ascontiguousarray(image[:, x0:x0 + cw]), *_in_window(far_x, label, x0, cw, w))
     ch = max(1, int(round(w / aspect)))
     y0 = (h - ch) // 2
-    return np.ascontiguousarray(image[y0:y0 + ch]), far_x, label
+    return (np.ascontiguousarray(image[y0:y0 + ch]), *_goal(far_x, label))
 
 
 def magnify(image: np.ndarray, far_x: float | None, label: int, scale: float, x_offset: float,
@@ -265,14 +275,7 @@ def magnify(image: np.ndarray, far_x: float | None, label: int, scale: float, x_
     h, w = image.shape[:2]
     cw, ch = max(1, int(round(w / scale))), max(1, int(round(h / scale)))
     x0, y0 = int(round(x_offset * (w - cw))), int(round(y_offset * (h - ch)))
-    out = np.ascontiguousarray(image[y0:y0 + ch, x0:x0 + cw])
-    label = parse_label(label)
-    if far_x is None and label != UNKNOWN:   # a voted bin: move its centre
-        far_x = bin_center_x(label)
-    if far_x is None or label == UNKNOWN:
-        return out, None, label
-    x = window_x(far_x, x0 / w, cw / w)
-    return out, x, x_to_bin(x)
+    return (np.ascontiguousarray(image[y0:y0 + ch, x0:x0 + cw]), *_in_window(far_x, label, x0, cw, w))
 
 
 def field_view(image: np.ndarray, far_x: float | None, far_y: float, label: int,
