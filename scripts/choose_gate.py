@@ -56,9 +56,12 @@ GRID = 8                    # gate scales a doubling, as crossing-eval sweeps
 
 
 def _subset(ds, rows, out: Path) -> Path:
-    """A dataset folder holding ``rows`` of ``ds`` (image paths re-rooted, nothing copied)."""
+    """A dataset folder holding ``rows`` of ``ds`` (image paths re-rooted, nothing copied; relative
+    to where the folder really is, so a CV folder reached through a link reads them too)."""
     out.mkdir(parents=True, exist_ok=True)
-    fixed = [r.__class__(os.path.relpath(ds.image_path(r), out), r.label, r.far_x, r.source, r.split, r.votes, r.flags)
+    real = out.resolve()
+    fixed = [r.__class__(os.path.relpath(os.path.realpath(ds.image_path(r)), real), r.label, r.far_x, r.source, r.split,
+                         r.votes, r.flags)
              for r in rows]
     write_manifest(out, fixed)
     return out

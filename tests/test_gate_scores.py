@@ -247,3 +247,23 @@ def test_choose_gate_zoom_magnifies_narrow_frames_up_to_z_and_caches_them_apart(
         "gate_curve_2_portrait1_zoom1.5.json", "gate_curve_2_portrait_window1_zoom1.5.json"}
     with pytest.raises(SystemExit):
         cg.main([str(tmp_path / "cv"), "--zoom", "0.5"])
+
+
+def test_choose_gate_calibration_subset_reads_its_photos_through_a_linked_cv_folder(tmp_path):
+    """A fold reached through a link (a CV split across machines or processes) writes its
+    calibration subset relative to where the fold really is, so it reads back from either path."""
+    import choose_gate as cg
+    from runtime_toy import bar_dataset
+
+    from crossing_assist.data_tools.manifest import read_manifest
+
+    ds = read_manifest(bar_dataset(tmp_path / "data" / "ptl", 3, split="val", source="ptl:y"))
+    real = tmp_path / "runs" / "cv" / "fold-ptl_x"
+    real.mkdir(parents=True)
+    link = tmp_path / "elsewhere" / "deeper" / "still" / "fold-ptl_x"
+    link.parent.mkdir(parents=True)
+    link.symlink_to(real)
+    cg._subset(ds, ds.rows, link / "calib_data")
+    for path in (real / "calib_data", link / "calib_data"):
+        sub = read_manifest(path)
+        assert [sub.image_path(r).resolve() for r in sub.rows] == [ds.image_path(r).resolve() for r in ds.rows]
