@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from crossing_assist.bundle import read_bundle
-from crossing_assist.geometry import GeometryError
+from crossing_assist.geometry import GeometryError, check_fov
 
 
 def far_angles(far_y: np.ndarray, train_fov_deg: float, aspect: float = 4 / 3) -> np.ndarray:
@@ -77,19 +77,21 @@ def main(argv=None) -> int:
         return 2
     try:
         b = read_bundle(a.bundle)
-        fov = a.fov if a.fov is not None else b.geometry.camera_fov_deg[1]
+        fov = check_fov(a.fov if a.fov is not None else b.geometry.camera_fov_deg[1])
         geometries = [replace(b.geometry, view_zoom=z) for z in a.view_zoom] if a.view_zoom else [b.geometry]
-    except (OSError, ValueError, GeometryError) as e:
+        halves = [band_half_angle(g, b.input.size, (w, h), fov) for g in geometries]
+        far_y = read_far_y(a.labels)
+        if not len(far_y):
+            raise ValueError(f"{a.labels} has no far_y values")
+    except (OSError, ValueError, KeyError, GeometryError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    angles = far_angles(read_far_y(a.labels), b.geometry.train_fov_deg)
+    angles = far_angles(far_y, b.geometry.train_fov_deg)
     print(f"{len(angles)} far kerbs; a {w}x{h} frame at {fov:g} deg; positive pitch: pointed further down")
     print(f"{'view':<22}{'band':>9}  " + "".join(f"{p:>+7g}" for p in pitches))
-    for g in geometries:
-        half = band_half_angle(g, b.input.size, (w, h), fov)
-        shares = in_view(angles, half, pitches)
+    for g, half in zip(geometries, halves):
         name = f"view_zoom {g.view_zoom:g}" if g.view_crop else "no view crop"
-        print(f"{name:<22}{f'±{half:.1f}°':>9}  " + "".join(f"{100 * s:>6.1f}%" for s in shares))
+        print(f"{name:<22}{f'±{half:.1f}°':>9}  " + "".join(f"{100 * s:>6.1f}%" for s in in_view(angles, half, pitches)))
     return 0
 
 

@@ -53,5 +53,8 @@ def test_cli_compares_view_zooms_and_fails_in_one_line(tmp_path):
     r = subprocess.run([sys.executable, str(SCRIPT), str(bundle), "--labels", str(tmp_path / "nope.csv")],
                        capture_output=True, text=True)
     assert r.returncode == 2 and r.stderr.startswith("error:") and r.stderr.count("\n") == 1
-    r = subprocess.run([sys.executable, str(SCRIPT), str(tmp_path), "--labels", str(labels)], capture_output=True, text=True)
-    assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr
+    for bad in ([str(tmp_path), "--labels", str(labels)],                    # not a bundle
+                [str(bundle), "--labels", str(labels), "--fov", "200"],      # a FOV no camera has
+                [str(bundle), "--labels", str(SCRIPT)]):                     # no far_y column
+        r = subprocess.run([sys.executable, str(SCRIPT), *bad], capture_output=True, text=True)
+        assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr, bad
