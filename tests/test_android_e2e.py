@@ -156,7 +156,7 @@ def portrait(tmp_path_factory) -> dict:
         x0 = (w - pw) // 2
         frames.append(cv2.cvtColor(bgr[: h // 2 * 2, x0:x0 + pw], cv2.COLOR_BGR2RGB))
     clip.write_y4m(tmp / "clip.y4m", frames, 10)
-    result = _drive(tmp, www, tmp / "clip.y4m", 8.0, "--phases", "short", "--viewport", "390x844")
+    result = _drive(tmp, www, tmp / "clip.y4m", 8.0, "--phases", "short", "--viewport", "390x844", "--tilt", "1")
     meta = json.loads((det / "bundle.json").read_text())
     return {"result": result, "engine": Engine(det), "geometry": meta["geometry"]}
 
@@ -485,6 +485,23 @@ def test_each_stop_reason_has_its_own_vibration(run: dict, portrait: dict) -> No
     assert len({next(iter(p)) for p in patterns.values()}) == len(patterns), "two reasons share a pattern"
     landscape = {e["reason"] for e in run["result"]["trace"] if e["kind"] == "vibrate"}
     assert "direction" not in landscape  # the direction code is off unless the user turns it on
+
+
+def test_a_phone_pointed_at_the_ground_is_told_to_raise_it(portrait: dict) -> None:
+    """After the portrait run the driver tilts the phone 50 deg down (deviceorientation beta 40):
+    a "not sure" stop then says and vibrates "raise it"; the decisions themselves stay the
+    Decider's (never a tilt reason)."""
+    trace = portrait["result"]["trace"]
+    t = portrait["result"]["tilt"]["t_spoken"]
+    spoken = next(e for e in trace if e["kind"] == "speech" and e["t"] == t)
+    assert spoken["text"] == STATUS_STOP["tilt_down"]
+    assert any(e["kind"] == "vibrate" and e["reason"] == "tilt_down" and abs(e["t"] - t) < 1e-6 for e in trace)
+    before = [e for e in trace if e["kind"] == "frame" and e["t"] <= t]
+    assert before[-1]["decision"]["stop"] and before[-1]["decision"]["reason"] == "uncertain"
+    assert {e["decision"]["reason"] for e in trace if e["kind"] == "frame"} <= {"ok", "uncertain", "stale", "failed"}
+    t_tilt = portrait["result"]["tilt"]["t_tilt"]   # no advice before the sensor said anything
+    assert t >= t_tilt and not any(e["kind"] in ("speech", "vibrate") and "tilt" in e.get("reason", e.get("text", ""))
+                                   for e in trace if e["t"] < t_tilt)
 
 
 def test_direction_code_vibrates_when_turned_on(portrait: dict) -> None:

@@ -10,7 +10,7 @@ import { fileURLToPath } from 'node:url';
 
 import { actionHeading, headingToPan, spaceGroups, spaceNames } from '../www/js/actions.js';
 import { BundleError, parseBundleMeta } from '../www/js/bundle.js';
-import { sameFrame, Watchdog, YawIntegrator, yawRateFromRotation } from '../www/js/live.js';
+import { cameraElevationDeg, sameFrame, TILT, TiltWatch, Watchdog, YawIntegrator, yawRateFromRotation } from '../www/js/live.js';
 import { cueFor, Decider, decisionConfig, observationFromOutputs } from '../www/js/logic.js';
 import { rgbaToRgb } from '../www/js/model.js';
 import { replayVectors } from '../www/js/vectors.js';
@@ -422,4 +422,37 @@ test('WASM threads: cores - 1 (at most 4) when cross-origin isolated, else one',
   assert.equal(wasmThreads(true, 4), 3);
   assert.equal(wasmThreads(true, 2), 1);
   assert.equal(wasmThreads(true, undefined), 1);
+});
+
+test('the back camera elevation follows beta and gamma in every screen orientation', () => {
+  const near = (a, b) => assert.ok(Math.abs(a - b) < 1e-9, `${a} vs ${b}`);
+  near(cameraElevationDeg(0, 0), -90); // flat on a table, screen up: the camera looks at the ground
+  near(cameraElevationDeg(90, 0), 0); // upright portrait: at the horizon
+  near(cameraElevationDeg(60, 0), -30); // top tilted away from the user: 30 deg down
+  near(cameraElevationDeg(120, 0), 30); // tilted towards the user: 30 deg up
+  near(cameraElevationDeg(0, 90), 0); // upright landscape, either way round
+  near(cameraElevationDeg(0, -90), 0);
+  near(cameraElevationDeg(0, -60), -30); // landscape, tilted back
+  assert.equal(cameraElevationDeg(null, 0), null);
+  assert.equal(cameraElevationDeg(90, undefined), null);
+});
+
+test('a phone pointed far down or up names its stop reason, with hysteresis and only while fresh', () => {
+  const w = new TiltWatch();
+  assert.equal(w.reason(0), null); // no sample yet
+  w.add(90 + TILT.down_deg + 5, 0, 0); // 5 deg above the lower limit
+  assert.equal(w.reason(0), null);
+  w.add(90 + TILT.down_deg - 1, 0, 0.1); // just below it
+  assert.equal(w.reason(0.1), 'tilt_down');
+  w.add(90 + TILT.down_deg + TILT.margin_deg - 1, 0, 0.2); // back up, but inside the margin: kept
+  assert.equal(w.reason(0.2), 'tilt_down');
+  w.add(90 + TILT.down_deg + TILT.margin_deg + 1, 0, 0.3); // out of the margin: held well enough
+  assert.equal(w.reason(0.3), null);
+  w.add(90 + TILT.up_deg + 1, 0, 0.4);
+  assert.equal(w.reason(0.4), 'tilt_up');
+  assert.equal(w.reason(0.4 + TILT.fresh_s + 0.01), null); // the sensor stopped: no advice
+  w.add(null, null, 5); // a sample without angles changes nothing
+  assert.equal(w.reason(5), null);
+  assert.match(statusMessage({ stop: true, reason: 'tilt_down' })[0], /raise it/);
+  assert.match(statusMessage({ stop: true, reason: 'tilt_up' })[0], /lower it/);
 });

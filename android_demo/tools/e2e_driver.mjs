@@ -21,7 +21,8 @@
 // set in the helper view (10 refused, 60 taken) -> long press ends ->
 // server stopped, reload, start again (offline; settings kept: no tutorial).
 // Phases "short": load with the tutorial marked done and the direction vibration on, start,
-// run, collect, double tap.
+// run, (--tilt 1: the gyroscope on, then the phone tilted down until a "not sure" stop says to
+// raise it), collect, double tap.
 // The driver asserts nothing; it exits non-zero only when it could not run.
 
 import { spawn } from 'node:child_process';
@@ -48,6 +49,7 @@ function parseArgs(argv) {
     else if (k === '--www') args.www = resolve(v);
     else if (k === '--phases') args.phases = v;
     else if (k === '--viewport') args.viewport = v;
+    else if (k === '--tilt') args.tilt = v === '1';
     else throw new Error(`unknown argument ${k}`);
   }
   if (!args.clip || !args.out) throw new Error('usage: e2e_driver.mjs --clip clip.y4m --out result.json [--run-s S] [--www DIR]');
@@ -312,9 +314,22 @@ async function fullPhases(page, context, server, args, result) {
   Object.assign(result, await collect(page));
 }
 
+/** The phone pointed at the ground (camera 50 deg down) until a "not sure" stop says to raise it. */
+async function tiltPhase(page, result) {
+  const tTilt = await page.evaluate(() => {
+    window.__tilt = setInterval(() => window.dispatchEvent(new DeviceOrientationEvent('deviceorientation',
+      { alpha: 0, beta: 40, gamma: 0 })), 50);
+    return (performance.now() - window.crossingAssist.t0) / 1000;
+  });
+  const tSpoken = await waitFor(page, () => window.crossingAssist.trace.find((e) => e.kind === 'speech' && e.text.includes('raise it'))?.t ?? null,
+    null, 60000, 'the tilt advice');
+  await page.evaluate(() => clearInterval(window.__tilt));
+  result.tilt = { t_tilt: tTilt, t_spoken: tSpoken };
+}
+
 async function shortPhases(page, server, args, result) {
-  await page.addInitScript(() => localStorage.setItem('crossing-assist-settings',
-    JSON.stringify({ tutorialDone: true, hapticDirections: true })));
+  await page.addInitScript((gyro) => localStorage.setItem('crossing-assist-settings',
+    JSON.stringify({ tutorialDone: true, hapticDirections: true, gyro })), !!args.tilt);
   await page.goto(`${server.url}?test=1`);
   await waitFor(page, () => window.crossingAssist?.ready && window.crossingAssist.offline === 'ready', null, 120000, 'the app and its service worker');
   result.first_load = server.requests.slice();
@@ -325,6 +340,7 @@ async function shortPhases(page, server, args, result) {
   await guide(page, args.runS, samples);
   result.samples = samples;
   result.states.running = await page.evaluate(screenState);
+  if (args.tilt) await tiltPhase(page, result);
   Object.assign(result, await collect(page));
   await control(page).dblclick();
   await waitFor(page, () => window.crossingAssist.mode === 'ready', null, 10000, 'the end of guidance');

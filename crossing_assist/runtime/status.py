@@ -8,7 +8,8 @@ both must agree on.
 from __future__ import annotations
 
 #: Stop reasons beyond the Decider's: audio cannot play, the app is in the background, the
-#: field-of-view setting is invalid. Each is a stop (the beacon never plays then).
+#: field-of-view setting is invalid, the phone is tilted too far. Each is a stop (the beacon
+#: never plays then).
 STATUS_STOP = {
     "uncertain": "Stop. Not sure: scan slowly.",
     "stale": "Stop. Camera stalled.",
@@ -16,6 +17,10 @@ STATUS_STOP = {
     "audio": "Audio stopped. Tap to resume.",
     "background": "Stop. The app is in the background.",
     "fov": "Stop. The camera field of view setting is invalid.",
+    # the app's "not sure" while its orientation sensor says the camera points far down or up
+    # (android_demo/www/js/live.js, TiltWatch); the decision itself is the Decider's
+    "tilt_down": "Stop. The phone points at the ground: raise it.",
+    "tilt_up": "Stop. The phone points too high: lower it.",
 }
 STRAIGHT_DEG = 7.5  # |heading| below: straight ahead
 SLIGHT_DEG = 22.5  # below: bear slightly; at or above: turn

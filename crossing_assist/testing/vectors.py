@@ -80,7 +80,7 @@ from crossing_assist.runtime.camera import camera_fov, gate_threshold, geometry_
 from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
 from crossing_assist.runtime.engine import measure_value
 from crossing_assist.runtime.live import is_fresh, same_frame
-from crossing_assist.runtime.status import status_message
+from crossing_assist.runtime.status import STATUS_STOP, status_message
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
@@ -353,7 +353,7 @@ def _guards(rng: np.random.Generator) -> dict:
 
 def _status_vectors() -> list[dict]:
     out = []
-    for reason in ("uncertain", "stale", "failed", "audio", "background", "fov"):
+    for reason in STATUS_STOP:   # every stop reason the app can show, the tilts included
         text, cls = status_message(True, reason, None)
         out.append({"stop": True, "reason": reason, "heading_deg": None, "text": text, "cls": cls})
     for h in (0.0, -7.4999, 7.5, -7.5, 12.0, -22.4999, 22.5, -22.5, 40.0, -80.0):

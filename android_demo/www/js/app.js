@@ -31,8 +31,8 @@ import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
 import { cameraFov, defaultFovText, FovError, frameView, gateThreshold, orientation, zoomedFov } from './geometry.js';
 import { Haptics } from './haptics.js';
-import { isFresh, sameFrame, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
-import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs } from './logic.js';
+import { isFresh, sameFrame, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
+import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN } from './logic.js';
 import { fetchBundle, openBest } from './model.js';
 import { loadSettings, saveSettings } from './settings.js';
 import { Speaker, SpeechPolicy } from './speech.js';
@@ -105,8 +105,11 @@ function announce([text, cls], t = now()) {
   record({ kind: 'speech', t, text });
 }
 
-/** What a decision means for the user beyond the beacon: the sentence (hysteresis) and the vibration. */
+/** What a decision means for the user beyond the beacon: the sentence (hysteresis) and the vibration.
+ * A stop for "not sure" while the phone points far down or up says which way to tilt it instead. */
 function feedback(t, d) {
+  const tilt = d.stop && d.reason === REASON_UNCERTAIN ? app.tilt?.reason(t) : null;
+  if (tilt) d = { ...d, reason: tilt };
   const msg = app.policy.step(t, d);
   if (msg) announce(msg, t);
   const pattern = d.stop ? app.haptics.stop(d.reason) : app.haptics.go(t, d.heading_deg);
@@ -348,6 +351,10 @@ function onAudioState(state) {
   onAudioLost(state);
 }
 
+function onOrientation(e) {
+  app.tilt?.add(e.beta, e.gamma, now());
+}
+
 function onMotion(e) {
   const rate = yawRateFromRotation(e.rotationRate, screen.orientation?.angle ?? 0);
   app.yaw?.add(rate, e.timeStamp / 1000);
@@ -363,6 +370,8 @@ async function startGyro() {
     return null;
   }
   window.addEventListener('devicemotion', onMotion);
+  app.tilt = new TiltWatch();
+  window.addEventListener('deviceorientation', onOrientation);
   return new YawIntegrator();
 }
 
@@ -446,7 +455,9 @@ async function stop({ quiet = false } = {}) {
   clearInterval(app.tick);
   clearTimeout(pressTimer);
   window.removeEventListener('devicemotion', onMotion);
+  window.removeEventListener('deviceorientation', onOrientation);
   app.yaw = null;
+  app.tilt = null;
   app.grabber?.close();
   app.stream?.getTracks().forEach((t) => t.stop());
   app.stream = null;

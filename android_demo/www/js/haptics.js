@@ -13,6 +13,8 @@ export const STOP_PATTERNS = Object.freeze({
   audio: [400, 150, 400, 150, 400],
   background: [80, 80, 80],
   fov: [100, 60, 600],
+  tilt_down: [400, 100, 80], // the phone points at the ground (long, short)
+  tilt_up: [80, 100, 400], // the phone points too high (short, long)
 });
 export const DIRECTION_PATTERNS = Object.freeze({ left: [120], ahead: [450], right: [120, 150, 120] });
 export const DIRECTION_REPEAT_S = 3.0;

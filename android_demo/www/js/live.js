@@ -114,3 +114,58 @@ export class YawIntegrator {
     return rate;
   }
 }
+
+/**
+ * How the phone may be tilted before the far kerb leaves the rows the model is shown. The view
+ * crop keeps the training camera's vertical view, centred. PTL's photographers pointed their
+ * phones a few degrees below the horizon (their far kerbs sit just above the middle of the
+ * photo); pointed 15 deg further down than they did, 94 % of their far kerbs stay in view, 20 deg
+ * only 70 % (scripts/pitch_tolerance.py, docs/android.md). So below `down_deg` (about 15-20 deg
+ * further down than they held theirs) or above `up_deg` of camera elevation, a stop for "not
+ * sure" says which way to tilt (TiltWatch). Guidance itself is never changed by the tilt.
+ */
+export const TILT = Object.freeze({ down_deg: -25, up_deg: 20, margin_deg: 5, fresh_s: 1.0 });
+
+/**
+ * The back camera's elevation (degrees above the horizon; -90 straight down) from
+ * DeviceOrientationEvent's beta and gamma (the W3C Z-X'-Y'' angles): the camera looks along the
+ * device's -z axis, whose vertical component is -cos(beta) cos(gamma), whatever the screen's
+ * orientation. Null without both angles.
+ */
+export function cameraElevationDeg(beta, gamma) {
+  if (!Number.isFinite(beta) || !Number.isFinite(gamma)) return null;
+  const r = Math.PI / 180;
+  const s = Math.max(-1, Math.min(1, -Math.cos(beta * r) * Math.cos(gamma * r)));
+  return Math.asin(s) / r + 0; // + 0: no -0
+}
+
+/**
+ * Follows the phone's tilt (DeviceOrientationEvent samples) and names the stop reason it gives:
+ * 'tilt_down' below cfg.down_deg of camera elevation, 'tilt_up' above cfg.up_deg, kept until
+ * the camera comes back cfg.margin_deg inside the limit (a phone hovering at a limit does not
+ * switch reasons, and so buzz, on every sample); null when held well enough, or when no sample
+ * is fresher than cfg.fresh_s (the sensor stopped: no advice rather than stale advice).
+ */
+export class TiltWatch {
+  constructor(cfg = TILT) {
+    this.cfg = { ...TILT, ...cfg };
+    this.state = null;
+    this.lastT = null;
+  }
+
+  /** A sample at time t (s); samples without both angles are ignored. */
+  add(beta, gamma, t) {
+    const e = cameraElevationDeg(beta, gamma);
+    if (e === null) return;
+    const { down_deg: down, up_deg: up, margin_deg: margin } = this.cfg;
+    if (e < (this.state === 'tilt_down' ? down + margin : down)) this.state = 'tilt_down';
+    else if (e > (this.state === 'tilt_up' ? up - margin : up)) this.state = 'tilt_up';
+    else this.state = null;
+    this.lastT = t;
+  }
+
+  /** The reason at time `now` (s): 'tilt_down', 'tilt_up' or null. */
+  reason(now) {
+    return this.lastT !== null && now - this.lastT <= this.cfg.fresh_s ? this.state : null;
+  }
+}

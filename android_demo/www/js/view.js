@@ -13,6 +13,8 @@ export const STATUS_STOP = Object.freeze({
   audio: 'Audio stopped. Tap to resume.',
   background: 'Stop. The app is in the background.',
   fov: 'Stop. The camera field of view setting is invalid.',
+  tilt_down: 'Stop. The phone points at the ground: raise it.',
+  tilt_up: 'Stop. The phone points too high: lower it.',
 });
 export const STRAIGHT_DEG = 7.5;
 export const SLIGHT_DEG = 22.5;
