@@ -117,3 +117,36 @@ def test_library_resume_refuses_a_different_config(tiny, tmp_path):
     train_mod.train(_cfg(tiny, tmp_path / "run", epochs=1))
     with pytest.raises(ConfigError, match="--batch-size 8"):
         train_mod.train(_cfg(tiny, tmp_path / "run", epochs=2, batch_size=8), resume=True)
+
+
+def test_a_process_needing_an_entry_another_is_computing_waits_and_reads_it(tiny, tmp_path, monkeypatch):
+    """Runs side by side on one cache take turns on an entry: while another holder has the
+    entry's lock, compute_features waits; once the entry is there it reads it, computing nothing."""
+    import shutil
+    import threading
+    import time
+
+    from crossing_assist.data_tools.manifest import read_manifest
+    from crossing_assist.models.backbones import create_backbone
+    from crossing_assist.models.data import make_variants
+
+    ds = read_manifest(tiny).split("train")
+    bb = create_backbone("mobilenet_v3_small", weights="none").eval()
+    args = (bb, 6, ds, (64, 64), make_variants(False), 90.0)
+    built = cache_mod.compute_features(*args, tmp_path / "elsewhere", progress=False)   # the other run's work
+    key = built.path.name
+
+    def never(*a, **kw):
+        raise AssertionError("computed an entry another process was computing")
+
+    monkeypatch.setattr(cache_mod, "_compute", never)
+    got = {}
+    with cache_mod.entry_lock(tmp_path / "c", key):   # the other process, still computing
+        waiter = threading.Thread(target=lambda: got.update(fs=cache_mod.compute_features(
+            *args, tmp_path / "c", progress=False)))
+        waiter.start()
+        time.sleep(1.0)
+        assert waiter.is_alive() and "fs" not in got    # waiting, not computing
+        shutil.copytree(built.path, tmp_path / "c" / key)   # ... and done
+    waiter.join(30)
+    assert got["fs"].path == tmp_path / "c" / key and got["fs"].feats.shape == built.feats.shape

@@ -8,7 +8,8 @@ came from), ``variant.npy`` (index into the variant list) and ``meta.json``. The
 everything that changes the features: backbone name, weights source *and* file fingerprint,
 number of frozen blocks, input size, mean/std, the variants (mirroring, yaw angles, field views, their seed and recipe, FOV), the fit and
 the dataset rows (image paths, labels, file sizes and mtimes). ``meta.json`` is written last
-(atomically), so a half-written entry is never used.
+(atomically), so a half-written entry is never used. Processes sharing a cache take turns on
+an entry (:func:`entry_lock`): the first computes it, the others wait and read it.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import hashlib
 import json
 import os
 import shutil
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -104,15 +106,42 @@ def compute_features(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: 
     path = Path(cache_dir) / key
     if (path / "meta.json").is_file():
         return _open(path)
-    sweep_orphans(cache_dir, prefix="")  # half-written entries of killed runs (<key>.tmp<pid>)
-    tmp = Path(cache_dir) / f"{key}.tmp{os.getpid()}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
-        return _compute(backbone, frozen_blocks, ds, size, variants, fov_deg, Path(cache_dir), batch_size,
-                        progress, desc, key, tmp, path, fit, seed)
-    finally:  # an error or Ctrl-C: no half-written entry stays behind (a finished one was moved)
+    with entry_lock(cache_dir, key):
+        if (path / "meta.json").is_file():   # another process built it while this one waited
+            return _open(path)
+        sweep_orphans(cache_dir, prefix="")  # half-written entries of killed runs (<key>.tmp<pid>)
+        tmp = Path(cache_dir) / f"{key}.tmp{os.getpid()}"
         shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir(parents=True)
+        try:
+            return _compute(backbone, frozen_blocks, ds, size, variants, fov_deg, Path(cache_dir), batch_size,
+                            progress, desc, key, tmp, path, fit, seed)
+        finally:  # an error or Ctrl-C: no half-written entry stays behind (a finished one was moved)
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+@contextmanager
+def entry_lock(cache_dir: str | os.PathLike, key: str):
+    """Held while one process computes the entry ``key``: another process that needs the same
+    entry (folds or runs started side by side on one cache) waits for it and then reads it,
+    instead of computing it again. An advisory ``flock`` on ``<cache_dir>/<key>.lock``, released
+    by the system if the holder dies, and removed by it once done (the cache holds only entries
+    between runs: a process that opens a removed lock re-checks for the entry before computing).
+    Where ``fcntl`` is missing (Windows) nothing is locked."""
+    try:
+        import fcntl
+    except ImportError:   # pragma: no cover - not POSIX
+        yield
+        return
+    Path(cache_dir).mkdir(parents=True, exist_ok=True)
+    lock = Path(cache_dir) / f"{key}.lock"
+    with open(lock, "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            lock.unlink(missing_ok=True)
+            fcntl.flock(f, fcntl.LOCK_UN)
 
 
 def _compute(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: tuple[int, int],
