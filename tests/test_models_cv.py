@@ -81,3 +81,26 @@ def test_format_cv_survives_undefined_figures():
                "far_x_error": {"mean": 0.0, "sd": None}}
     text = format_cv(summary)
     assert "accuracy 0.500" in text and "bin MAE n/a" in text and "far-x error 0.0000" in text
+
+
+def test_cv_jobs_trains_folds_side_by_side_with_the_serial_runs_figures(tmp_path):
+    """--cv-jobs 2: the three folds in two worker processes give the figures the one-process CV
+    gives (same seeded folds, same cache); bad values fail in one line."""
+    data = make_tiny_dataset(tmp_path / "data", n_train=9, n_val=3, size=48)
+    serial = subprocess.run(_args(data, tmp_path / "serial"), capture_output=True, text=True)
+    assert serial.returncode == 0, serial.stderr
+    r = subprocess.run([*_args(data, tmp_path / "side"), "--cv-jobs", "2"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.count("holding out") == 6 and r.stdout.count(": done") == 3   # submitted, then finished
+    one = json.loads((tmp_path / "serial" / "cv.json").read_text())
+    two = json.loads((tmp_path / "side" / "cv.json").read_text())
+    assert [f["source"] for f in two["folds"]] == [f["source"] for f in one["folds"]]
+    for a, b in zip(one["folds"], two["folds"]):
+        for k, v in a.items():
+            assert b[k] == (v if v is None or isinstance(v, str) else pytest.approx(v, rel=1e-6, abs=1e-9)), (k, a, b)
+    assert len(list((tmp_path / "side").glob("fold-*/weights/last.pt"))) == 3
+    no_cv = [a for a in _args(data, tmp_path / "y") if a not in ("--cv", "source")]
+    for args, says in (([*_args(data, tmp_path / "x"), "--cv-jobs", "0"], "--cv-jobs 0"),
+                       ([*no_cv, "--cv-jobs", "2"], "without --cv")):
+        r = subprocess.run(args, capture_output=True, text=True)
+        assert r.returncode != 0 and r.stderr.startswith("error:") and says in r.stderr and "Traceback" not in r.stderr

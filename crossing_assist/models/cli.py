@@ -113,6 +113,9 @@ def train_parser() -> argparse.ArgumentParser:
                    "(options must match the run's args.yaml; a larger --epochs extends it)")
     p.add_argument("--cv", choices=("source",), help="leave-one-source-out cross-validation: one run per "
                    "train source in OUT/fold-SOURCE, mean +- sd in OUT/cv.json (finished folds are kept)")
+    p.add_argument("--cv-jobs", type=int, default=1, metavar="N",
+                   help="with --cv: train N folds side by side, each in its own process with --threads threads "
+                   "(the feature cache is built once; the others wait for it)")
     p.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     return p
 
@@ -141,9 +144,11 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             if distributed.requested():
                 raise ConfigError("Invalid --cv under torchrun: folds run one after another; run --cv in one process")
 
-            summary = cross_validate(cfg, resume=a.resume)
+            summary = cross_validate(cfg, resume=a.resume, jobs=a.cv_jobs)
             print(format_cv(summary))
             return 0
+        if a.cv_jobs != 1:
+            raise ConfigError(f"Invalid --cv-jobs {a.cv_jobs} without --cv: it trains the folds of a --cv run side by side")
         if a.resume:
             cfg = resume_config(cfg, _given(train_parser(), _args(argv)))
         try:

@@ -53,25 +53,62 @@ def fold_stats(folds: list[dict], keys) -> dict:
     return out
 
 
-def cross_validate(cfg: TrainConfig, *, resume: bool = False) -> dict:
-    """Run (or finish) every fold of ``cfg`` and return the summary written to ``cv.json``."""
+def _train_fold(fcfg: TrainConfig, resume: bool) -> None:
+    """One fold in a worker process (``jobs`` > 1); at module level so that it pickles."""
+    from .train import train
+
+    train(fcfg, resume=resume)
+
+
+def _train_side_by_side(todo: list[tuple[TrainConfig, bool]], jobs: int) -> None:
+    """The unfinished folds in up to ``jobs`` processes at once (each with the config's
+    threads; they share the feature cache, whose entries are built once: cache.entry_lock).
+    A fold's error stops the others and is raised; finished folds are kept for a rerun."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(todo)), mp_context=mp.get_context("spawn"))
+    try:
+        futures = {pool.submit(_train_fold, replace(fcfg, progress=False), again): fcfg.holdout[0]
+                   for fcfg, again in todo}
+        for fut in as_completed(futures):
+            fut.result()
+            print(f"fold holding out {futures[fut]}: done", flush=True)
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
+
+
+def cross_validate(cfg: TrainConfig, *, resume: bool = False, jobs: int = 1) -> dict:
+    """Run (or finish) every fold of ``cfg`` and return the summary written to ``cv.json``;
+    ``jobs`` > 1 trains that many folds side by side, in processes of their own."""
     from .train import train
 
     out = Path(cfg.out)
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        raise ConfigError(f"Invalid --cv-jobs {jobs!r}; valid: >= 1 (folds trained side by side)")
     sources = read_manifest(cfg.data).split("train").sources()
     if len(sources) < 2:
         raise ConfigError(f"Invalid --cv source: {cfg.data} has {len(sources)} train source(s); need >= 2")
     if cfg.holdout:
         raise ConfigError("Invalid --cv source with --holdout: each fold holds out its own source")
-    folds = []
+    todo = []
     for i, source in enumerate(sources, 1):
         fold = _fold_dir(out, source)
-        m = _fold_metrics(fold, cfg.epochs)
-        if m is None:
+        if _fold_metrics(fold, cfg.epochs) is None:
             print(f"fold {i}/{len(sources)}: holding out {source}", flush=True)
             fcfg = replace(cfg, out=str(fold), holdout=(source,), select_on="last")
-            train(fcfg, resume=(fold / "weights" / "last.pt").is_file())
-            m = _fold_metrics(fold, cfg.epochs)
+            again = (fold / "weights" / "last.pt").is_file()
+            if jobs == 1:
+                train(fcfg, resume=again)
+            else:
+                todo.append((fcfg, again))
+    if todo:
+        _train_side_by_side(todo, jobs)
+    folds = []
+    for source in sources:
+        m = _fold_metrics(_fold_dir(out, source), cfg.epochs)
         folds.append({"source": source, **{k: m.get(k) for k in ("n",) + CV_METRICS}})
     summary = {"cv": "source", "folds": folds, "config": cfg.to_dict(), **fold_stats(folds, CV_METRICS)}
     out.mkdir(parents=True, exist_ok=True)
