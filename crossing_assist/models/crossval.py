@@ -63,7 +63,8 @@ def _train_fold(fcfg: TrainConfig, resume: bool) -> None:
 def _train_side_by_side(todo: list[tuple[TrainConfig, bool]], jobs: int) -> None:
     """The unfinished folds in up to ``jobs`` processes at once (each with the config's
     threads; they share the feature cache, whose entries are built once: cache.entry_lock).
-    A fold's error stops the others and is raised; finished folds are kept for a rerun."""
+    A fold's error cancels the folds not yet started and is raised (those running finish);
+    finished folds are kept for a rerun."""
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
