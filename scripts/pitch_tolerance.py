@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from crossing_assist.bundle import read_bundle
-from crossing_assist.geometry import GeometryError, check_fov
+from crossing_assist.geometry import GeometryError, check_fov, parse_size
 
 
 def far_angles(far_y: np.ndarray, train_fov_deg: float, aspect: float = 4 / 3) -> np.ndarray:
@@ -61,17 +61,16 @@ def main(argv=None) -> int:
                     help="a CSV with a far_y column (row fraction of the far kerb), e.g. PTL's labels.csv")
     ap.add_argument("--view-zoom", type=float, nargs="+", metavar="Z",
                     help="compare the bundle's geometry with these view zooms (default: the bundle's own)")
-    ap.add_argument("--frame", default="480x640", help="the portrait frame, WIDTHxHEIGHT")
+    ap.add_argument("--frame", type=lambda t: parse_size(t, "WxH"), default=(640, 480), metavar="WxH",
+                    help="the portrait frame (default 480x640)")
     ap.add_argument("--fov", type=float, help="its horizontal FOV in degrees (default: the bundle's portrait FOV)")
     ap.add_argument("--pitch", default="-20,-15,-10,-5,0,5,10,15,20", help="pitches in degrees, comma-separated")
     a = ap.parse_args(argv)
+    h, w = a.frame
     try:
-        w, h = (int(v) for v in a.frame.lower().split("x"))
         pitches = [float(p) for p in a.pitch.split(",")]
-        if w <= 0 or h <= 0:
-            raise ValueError
     except ValueError:
-        ap.error(f"--frame {a.frame!r} / --pitch {a.pitch!r}: WIDTHxHEIGHT and comma-separated degrees")
+        ap.error(f"--pitch {a.pitch!r}: comma-separated degrees, e.g. -10,0,10")
     if not a.labels.is_file():
         print(f"error: {a.labels} not found (a CSV with a far_y column)", file=sys.stderr)
         return 2

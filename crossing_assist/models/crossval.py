@@ -94,19 +94,21 @@ def cross_validate(cfg: TrainConfig, *, resume: bool = False, jobs: int = 1) -> 
         raise ConfigError(f"Invalid --cv source: {cfg.data} has {len(sources)} train source(s); need >= 2")
     if cfg.holdout:
         raise ConfigError("Invalid --cv source with --holdout: each fold holds out its own source")
-    todo = []
+    todo = []   # (what to say, the fold's config, whether it resumes) of each unfinished fold
     for i, source in enumerate(sources, 1):
         fold = _fold_dir(out, source)
         if _fold_metrics(fold, cfg.epochs) is None:
-            print(f"fold {i}/{len(sources)}: holding out {source}", flush=True)
-            fcfg = replace(cfg, out=str(fold), holdout=(source,), select_on="last")
-            again = (fold / "weights" / "last.pt").is_file()
-            if jobs == 1:
-                train(fcfg, resume=again)
-            else:
-                todo.append((fcfg, again))
-    if todo:
-        _train_side_by_side(todo, jobs)
+            todo.append((f"fold {i}/{len(sources)}: holding out {source}",
+                         replace(cfg, out=str(fold), holdout=(source,), select_on="last"),
+                         (fold / "weights" / "last.pt").is_file()))
+    if jobs > 1 and len(todo) > 1:
+        for line, _, _ in todo:
+            print(line, flush=True)
+        _train_side_by_side([(fcfg, again) for _, fcfg, again in todo], jobs)
+    else:   # one process: each fold announced as it starts
+        for line, fcfg, again in todo:
+            print(line, flush=True)
+            train(fcfg, resume=again)
     folds = []
     for source in sources:
         m = _fold_metrics(_fold_dir(out, source), cfg.epochs)
