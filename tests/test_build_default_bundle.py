@@ -14,14 +14,9 @@ from crossing_assist.bundle import read_bundle
 from crossing_assist.models.config import TrainConfig
 from crossing_assist.models.train import train
 from test_models_train import make_tiny_dataset
+from test_stamp_bundle import _gate   # a choose_gate.py result at one scale
 
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "build_default_bundle.sh"
-
-
-def _gate(scale: float) -> dict:
-    point = {"scale": scale, "beacon_on": 0.8, "confidently_wrong": 0.004, "silence_no_crossing": 1.0, "per_fold": {}}
-    return {"scale": scale, "targets_met": True, "folds": [], "accuracy": 0.6, "bin_mae": 0.5,
-            "at_scale": point, "at_fitted_threshold": point}
 
 
 def _build(tmp_path: Path, **env) -> subprocess.CompletedProcess:
