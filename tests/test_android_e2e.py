@@ -58,6 +58,7 @@ NODE = shutil.which("node")
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 FPS = 10
 FLIP_S = 6
+SIDEWAYS_AFTER_S = 1.0  # the portrait run's wait for the hold-it-sideways advice (the app's: 5 s)
 RUN_S = 18.0  # longer than the 17 s clip: every segment, the frozen one included, is seen
 WATCHDOG_S = 0.5
 BAR_PX = 80  # the helper bar under the control (4rem of 20 px)
@@ -156,7 +157,8 @@ def portrait(tmp_path_factory) -> dict:
         x0 = (w - pw) // 2
         frames.append(cv2.cvtColor(bgr[: h // 2 * 2, x0:x0 + pw], cv2.COLOR_BGR2RGB))
     clip.write_y4m(tmp / "clip.y4m", frames, 10)
-    result = _drive(tmp, www, tmp / "clip.y4m", 8.0, "--phases", "short", "--viewport", "390x844", "--tilt", "1")
+    result = _drive(tmp, www, tmp / "clip.y4m", 8.0, "--phases", "short", "--viewport", "390x844", "--tilt", "1",
+                    "--sideways-after", str(SIDEWAYS_AFTER_S))
     meta = json.loads((det / "bundle.json").read_text())
     return {"result": result, "engine": Engine(det), "geometry": meta["geometry"]}
 
@@ -502,6 +504,27 @@ def test_a_phone_pointed_at_the_ground_is_told_to_raise_it(portrait: dict) -> No
     t_tilt = portrait["result"]["tilt"]["t_tilt"]   # no advice before the sensor said anything
     assert t >= t_tilt and not any(e["kind"] in ("speech", "vibrate") and "tilt" in e.get("reason", e.get("text", ""))
                                    for e in trace if e["t"] < t_tilt)
+
+
+def test_an_upright_phone_unsure_for_a_while_is_told_to_hold_it_sideways(portrait: dict) -> None:
+    """The portrait run gives the advice after SIDEWAYS_AFTER_S s (the app's 5 s, shortened):
+    vibrated once a "not sure" stop has lasted that long, never before, and spoken (at once or
+    after the speech's gap between two stop sentences); the decisions stay the Decider's."""
+    trace = portrait["result"]["trace"]
+    t_said = portrait["result"]["sideways"]["t_spoken"]
+    said = next(e for e in trace if e["kind"] == "speech" and e["t"] == t_said)
+    assert said["text"] == STATUS_STOP["sideways"]
+    t = next(e["t"] for e in trace if e["kind"] == "vibrate" and e["reason"] == "sideways")
+    assert t <= t_said
+    frames = [e for e in trace if e["kind"] == "frame" and e["fresh"] and e["t"] <= t]
+    assert frames[-1]["decision"]["stop"] and frames[-1]["decision"]["reason"] == "uncertain"
+    since = frames[-1]["t"]  # the unbroken "not sure" stop before the advice
+    for f in reversed(frames):
+        if f["decision"]["reason"] != "uncertain":
+            break
+        since = f["t"]
+    assert t - since >= SIDEWAYS_AFTER_S - 1e-6, (since, t)
+    assert {e["decision"]["reason"] for e in trace if e["kind"] == "frame"} <= {"ok", "uncertain", "stale", "failed"}
 
 
 def test_direction_code_vibrates_when_turned_on(portrait: dict) -> None:

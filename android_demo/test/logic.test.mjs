@@ -10,7 +10,7 @@ import { fileURLToPath } from 'node:url';
 
 import { actionHeading, headingToPan, spaceGroups, spaceNames } from '../www/js/actions.js';
 import { BundleError, parseBundleMeta } from '../www/js/bundle.js';
-import { cameraElevationDeg, sameFrame, TILT, TiltWatch, Watchdog, YawIntegrator, yawRateFromRotation } from '../www/js/live.js';
+import { cameraElevationDeg, sameFrame, SIDEWAYS, SidewaysHint, TILT, TiltWatch, Watchdog, YawIntegrator, yawRateFromRotation } from '../www/js/live.js';
 import { cueFor, Decider, decisionConfig, observationFromOutputs } from '../www/js/logic.js';
 import { rgbaToRgb } from '../www/js/model.js';
 import { replayVectors } from '../www/js/vectors.js';
@@ -455,4 +455,25 @@ test('a phone pointed far down or up names its stop reason, with hysteresis and 
   assert.equal(w.reason(5), null);
   assert.match(statusMessage({ stop: true, reason: 'tilt_down' })[0], /raise it/);
   assert.match(statusMessage({ stop: true, reason: 'tilt_up' })[0], /lower it/);
+});
+
+test('an upright phone unsure for a while is told to hold it sideways, once in a while', () => {
+  const h = new SidewaysHint();
+  const { after_s: after, every_s: every } = SIDEWAYS;
+  assert.equal(h.update(0, true, true), null); // a "not sure" stop begins
+  assert.equal(h.update(after - 0.1, true, true), null);
+  assert.equal(h.update(after, true, true), 'sideways');
+  assert.equal(h.update(after + 1, true, true), 'sideways'); // kept while the stop lasts
+  assert.equal(h.update(after + 2, false, true), null); // the beacon plays: gone
+  assert.equal(h.update(after + 3, true, true), null); // a new stop ...
+  assert.equal(h.update(2 * after + 10, true, true), null); // ... is not told again before every_s
+  assert.equal(h.update(after + every + 1, true, true), 'sideways'); // now it is
+  assert.equal(h.update(after + every + 2, true, false), null); // turned sideways: gone
+  const land = new SidewaysHint();
+  assert.equal(land.update(0, true, false), null);
+  assert.equal(land.update(3 * after, true, false), null); // never in landscape
+  const quick = new SidewaysHint({ after_s: 1 });
+  quick.update(0, true, true);
+  assert.equal(quick.update(1, true, true), 'sideways');
+  assert.match(statusMessage({ stop: true, reason: 'sideways' })[0], /sideways/);
 });

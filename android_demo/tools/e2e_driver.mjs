@@ -21,7 +21,8 @@
 // set in the helper view (10 refused, 60 taken) -> long press ends ->
 // server stopped, reload, start again (offline; settings kept: no tutorial).
 // Phases "short": load with the tutorial marked done and the direction vibration on, start,
-// run, (--tilt 1: the gyroscope on, then the phone tilted down until a "not sure" stop says to
+// run, (--sideways-after S: the hold-it-sideways advice after S s of a "not sure" stop, waited
+// for), (--tilt 1: the gyroscope on, then the phone tilted down until a "not sure" stop says to
 // raise it), collect, double tap.
 // The driver asserts nothing; it exits non-zero only when it could not run.
 
@@ -50,6 +51,7 @@ function parseArgs(argv) {
     else if (k === '--phases') args.phases = v;
     else if (k === '--viewport') args.viewport = v;
     else if (k === '--tilt') args.tilt = v === '1';
+    else if (k === '--sideways-after') args.sidewaysAfter = Number(v);
     else throw new Error(`unknown argument ${k}`);
   }
   if (!args.clip || !args.out) throw new Error('usage: e2e_driver.mjs --clip clip.y4m --out result.json [--run-s S] [--www DIR]');
@@ -327,10 +329,17 @@ async function tiltPhase(page, result) {
   result.tilt = { t_tilt: tTilt, t_spoken: tSpoken };
 }
 
+/** Waits until a "not sure" stop held upright says to hold the phone sideways. */
+async function sidewaysPhase(page, result) {
+  const tSpoken = await waitFor(page, () => window.crossingAssist.trace.find((e) => e.kind === 'speech' && e.text.includes('sideways'))?.t ?? null,
+    null, 60000, 'the hold-it-sideways advice');
+  result.sideways = { t_spoken: tSpoken };
+}
+
 async function shortPhases(page, server, args, result) {
   await page.addInitScript((gyro) => localStorage.setItem('crossing-assist-settings',
     JSON.stringify({ tutorialDone: true, hapticDirections: true, gyro })), !!args.tilt);
-  await page.goto(`${server.url}?test=1`);
+  await page.goto(`${server.url}?test=1${args.sidewaysAfter ? `&sideways_after_s=${args.sidewaysAfter}` : ''}`);
   await waitFor(page, () => window.crossingAssist?.ready && window.crossingAssist.offline === 'ready', null, 120000, 'the app and its service worker');
   result.first_load = server.requests.slice();
   result.states = { ready: await page.evaluate(screenState) };
@@ -340,6 +349,7 @@ async function shortPhases(page, server, args, result) {
   await guide(page, args.runS, samples);
   result.samples = samples;
   result.states.running = await page.evaluate(screenState);
+  if (args.sidewaysAfter) await sidewaysPhase(page, result);
   if (args.tilt) await tiltPhase(page, result);
   Object.assign(result, await collect(page));
   await control(page).dblclick();

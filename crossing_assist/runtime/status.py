@@ -8,8 +8,8 @@ both must agree on.
 from __future__ import annotations
 
 #: Stop reasons beyond the Decider's: audio cannot play, the app is in the background, the
-#: field-of-view setting is invalid, the phone is tilted too far. Each is a stop (the beacon
-#: never plays then).
+#: field-of-view setting is invalid, the phone is tilted too far, or held upright while unsure.
+#: Each is a stop (the beacon never plays then).
 STATUS_STOP = {
     "uncertain": "Stop. Not sure: scan slowly.",
     "stale": "Stop. Camera stalled.",
@@ -21,6 +21,9 @@ STATUS_STOP = {
     # (android_demo/www/js/live.js, TiltWatch); the decision itself is the Decider's
     "tilt_down": "Stop. The phone points at the ground: raise it.",
     "tilt_up": "Stop. The phone points too high: lower it.",
+    # the app's "not sure" that has lasted 5 s with the phone upright (live.js, SidewaysHint):
+    # on held-out photographers the beacon plays twice as often with the phone held sideways
+    "sideways": "Stop. Not sure: hold the phone sideways, it guides better.",
 }
 STRAIGHT_DEG = 7.5  # |heading| below: straight ahead
 SLIGHT_DEG = 22.5  # below: bear slightly; at or above: turn

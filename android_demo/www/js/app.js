@@ -19,19 +19,24 @@
 // * a bundle with geometry.view_crop (schema 3) sees only the frame's middle rows at the training
 //   camera's angular scale (geometry.js viewRows, from the whole frame's FOV), as Engine.predict.
 //
+// Advice on a "not sure" stop (the decision is unchanged, only the sentence and the vibration):
+// with the gyroscope on, a phone pointed far down or up is told which way to tilt (TiltWatch);
+// a phone held upright and unsure for 5 s is told to hold it sideways (SidewaysHint).
+//
 // The whole screen above the helper bar is one control: tap to start; while guiding, a double
 // tap or a long press ends guidance (a single tap only says how), and a tap resumes lost audio.
 //
 // URL flags: ?test=1 keeps a trace of every step (and copies of the camera frames, before any
 // view crop) in window.crossingAssist for the end-to-end test; ?bundle=URL loads another bundle
 // folder; ?gyro=1 ticks "Use the gyroscope"; ?threads=N sets the WASM threads;
-// ?tutorial_speed=K plays the tutorial K times faster.
+// ?tutorial_speed=K plays the tutorial K times faster; ?sideways_after_s=S gives the hold-it-sideways
+// advice after S s instead of 5.
 
 import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
 import { cameraFov, defaultFovText, FovError, frameView, gateThreshold, orientation, zoomedFov } from './geometry.js';
 import { Haptics } from './haptics.js';
-import { isFresh, sameFrame, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
+import { isFresh, sameFrame, SidewaysHint, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
 import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN } from './logic.js';
 import { fetchBundle, openBest } from './model.js';
 import { loadSettings, saveSettings } from './settings.js';
@@ -49,6 +54,7 @@ const STOP_CUE = { kind: KIND_STOP };
 const params = new URLSearchParams(location.search);
 const TEST = params.get('test') === '1';
 const TUTORIAL_SPEED = Math.max(1, Number(params.get('tutorial_speed')) || 1);
+const SIDEWAYS_AFTER_S = Number(params.get('sideways_after_s')) || undefined; // tests: a shorter wait
 const MAX_TRACE = 5000;
 const MAX_FRAMES = 600;
 
@@ -106,10 +112,13 @@ function announce([text, cls], t = now()) {
 }
 
 /** What a decision means for the user beyond the beacon: the sentence (hysteresis) and the vibration.
- * A stop for "not sure" while the phone points far down or up says which way to tilt it instead. */
+ * A stop for "not sure" while the phone points far down or up says which way to tilt it instead;
+ * one that has lasted a while with the phone upright says to hold it sideways (live.js). */
 function feedback(t, d) {
-  const tilt = d.stop && d.reason === REASON_UNCERTAIN ? app.tilt?.reason(t) : null;
-  if (tilt) d = { ...d, reason: tilt };
+  const unsure = d.stop && d.reason === REASON_UNCERTAIN;
+  const sideways = app.sideways?.update(t, unsure, app.orientation === 'portrait');
+  const advice = unsure ? (app.tilt?.reason(t) || sideways) : null;
+  if (advice) d = { ...d, reason: advice };
   const msg = app.policy.step(t, d);
   if (msg) announce(msg, t);
   const pattern = d.stop ? app.haptics.stop(d.reason) : app.haptics.go(t, d.heading_deg);
@@ -216,6 +225,7 @@ async function step(frame, captured, dt) {
     appStop('fov');
     return;
   }
+  app.orientation = cam.orientation;
   const threshold = gateThreshold(app.meta.calibration.uncertainty, frame.width, frame.height);
   if (cam.fov !== app.fov || threshold !== app.decider?.cfg.threshold) {
     // The phone turned (or the setting changed): strips mean other headings, and the
@@ -426,6 +436,8 @@ async function start({ tutorial = !app.settings.tutorialDone } = {}) {
     app.grabber = new FrameGrabber($('video'));
     app.decider = null;
     app.fov = null;
+    app.orientation = null;
+    app.sideways = new SidewaysHint(SIDEWAYS_AFTER_S ? { after_s: SIDEWAYS_AFTER_S } : undefined);
     app.audioFailed = false;
     app.paused = false;
     app.audio.onStateChange = onAudioState;

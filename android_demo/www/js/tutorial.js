@@ -1,6 +1,7 @@
 // The first-run headphone check and sound tutorial: a beep left, right and centre, each named
 // aloud (swapped ears are caught before they matter), then the beacon sweeping left to right
-// and the stop cue with its vibration, and how to end guidance. `playTutorial` plays it
+// and the stop cue with its vibration, how to hold the phone (sideways guides best: live.js,
+// SidewaysHint), and how to end guidance. `playTutorial` plays it
 // through the app's audio and speaker; `skipped()` is polled between steps (a tap skips).
 
 import { STOP_PATTERNS } from './haptics.js';
@@ -14,6 +15,7 @@ export const TUTORIAL = Object.freeze([
   { say: 'If left and right were swapped, turn your headphones round.', cue: { kind: KIND_SILENCE }, s: 3 },
   { say: 'This is the beacon. It comes from where to head, and beeps faster the surer the app is.', sweep: true, s: 6 },
   { say: 'This is the stop cue, two falling beeps, with a vibration. Stop and scan slowly.', cue: { kind: KIND_STOP }, s: 4 },
+  { say: 'Hold the phone at chest height, camera ahead. Held sideways, it guides best.', cue: { kind: KIND_SILENCE }, s: 4 },
   { say: 'Double tap or hold the screen to end guidance. Guidance starts now.', cue: { kind: KIND_SILENCE }, s: 3 },
 ]);
 

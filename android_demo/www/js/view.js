@@ -15,6 +15,7 @@ export const STATUS_STOP = Object.freeze({
   fov: 'Stop. The camera field of view setting is invalid.',
   tilt_down: 'Stop. The phone points at the ground: raise it.',
   tilt_up: 'Stop. The phone points too high: lower it.',
+  sideways: 'Stop. Not sure: hold the phone sideways, it guides better.',
 });
 export const STRAIGHT_DEG = 7.5;
 export const SLIGHT_DEG = 22.5;
