@@ -4,6 +4,7 @@ it and last.pt, the feature cache leaves nothing half-written behind."""
 from __future__ import annotations
 
 import csv
+import json
 import os
 import subprocess
 import sys
@@ -150,3 +151,33 @@ def test_a_process_needing_an_entry_another_is_computing_waits_and_reads_it(tiny
         shutil.copytree(built.path, tmp_path / "c" / key)   # ... and done
     waiter.join(30)
     assert got["fs"].path == tmp_path / "c" / key and got["fs"].feats.shape == built.feats.shape
+
+
+def test_a_run_builds_the_entries_no_one_else_is_building_before_it_waits(tiny, tmp_path):
+    """Two runs side by side need the same entries: while another process builds the train
+    entry, this run builds the others (here val) instead of idling, then waits and reads train;
+    compute_features(wait=False) gives None at once for an entry another process holds."""
+    import shutil
+    import threading
+    import time
+
+    train_mod.train(_cfg(tiny, tmp_path / "other", epochs=1, cache_dir=str(tmp_path / "elsewhere")))
+    built = {p.name: p for p in (tmp_path / "elsewhere").iterdir() if (p / "meta.json").is_file()}
+    cache = tmp_path / "c"
+    cache.mkdir()
+    done = {}
+    assert len(built) == 2   # train (8 rows x 2 mirror variants) and val (4 rows)
+    train_key = max(built, key=lambda k: json.loads((built[k] / "meta.json").read_text())["n"])
+    with cache_mod.entry_lock(cache, train_key):   # the other process, building train
+        run = threading.Thread(target=lambda: done.update(out=train_mod.train(
+            _cfg(tiny, tmp_path / "run", epochs=1, cache_dir=str(cache)))))
+        run.start()
+        deadline = time.time() + 60
+        while time.time() < deadline and not any((p / "meta.json").is_file() for p in cache.iterdir()):
+            time.sleep(0.2)
+        others = [p.name for p in cache.iterdir() if (p / "meta.json").is_file()]
+        assert others and train_key not in others, others   # built the rest first ...
+        assert run.is_alive() and "out" not in done         # ... and waits for train
+        shutil.copytree(built[train_key], cache / train_key)   # the other process is done
+    run.join(120)
+    assert "out" in done and (tmp_path / "run" / "weights" / "last.pt").is_file()

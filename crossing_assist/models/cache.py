@@ -9,7 +9,8 @@ everything that changes the features: backbone name, weights source *and* file f
 number of frozen blocks, input size, mean/std, the variants (mirroring, yaw angles, field views, their seed and recipe, FOV), the fit and
 the dataset rows (image paths, labels, file sizes and mtimes). ``meta.json`` is written last
 (atomically), so a half-written entry is never used. Processes sharing a cache take turns on
-an entry (:func:`entry_lock`): the first computes it, the others wait and read it.
+an entry (:func:`entry_lock`): the first computes it, the others wait and read it; a run first
+builds the entries no other process is building (``wait=False``), then waits for the rest.
 """
 
 from __future__ import annotations
@@ -100,13 +101,16 @@ def _open(path: Path) -> FeatureSet:
 def compute_features(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: tuple[int, int],
                      variants: tuple[Variant, ...], fov_deg: float, cache_dir: Path,
                      batch_size: int = 32, progress: bool = True, desc: str = "features",
-                     fit: str = "stretch", seed: int = 0) -> FeatureSet:
-    """Features of blocks ``[0, frozen_blocks)`` for every row x variant, cached on disk."""
+                     fit: str = "stretch", seed: int = 0, wait: bool = True) -> FeatureSet | None:
+    """Features of blocks ``[0, frozen_blocks)`` for every row x variant, cached on disk.
+    ``wait=False``: None at once, computing nothing, while another process computes the entry."""
     key = cache_key(backbone, frozen_blocks, size, variants, fov_deg, ds, fit, seed)
     path = Path(cache_dir) / key
     if (path / "meta.json").is_file():
         return _open(path)
-    with entry_lock(cache_dir, key):
+    with entry_lock(cache_dir, key, wait=wait) as held:
+        if not held:
+            return None
         if (path / "meta.json").is_file():   # another process built it while this one waited
             return _open(path)
         sweep_orphans(cache_dir, prefix="")  # half-written entries of killed runs (<key>.tmp<pid>)
@@ -121,24 +125,29 @@ def compute_features(backbone: Backbone, frozen_blocks: int, ds: Dataset, size: 
 
 
 @contextmanager
-def entry_lock(cache_dir: str | os.PathLike, key: str):
+def entry_lock(cache_dir: str | os.PathLike, key: str, wait: bool = True):
     """Held while one process computes the entry ``key``: another process that needs the same
     entry (folds or runs started side by side on one cache) waits for it and then reads it,
     instead of computing it again. An advisory ``flock`` on ``<cache_dir>/<key>.lock``, released
     by the system if the holder dies, and removed by it once done (the cache holds only entries
     between runs: a process that opens a removed lock re-checks for the entry before computing).
+    Yields whether it is held: ``wait=False`` yields False at once when another process holds it.
     Where ``fcntl`` is missing (Windows) nothing is locked."""
     try:
         import fcntl
     except ImportError:   # pragma: no cover - not POSIX
-        yield
+        yield True
         return
     Path(cache_dir).mkdir(parents=True, exist_ok=True)
     lock = Path(cache_dir) / f"{key}.lock"
     with open(lock, "a") as f:
-        fcntl.flock(f, fcntl.LOCK_EX)
         try:
-            yield
+            fcntl.flock(f, fcntl.LOCK_EX if wait else fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            yield False
+            return
+        try:
+            yield True
         finally:
             lock.unlink(missing_ok=True)
             fcntl.flock(f, fcntl.LOCK_UN)

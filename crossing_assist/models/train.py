@@ -277,20 +277,23 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     size = policy.config.input_size
     variants = make_variants(cfg.mirror, cfg.yaw, cfg.field, cfg.field_without, cfg.field_zoom)
     cache = Path(cfg.cache_dir)
-    fs = lambda d, v, name: compute_features(policy.backbone, start, d, size, v, cfg.fov_deg, cache,  # noqa: E731
-                                             progress=cfg.progress, desc=f"features {name}",
-                                             fit=cfg.fit, seed=cfg.seed)
+    fs = lambda d, v, name, wait=True: compute_features(  # noqa: E731
+        policy.backbone, start, d, size, v, cfg.fov_deg, cache, progress=cfg.progress, desc=f"features {name}",
+        fit=cfg.fit, seed=cfg.seed, wait=wait)
+    extras = [ex for ex in (read_manifest(e).split("train") for e in cfg.extra_data) if len(ex)]
+    entries = [(train_ds, variants, "train"), *((ex, variants, f"train {Path(ex.root).name}") for ex in extras),
+               *([(val_ds, make_variants(False), "val")] if val_ds is not None else [])]
     with distributed.main_first(ctx):  # rank 0 builds the cache, the other ranks then read it
+        for entry in entries:  # runs side by side on one cache (--cv-jobs): first what no one else is building
+            fs(*entry, wait=False)
         train_fs = fs(train_ds, variants, "train")
         tr, held = _hold_out(_to_split(train_fs, cfg.actions), train_fs, train_ds, cfg.holdout)
         n_extra = 0
-        for extra in cfg.extra_data:  # cached per folder, so adding data never recomputes the main set
-            ex = read_manifest(extra).split("train")
-            if len(ex):
-                ex_fs = fs(ex, variants, f"train {Path(extra).name}")
-                ex_split, _ = _hold_out(_to_split(ex_fs, cfg.actions), ex_fs, ex, cfg.holdout)  # held-out sources stay out
-                tr = _concat(tr, ex_split)
-                n_extra += int(sum(r.source not in cfg.holdout for r in ex.rows))
+        for ex in extras:  # cached per folder, so adding data never recomputes the main set
+            ex_fs = fs(ex, variants, f"train {Path(ex.root).name}")
+            ex_split, _ = _hold_out(_to_split(ex_fs, cfg.actions), ex_fs, ex, cfg.holdout)  # held-out sources stay out
+            tr = _concat(tr, ex_split)
+            n_extra += int(sum(r.source not in cfg.holdout for r in ex.rows))
         val = _to_split(fs(val_ds, make_variants(False), "val"), cfg.actions) if val_ds is not None else None
     sel = val if cfg.select_on == "val" else held
     # the majority-class baseline is the most frequent *direction* (unknown negatives would make a
