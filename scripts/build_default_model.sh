@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Build the app's DEFAULT policy (13 actions, EfficientNet-Lite0, its last 8 blocks fine-tuned) into runs/default/.
 #
-# Canvas: 168 x 224 (4:3 landscape, the PTL photos' own aspect), frames letterboxed onto it exactly
+# Canvas: 168 x 224 (INPUT_SIZE; 4:3 landscape, the PTL photos' own aspect), frames letterboxed onto it exactly
 # as the bundle's graph fits a camera frame (crossing_assist/geometry.py).
 # Data: PTL train (real photos, ../shared/data/ptl, squash undone: aspect=4:3) with, per photo, its
 # two random *field views* (mirrored half the time, roll up to 15 deg, a phone aspect such as 3:4 portrait
@@ -31,6 +31,8 @@ BALANCE=${BALANCE:-none}  # weights: inverse-frequency class weights in the loss
 LR_SCHEDULE=${LR_SCHEDULE:-cosine}   # cosine (since 2026-11-29 night) vs constant: leave-one-photographer-out 0.695 vs 0.677
 SEED=${SEED:-0}          # another seed of the same recipe: its CV can be pooled (choose_gate.py --also)
 THREADS=${THREADS:-1}
+INPUT_SIZE=${INPUT_SIZE:-168x224}   # HxW of the canvas; 192x256: portrait views placed better held out (one CV run,
+                                    # 2026-12-02, a candidate: docs/models.md, "A larger canvas")
 # ablations (scripts/augment_ablation.py): field-view steps left out, and whether negatives are added
 FIELD_WITHOUT=${FIELD_WITHOUT:-}   # e.g. roll or corruption (crossing-train --field-without)
 NEGATIVES=${NEGATIVES:-1}          # 0: no synthetic corners and no PTL negatives
@@ -45,7 +47,7 @@ if [ -n "$SOFT_X" ]; then EXTRA+=(--soft-x "$SOFT_X"); fi
 if [ -n "$FIELD_ZOOM" ]; then EXTRA+=(--field-zoom "$FIELD_ZOOM"); fi
 RECIPE=(--data runs/data/ptl "${EXTRA[@]}" --backbone efficientnet_lite0
     --head "$HEAD" --actions 13 --epochs "$EPOCHS" --optimizer adamw --lr 1e-3 --lr-schedule "$LR_SCHEDULE" --weight-decay 1e-4 --smoothing 0.2 --balance "$BALANCE"
-    --aux-x 1.0 --unfreeze "$UNFREEZE" --input-size 168x224 --fit letterbox --no-mirror --field "$FIELD" --seed "$SEED"
+    --aux-x 1.0 --unfreeze "$UNFREEZE" --input-size "$INPUT_SIZE" --fit letterbox --no-mirror --field "$FIELD" --seed "$SEED"
     --threads "$THREADS" --quiet)
 if [ "${CV:-0}" = 1 ]; then   # leave-one-photographer-out figures of the same recipe
     $PY -m crossing_assist.models.cli train "${RECIPE[@]}" --out "$OUT/cv" --cv source ${RESUME:+--resume}
