@@ -284,17 +284,18 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     entries = [(train_ds, variants, "train"), *((ex, variants, f"train {Path(ex.root).name}") for ex in extras),
                *([(val_ds, make_variants(False), "val")] if val_ds is not None else [])]
     with distributed.main_first(ctx):  # rank 0 builds the cache, the other ranks then read it
-        for entry in entries:  # runs side by side on one cache (--cv-jobs): first what no one else is building
-            fs(*entry, wait=False)
-        train_fs = fs(train_ds, variants, "train")
+        # runs side by side on one cache (--cv-jobs): each first builds the entries no other run is
+        # building, then waits for the rest
+        built = [fs(*e, wait=False) for e in entries]
+        train_fs, *extra_fs = [b if b is not None else fs(*e) for b, e in zip(built, entries)]
+        val_fs = extra_fs.pop() if val_ds is not None else None
         tr, held = _hold_out(_to_split(train_fs, cfg.actions), train_fs, train_ds, cfg.holdout)
         n_extra = 0
-        for ex in extras:  # cached per folder, so adding data never recomputes the main set
-            ex_fs = fs(ex, variants, f"train {Path(ex.root).name}")
+        for ex, ex_fs in zip(extras, extra_fs):  # cached per folder, so adding data never recomputes the main set
             ex_split, _ = _hold_out(_to_split(ex_fs, cfg.actions), ex_fs, ex, cfg.holdout)  # held-out sources stay out
             tr = _concat(tr, ex_split)
             n_extra += int(sum(r.source not in cfg.holdout for r in ex.rows))
-        val = _to_split(fs(val_ds, make_variants(False), "val"), cfg.actions) if val_ds is not None else None
+        val = _to_split(val_fs, cfg.actions) if val_fs is not None else None
     sel = val if cfg.select_on == "val" else held
     # the majority-class baseline is the most frequent *direction* (unknown negatives would make a
     # baseline that is right on no crossing photo); all-unknown training data keeps unknown
