@@ -6,8 +6,11 @@ from __future__ import annotations
 import csv
 import json
 import os
+import shutil
 import subprocess
 import sys
+import threading
+import time
 
 import pytest
 from test_models_train import _cfg, make_tiny_dataset
@@ -123,10 +126,6 @@ def test_library_resume_refuses_a_different_config(tiny, tmp_path):
 def test_a_process_needing_an_entry_another_is_computing_waits_and_reads_it(tiny, tmp_path, monkeypatch):
     """Runs side by side on one cache take turns on an entry: while another holder has the
     entry's lock, compute_features waits; once the entry is there it reads it, computing nothing."""
-    import shutil
-    import threading
-    import time
-
     from crossing_assist.data_tools.manifest import read_manifest
     from crossing_assist.models.backbones import create_backbone
     from crossing_assist.models.data import make_variants
@@ -157,10 +156,6 @@ def test_a_run_builds_the_entries_no_one_else_is_building_before_it_waits(tiny, 
     """Two runs side by side need the same entries: while another process builds the train
     entry, this run builds the others (here val) instead of idling, then waits and reads train;
     compute_features(wait=False) gives None at once for an entry another process holds."""
-    import shutil
-    import threading
-    import time
-
     train_mod.train(_cfg(tiny, tmp_path / "other", epochs=1, cache_dir=str(tmp_path / "elsewhere")))
     built = {p.name: p for p in (tmp_path / "elsewhere").iterdir() if (p / "meta.json").is_file()}
     cache = tmp_path / "c"
