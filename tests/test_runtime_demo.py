@@ -156,3 +156,16 @@ def test_with_ffmpeg_on_path_the_beacon_is_muxed_into_the_video(tmp_path, toy_bu
     assert summary.outputs["with_audio"] == str(muxed) and muxed.read_text() == "muxed\n"
     args = log.read_text()
     assert "annotated.mp4" in args and "beacon.wav" in args and "libx264" in args
+
+
+def test_the_summary_advises_sideways_only_for_a_mostly_unsure_portrait_video():
+    from crossing_assist.runtime.offline import Summary
+
+    def lines(size, uncertain, ok):
+        return Summary(frames=uncertain + ok, video_s=1.0, wall_s=1.0, gates={}, failed=0, outputs={},
+                       reasons={"uncertain": uncertain, "ok": ok}, frame_size=size, fov_deg=(53.0,)).lines()
+
+    advice = [line for line in lines((480, 640), 6, 4) if line.startswith("advice:")]
+    assert advice == [advice[0]] and "unsure on 60% of these portrait frames" in advice[0] and "sideways" in advice[0]
+    assert not any(line.startswith("advice:") for line in lines((640, 480), 6, 4))   # landscape already
+    assert not any(line.startswith("advice:") for line in lines((480, 640), 4, 6))   # mostly guided

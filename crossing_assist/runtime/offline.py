@@ -26,6 +26,7 @@ from crossing_assist.geometry import GeometryError
 from crossing_assist.runtime.annotate import annotate
 from crossing_assist.runtime.audio import write_wav
 from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
+from crossing_assist.runtime.decide import REASON_UNCERTAIN
 from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.pipeline import Pipeline, Step, open_pipeline, trace_record
 from crossing_assist.runtime.truth import compare, load_truth, truth_line
@@ -33,6 +34,7 @@ from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
 
 
 STOP_TAIL_S = 1.0  # seconds of stop cue that end the WAV of a video that died mid-way
+SIDEWAYS_UNSURE = 0.5  # a portrait video unsure on at least this share of frames: the summary advises sideways
 
 
 @dataclass(frozen=True)
@@ -86,6 +88,11 @@ class Summary:
                 seen = f"; the model sees rows {top}-{top + rows} of {h} (view crop: the training camera's view)"
             out.insert(1, f"frames {w}x{h} ({'portrait' if h > w else 'landscape'}); headings assume a "
                           f"horizontal field of view of {fovs} deg{seen}")
+            unsure = self.reasons.get(REASON_UNCERTAIN, 0) / n
+            if h > w and unsure >= SIDEWAYS_UNSURE:   # the phone app's SidewaysHint, for a whole video
+                out.insert(2, f"advice: the model was unsure on {100 * unsure:.0f}% of these portrait frames; "
+                              "with a crossing in view, a phone held sideways (landscape) hears the beacon "
+                              "about twice as often (README, 'What the user hears')")
         if self.failed:
             out.append(f"failed inferences: {self.failed}")
         if self.truth:
