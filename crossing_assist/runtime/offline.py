@@ -91,8 +91,8 @@ class Summary:
             unsure = self.reasons.get(REASON_UNCERTAIN, 0) / n
             if h > w and unsure >= SIDEWAYS_UNSURE:   # the phone app's SidewaysHint, for a whole video
                 out.insert(2, f"advice: the model was unsure on {100 * unsure:.0f}% of these portrait frames; "
-                              "with a crossing in view, a phone held sideways (landscape) hears the beacon "
-                              "about twice as often (README, 'What the user hears')")
+                              "with a crossing in view, a phone held sideways (landscape) hears the beacon more "
+                              "often (README, 'What the user hears')")
         if self.failed:
             out.append(f"failed inferences: {self.failed}")
         if self.truth:
