@@ -86,10 +86,11 @@ class Summary:
             if self.view_rows and self.view_rows[1] < h:
                 top, rows = self.view_rows
                 seen = f"; the model sees rows {top}-{top + rows} of {h} (view crop: the training camera's view)"
-            out.insert(1, f"frames {w}x{h} ({'portrait' if h > w else 'landscape'}); headings assume a "
+            portrait = h > w
+            out.insert(1, f"frames {w}x{h} ({'portrait' if portrait else 'landscape'}); headings assume a "
                           f"horizontal field of view of {fovs} deg{seen}")
             unsure = self.reasons.get(REASON_UNCERTAIN, 0) / n
-            if h > w and unsure >= SIDEWAYS_UNSURE:   # the phone app's SidewaysHint, for a whole video
+            if portrait and unsure >= SIDEWAYS_UNSURE:   # the phone app's SidewaysHint, for a whole video
                 out.insert(2, f"advice: the model was unsure on {100 * unsure:.0f}% of these portrait frames; "
                               "with a crossing in view, a phone held sideways (landscape) hears the beacon more "
                               "often (README, 'What the user hears')")
