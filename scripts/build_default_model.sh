@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Build the app's DEFAULT policy (13 actions, EfficientNet-Lite0, its last 8 blocks fine-tuned) into runs/default/.
 #
-# Canvas: 168 x 224 (INPUT_SIZE; 4:3 landscape, the PTL photos' own aspect), frames letterboxed onto it exactly
+# Canvas: 192 x 256 (INPUT_SIZE; 4:3 landscape, the PTL photos' own aspect), frames letterboxed onto it exactly
 # as the bundle's graph fits a camera frame (crossing_assist/geometry.py).
 # Data: PTL train (real photos, ../shared/data/ptl, squash undone: aspect=4:3) with, per photo, its
 # two random *field views* (mirrored half the time, roll up to 15 deg, a phone aspect such as 3:4 portrait
@@ -31,8 +31,9 @@ BALANCE=${BALANCE:-none}  # weights: inverse-frequency class weights in the loss
 LR_SCHEDULE=${LR_SCHEDULE:-cosine}   # cosine (since 2026-11-29 night) vs constant: leave-one-photographer-out 0.695 vs 0.677
 SEED=${SEED:-0}          # another seed of the same recipe: its CV can be pooled (choose_gate.py --also)
 THREADS=${THREADS:-1}
-INPUT_SIZE=${INPUT_SIZE:-168x224}   # HxW of the canvas; 192x256: portrait views placed better held out (one CV run,
-                                    # 2026-12-02, a candidate: docs/models.md, "A larger canvas")
+INPUT_SIZE=${INPUT_SIZE:-192x256}   # HxW of the canvas: 192x256 since 2026-12-03 (168x224 before): at the same risk a
+                                    # portrait phone hears the beacon more often held out, three CV runs
+                                    # (docs/models.md, "A larger canvas")
 # ablations (scripts/augment_ablation.py): field-view steps left out, and whether negatives are added
 FIELD_WITHOUT=${FIELD_WITHOUT:-}   # e.g. roll or corruption (crossing-train --field-without)
 NEGATIVES=${NEGATIVES:-1}          # 0: no synthetic corners and no PTL negatives
