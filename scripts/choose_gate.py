@@ -263,6 +263,13 @@ def held_out_parser(description: str, frames: int) -> argparse.ArgumentParser:
     return ap
 
 
+def add_also(ap: argparse.ArgumentParser) -> None:
+    """``--also CV2`` (repeatable): pool the folds of more runs of the same recipe with CV's."""
+    ap.add_argument("--also", type=Path, action="append", default=[], metavar="CV2",
+                    help="another --cv source run of the same recipe (e.g. another --seed): its folds are pooled "
+                         "with CV's, so the figures average over training noise; the result is written in CV")
+
+
 def finished_folds(cv: Path):
     """``(fold folder, held-out source)`` of each finished fold (a CV still running: those done so far)."""
     import yaml
@@ -287,9 +294,7 @@ def main(argv=None) -> int:
     ap.add_argument("--grid", type=int, default=GRID, metavar="STEPS",
                     help=f"gate scales a doubling, from x1/4 to x4 (default {GRID}, crossing-eval's grid); another grid "
                          "is a curve cache of its own, swept from the fold's saved predictions (listened*.npz)")
-    ap.add_argument("--also", type=Path, action="append", default=[], metavar="CV2",
-                    help="another --cv source run of the same recipe (e.g. another --seed): its folds are pooled "
-                         "with CV's, so the choice averages over training noise; the result is written in CV")
+    add_also(ap)
     ap.add_argument("--zoom", type=float, default=1.0, metavar="Z",
                     help="portrait frames (narrower than the training camera) shown magnified up to Z instead of at "
                          "the training scale, as crossing-export --view-zoom Z bundles show them (for models trained "

@@ -14,10 +14,11 @@ window of the photo, a narrower camera), each at one of three offsets
 clip through the runtime (:class:`~crossing_assist.runtime.listen.Listener`, the bundle's own
 gate thresholds). Per condition, pooled over folds: the model's accuracy and bin MAE (argmax of
 the clip's first frame), beacon on, confidently wrong and silence on no-crossing views; the
-change against ``clean`` beside each. Writes ``CV/robustness[_mirror].json`` and prints a
+change against ``clean`` beside each; ``--also CV2`` pools the folds of more runs of the recipe
+(other seeds) with CV's. Writes ``CV/robustness[_mirror].json`` and prints a
 markdown table.
 
-    .venv/bin/python scripts/robustness_table.py runs/default/cv [--mirror] [--frames 100]
+    .venv/bin/python scripts/robustness_table.py runs/default/cv [--mirror] [--frames 100] [--also CV2 ...]
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from choose_gate import (  # noqa: E402  (a sibling script)
-    draw_tag, finished_folds, fold_bundle, held_out_parser, held_out_rows, model_accuracy, tag,
+    add_also, draw_tag, finished_folds, fold_bundle, held_out_parser, held_out_rows, model_accuracy, tag,
 )
 
 from crossing_assist.data_tools.augment import PORTRAIT_SETS, roll, user_views  # noqa: E402
@@ -93,7 +94,7 @@ def pool(folds: list[dict]) -> dict:
                            ("silence_no_crossing", "frames_without_crossing")):
             n = sum(r[count] for r in rows)
             row[key] = sum((r[key] or 0) * r[count] for r in rows) / n if n else None
-        row["accuracy_per_fold"] = {f["source"]: f[condition]["accuracy"] for f in folds}
+        row["accuracy_per_fold"] = {f["fold"]: f[condition]["accuracy"] for f in folds}
         out[condition] = row
     return out
 
@@ -110,19 +111,25 @@ def markdown(table: dict) -> str:
 
 
 def main(argv=None) -> int:
-    a = held_out_parser(__doc__.split("\n\n")[0], frames=100).parse_args(argv)
+    ap = held_out_parser(__doc__.split("\n\n")[0], frames=100)
+    add_also(ap)
+    a = ap.parse_args(argv)
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}
     folds = []
-    for fold, source in finished_folds(a.cv):
-        print(f"fold {source}", file=sys.stderr, flush=True)
-        folds.append(fold_table(fold, source, ptl, neg, used, a.frames, a.seed, a.mirror))
+    for i, cv in enumerate([a.cv, *a.also]):
+        for fold, source in finished_folds(cv):
+            print(f"{cv} fold {source}", file=sys.stderr, flush=True)
+            # one key per fold in the pooled per-fold figures
+            folds.append({**fold_table(fold, source, ptl, neg, used, a.frames, a.seed, a.mirror),
+                          "fold": f"{source} ({cv})" if i else source})
     if not folds:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
     table = pool(folds)
     (a.cv / f"robustness{tag(a.mirror)}.json").write_text(
-        json.dumps({"frames_per_fold": a.frames, "folds": [f["source"] for f in folds], "conditions": table}, indent=1))
+        json.dumps({"frames_per_fold": a.frames, "folds": [f["fold"] for f in folds], "conditions": table,
+                    **({"pooled_runs": [str(cv) for cv in (a.cv, *a.also)]} if a.also else {})}, indent=1))
     print(markdown(table))
     return 0
 
