@@ -267,3 +267,31 @@ def test_choose_gate_calibration_subset_reads_its_photos_through_a_linked_cv_fol
     for path in (real / "calib_data", link / "calib_data"):
         sub = read_manifest(path)
         assert [sub.image_path(r).resolve() for r in sub.rows] == [ds.image_path(r).resolve() for r in ds.rows]
+
+
+def test_robustness_table_also_pools_the_folds_of_another_run_weighted_by_frames(tmp_path, monkeypatch):
+    """``robustness_table.py --also CV2``: every fold of both runs enters each condition's pooled rate,
+    weighted by its frame count, and each keeps its own key in the per-fold figures."""
+    import json
+
+    import robustness_table as rt
+
+    def table(source, accuracy, frames):
+        row = {"accuracy": accuracy, "bin_mae": 0.5, "beacon_on": 0.8, "confidently_wrong": 0.01,
+               "silence_no_crossing": 1.0, "frames_with_crossing": frames, "frames_without_crossing": frames // 2}
+        return {"source": source, **{c: row for c in rt.CONDITIONS}}
+
+    acc = {tmp_path / "a": 0.6, tmp_path / "b": 0.9}
+    for cv in acc:
+        cv.mkdir()
+    monkeypatch.setattr(rt, "read_manifest", lambda path: type("M", (), {"rows": []})())
+    monkeypatch.setattr(rt, "finished_folds", lambda cv: [(cv / "fold-ptl_x", "ptl:x")])
+    monkeypatch.setattr(rt, "fold_table", lambda fold, source, *a: table(source, acc[fold.parent], 30 if fold.parent.name == "a" else 10))
+
+    assert rt.main([str(tmp_path / "a"), "--also", str(tmp_path / "b")]) == 0
+    out = json.loads((tmp_path / "a" / "robustness.json").read_text())
+    assert out["folds"] == ["ptl:x", f"ptl:x ({tmp_path / 'b'})"]
+    assert out["pooled_runs"] == [str(tmp_path / "a"), str(tmp_path / "b")]
+    clean = out["conditions"]["clean"]
+    assert clean["accuracy"] == pytest.approx((0.6 * 30 + 0.9 * 10) / 40)
+    assert clean["accuracy_per_fold"] == {"ptl:x": 0.6, f"ptl:x ({tmp_path / 'b'})": 0.9}
