@@ -8,9 +8,9 @@ import sys
 import pytest
 from runtime_toy import TOY2, bar_dataset, bar_frame, make_toy_bundle, toy_bundle  # noqa: F401  (fixture)
 
-from crossing_assist.actions import UNKNOWN, bin_center_x
+from crossing_assist.actions import UNKNOWN, bin_center_x, x_to_heading
 from crossing_assist.runtime.engine import Engine
-from crossing_assist.runtime.listen import Heard, Listener, choose_threshold, summarise
+from crossing_assist.runtime.listen import Heard, Listener, choose_threshold, error_stats, heading_errors, summarise
 
 
 def test_summarise_rates_on_a_hand_made_list():
@@ -27,6 +27,20 @@ def test_summarise_rates_on_a_hand_made_list():
     assert s["confidently_wrong"] == 1.0 and s["silence_no_crossing"] is None
     s = summarise([Heard(UNKNOWN, False, 0)])
     assert s["beacon_on"] is None and s["strip_mae_on"] is None and s["silence_no_crossing"] == 1.0
+
+
+def test_heading_errors_are_degrees_to_the_goal_at_each_clips_fov_on_and_in_view_only():
+    heard = [Heard(6, True, 6, 5.0, 67.0), Heard(6, True, 6, 5.0, 40.0), Heard(6, False, 0, None, 67.0),
+             Heard(1, True, 1, -30.0, 53.0), Heard(UNKNOWN, True, 4, -10.0, 67.0)]
+    far_x = [0.6, 0.6, 0.6, -0.2, None]        # off, out of view and no goal are left out
+    e = heading_errors(heard, far_x)
+    assert e == pytest.approx([abs(5.0 - x_to_heading(0.6, 67.0)), abs(5.0 - x_to_heading(0.6, 40.0))])
+    assert e[0] > e[1] > 0        # the same x is a wider angle on the wider camera
+    s = error_stats([1.0, 2.0, 3.0, 10.0])
+    assert (s["n"], s["median"], s["mean"]) == (4, 2.5, 4.0) and s["p90"] == pytest.approx(7.9)
+    assert error_stats([]) == {"n": 0, "median": None, "mean": None, "p90": None}
+    with pytest.raises(ValueError, match="goal positions"):
+        heading_errors(heard, far_x[:2])
 
 
 def _pt(t, on, wrong, silence):
@@ -96,6 +110,10 @@ def test_crossing_eval_bundle_writes_listen_numbers_and_risk_coverage(tmp_path, 
     assert land["silence_no_crossing"] == 1.0 and land["beacon_on_goal_in_view"] == 1.0
     assert port["silence_no_crossing"] == 1.0 and 0 < port["beacon_on"] <= 1.0
     assert port["beacon_on_goal_in_view"] == 1.0
+    # the toy bundle puts the beacon on the bar's strip: off by at most half a strip, in degrees
+    assert land["heading_error_deg"]["n"] == 6 and land["heading_error_deg"]["p90"] < 67.0 / 24
+    assert 0 < port["heading_error_deg"]["n"] <= 12 and port["heading_error_deg"]["p90"] < 53.0 / 24
+    assert "heading played vs the goal" in r.stdout
     for view in (land, port):   # each view's curve around its own (orientation's) threshold
         thresholds = [c["threshold"] for c in view["risk_coverage"]]
         assert thresholds == sorted(thresholds) and view["bundle_threshold"] in thresholds

@@ -214,6 +214,10 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                       f"{f(v['far_x_error'], '.4f')}, beacon on {f(v['beacon_on'])} (goal in view "
                       f"{f(v['beacon_on_goal_in_view'])}), confidently wrong {f(v['confidently_wrong'], '.4f')}, "
                       f"silence off-crossing {f(v['silence_no_crossing'])}")
+                e = v.get("heading_error_deg") or {}
+                if e.get("n"):
+                    print(f"{'':>15} heading played vs the goal, beacon on and goal in view ({e['n']} frames): median "
+                          f"{e['median']:.1f} deg, mean {e['mean']:.1f} deg, p90 {e['p90']:.1f} deg")
         if "conformal" in m:
             c = m["conformal"]
             print(f"conformal sets: coverage {c['coverage']:.3f} (target {c['target_coverage']:.2f}), "

@@ -21,7 +21,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from crossing_assist.actions import UNKNOWN, heading_to_x, x_to_bin
+from crossing_assist.actions import UNKNOWN, heading_to_x, x_to_bin, x_to_heading
 from crossing_assist.fileio import atomic_path
 from crossing_assist.geometry import ORIENTATIONS
 from crossing_assist.runtime.decide import Decider, DecisionConfig
@@ -35,11 +35,14 @@ SAVED = ("seconds", "fps", "labels", "probs", "ok", "uncertainty", "action", "fo
 @dataclass(frozen=True)
 class Heard:
     """The last decision of one still clip: ``on`` (beacon playing), ``strip`` it points at
-    (0 when off), ``label`` (bin 1..12, 0 = no crossing)."""
+    (0 when off), ``label`` (bin 1..12, 0 = no crossing), ``heading_deg`` played (None when off)
+    and the camera FOV ``fov_deg`` it was read with."""
 
     label: int
     on: bool
     strip: int
+    heading_deg: float | None = None
+    fov_deg: float | None = None
 
 
 def play_still(engine: Engine, frame: np.ndarray, seconds: float = 1.0, fps: float = 10.0,
@@ -58,8 +61,9 @@ def decide_still(preds: Sequence[Prediction], cfg: DecisionConfig, fps: float = 
     for i, p in enumerate(preds):
         d = decider.step(i / fps, p.observation())
     if d is None or d.stop or d.heading_deg is None:
-        return Heard(0, False, 0)
-    return Heard(0, True, x_to_bin(min(max(heading_to_x(d.heading_deg, fov), 0.0), 1.0 - 1e-9)))
+        return Heard(0, False, 0, None, fov)
+    strip = x_to_bin(min(max(heading_to_x(d.heading_deg, fov), 0.0), 1.0 - 1e-9))
+    return Heard(0, True, strip, float(d.heading_deg), fov)
 
 
 def summarise(heard: Iterable[Heard]) -> dict:
@@ -81,6 +85,26 @@ def summarise(heard: Iterable[Heard]) -> dict:
         "strip_mae_on": float(err.mean()) if len(err) else None,
         "silence_no_crossing": rate(sum(not h.on for h in neg), len(neg)),
     }
+
+
+def heading_errors(heard: Sequence[Heard], far_x: Sequence[float | None]) -> np.ndarray:
+    """Degrees between the heading played and the goal's own heading (``far_x``, the far point's
+    position across the frame, read with the clip's FOV), for the clips whose beacon is on and
+    whose goal is in view (``0 <= far_x <= 1``): the error a user walks with, comparable across
+    cameras of different FOV where strips are not (a 53 deg strip is 0.79 of a 67 deg one)."""
+    if len(heard) != len(far_x):
+        raise ValueError(f"{len(heard)} clips but {len(far_x)} goal positions")
+    return np.asarray([abs(h.heading_deg - x_to_heading(x, h.fov_deg)) for h, x in zip(heard, far_x)
+                       if h.on and h.heading_deg is not None and h.fov_deg is not None
+                       and x is not None and 0.0 <= x <= 1.0], float)
+
+
+def error_stats(errors_deg: np.ndarray) -> dict:
+    """``n``, ``median``, ``mean`` and ``p90`` of heading errors in degrees (None without any)."""
+    e = np.asarray(errors_deg, float)
+    if not len(e):
+        return {"n": 0, "median": None, "mean": None, "p90": None}
+    return {"n": int(len(e)), "median": float(np.median(e)), "mean": float(e.mean()), "p90": float(np.percentile(e, 90))}
 
 
 @dataclass
@@ -149,8 +173,7 @@ class Listener:
         out = []
         for i in range(len(self.clips)) if idx is None else idx:
             o = next((p.orientation for p in self.clips[i] if p.ok), "landscape")
-            h = decide_still(self.clips[i], cfgs[o], self.fps)
-            out.append(Heard(self.labels[i], h.on, h.strip))
+            out.append(replace(decide_still(self.clips[i], cfgs[o], self.fps), label=self.labels[i]))
         return out
 
     def risk_coverage(self, thresholds: Sequence[float], idx: Sequence[int] | None = None) -> list[dict]:
