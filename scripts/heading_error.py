@@ -1,0 +1,105 @@
+"""Heading error in degrees on held-out photographers, per view: is a portrait phone placed worse,
+or are its strips only narrower?
+
+Strip accuracy does not compare cameras: a strip of the 67 deg training camera is 5.6 deg wide, of a
+53 deg portrait phone 4.4 deg, of a 3:4 window of a photo (41 deg) 3.4 deg, so the same angular
+error is more strips off on a narrower camera. This script reads the predictions
+``scripts/choose_gate.py`` saved in each fold (``listened…npz``; no model runs) and, over the
+clips whose goal is in view, measures the heading of the model's argmax strip (first frame) and
+of the beacon heard at the gate scales (the decision logic replayed, the fold's fitted threshold
+times ``--scale`` / ``--portrait-scale``) against the labelled strip's, both at the clip's camera FOV.
+
+    .venv/bin/python scripts/heading_error.py runs/res256 --also runs/res256_s1 --also runs/res256_s2 \
+        --mirror --frames 100000 --portrait-frames 200 --portrait 3 --scale 0.841 --portrait-scale 0.958
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from choose_gate import add_also, draw_tag, finished_folds, fold_bundle, held_out_parser  # noqa: E402
+
+from crossing_assist.actions import N_BINS  # noqa: E402
+from crossing_assist.data_tools.augment import PORTRAIT_SETS  # noqa: E402
+from crossing_assist.data_tools.manifest import read_manifest  # noqa: E402
+from crossing_assist.runtime.listen import Listener  # noqa: E402
+
+FAR_DEG = 10.0   # a heading this far off is reported apart
+
+
+def strip_heading(strip: np.ndarray, fov_deg: np.ndarray) -> np.ndarray:
+    """Heading (degrees) of the centre of each strip 1..12 under a pinhole camera of ``fov_deg``."""
+    x = (np.asarray(strip, float) - 0.5) / N_BINS
+    return np.degrees(np.arctan((2 * x - 1) * np.tan(np.radians(np.asarray(fov_deg, float)) / 2)))
+
+
+def view_errors(lis: Listener, in_view: list[int], threshold: float) -> dict[str, np.ndarray]:
+    """Per clip with a crossing and its goal in view: ``fov`` (deg), ``right`` (argmax = label),
+    ``model`` (deg, argmax against label; NaN for an unknown or failed argmax) and ``heard``
+    (deg, the beacon at ``threshold`` against the label; NaN when off)."""
+    idx = [i for i in in_view if lis.labels[i] != 0]
+    labels = np.asarray([lis.labels[i] for i in idx])
+    fov = np.asarray([next((p.fov_deg for p in lis.clips[i] if p.ok and p.fov_deg is not None), np.nan) for i in idx])
+    first = np.asarray([lis.clips[i][0].action if lis.clips[i][0].ok else 0 for i in idx])
+    goal = strip_heading(labels, fov)
+    model = np.where(first > 0, np.abs(strip_heading(np.maximum(first, 1), fov) - goal), np.nan)
+    heard = lis.heard(threshold, idx)
+    played = np.asarray([np.nan if not h.on or h.heading_deg is None else h.heading_deg for h in heard], float)
+    return {"fov": fov, "right": first == labels, "model": model, "heard": np.abs(played - goal)}
+
+
+def row(name: str, e: dict[str, np.ndarray]) -> str:
+    """One markdown row of a view's pooled errors."""
+    model, heard = e["model"][~np.isnan(e["model"])], e["heard"][~np.isnan(e["heard"])]
+    fov = float(np.nanmedian(e["fov"]))
+    stat = lambda v: f"{v.mean():.2f} / {np.percentile(v, 90):.1f} / {100 * (v >= FAR_DEG).mean():.1f} %" if len(v) else "n/a"  # noqa: E731
+    return (f"| {name} | {len(e['right'])} | {fov:.1f} deg ({fov / N_BINS:.2f}) | {e['right'].mean():.3f} | {stat(model)} | "
+            f"{100 * len(heard) / len(e['right']):.1f} % | {stat(heard)} |")
+
+
+def main(argv=None) -> int:
+    ap = held_out_parser(__doc__.split("\n\n")[0], frames=200)
+    add_also(ap)
+    ap.add_argument("--portrait", type=int, default=3, help="portrait views a photo, of each kind, as listened to")
+    ap.add_argument("--portrait-frames", type=int, metavar="N", help="the portrait draw's photos a fold (default: --frames)")
+    ap.add_argument("--scale", type=float, default=1.0, help="landscape gate threshold = the fold's fitted one x this")
+    ap.add_argument("--portrait-scale", type=float, default=1.0, help="the same for portrait views")
+    a = ap.parse_args(argv)
+    from crossing_assist.runtime.engine import Engine
+
+    ptl = read_manifest(a.ptl)
+    views = ("landscape", *(PORTRAIT_SETS if a.portrait else ()))
+    pooled: dict[str, list[dict]] = {v: [] for v in views}
+    for cv in (a.cv, *a.also):
+        for fold, source in finished_folds(cv):
+            engine = Engine(fold_bundle(fold, source, ptl, a.mirror), threads=1)
+            t0 = engine.decision_config().threshold
+            for view in views:
+                n = a.frames if view == "landscape" or a.portrait_frames is None else a.portrait_frames
+                path = fold / f"listened{draw_tag(a.mirror, n, a.seed)}{'' if view == 'landscape' else f'_{view}{a.portrait}'}.npz"
+                if not path.is_file():
+                    print(f"error: {path} missing: run scripts/choose_gate.py {cv} with the same draw first", file=sys.stderr)
+                    return 2
+                lis, extra = Listener.load(engine, path)
+                scale = a.scale if view == "landscape" else a.portrait_scale
+                pooled[view].append(view_errors(lis, extra["in_view"].tolist(), scale * t0))
+                print(f"{cv} {source} {view}: {len(pooled[view][-1]['right'])} clips, goal in view", file=sys.stderr, flush=True)
+    if not any(pooled.values()):
+        print(f"error: no finished fold in {a.cv}", file=sys.stderr)
+        return 2
+    print(f"goal in view; heading errors in degrees against the labelled strip's centre, mean / p90 / share >= {FAR_DEG:g} deg; "
+          f"heard at the fitted threshold x {a.scale:g} (landscape), x {a.portrait_scale:g} (portrait)\n")
+    print("| view | clips | camera FOV (a strip) | accuracy | model: error | beacon on | heard: error |")
+    print("|---|---:|---|---:|---|---:|---|")
+    for view in views:
+        if pooled[view]:
+            print(row(view, {k: np.concatenate([f[k] for f in pooled[view]]) for k in pooled[view][0]}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
