@@ -83,6 +83,12 @@ def draw_tag(mirror: bool, frames: int, seed: int) -> str:
     return f"{tag(mirror)}_{frames}" + (f"_seed{seed}" if seed else "")
 
 
+def view_tag(mirror: bool, frames: int, seed: int, view: str, portrait: int, zoom: float = 1.0) -> str:
+    """File-name suffix of a fold's cached measurement of ``view`` on one held-out draw: the
+    portrait kinds add their name, views a photo and zoom (``listened…npz``, ``gate_curve…json``)."""
+    return draw_tag(mirror, frames, seed) + ("" if view == "landscape" else f"_{view}{portrait}{zoom_tag(zoom)}")
+
+
 def fold_bundle(fold: Path, source: str, ptl, mirror: bool = False) -> Path:
     """The fold's model exported as a bundle (once), calibrated on PTL val without ``source``;
     ``mirror``: with mirror test-time augmentation (folder ``bundle_mirror``)."""
@@ -170,7 +176,7 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     out = {}
     for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
         n = n_frames if view == "landscape" or portrait_frames is None else portrait_frames
-        draw = draw_tag(mirror, n, seed) + ("" if view == "landscape" else f"_{view}{portrait}{zoom_tag(zoom)}")
+        draw = view_tag(mirror, n, seed, view, portrait, zoom)
         done = fold / f"gate_curve{draw}{'' if grid == GRID else f'_grid{grid}'}.json"
         if done.is_file():   # listened to already (the fold does not change once finished)
             out[view] = json.loads(done.read_text())

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from choose_gate import add_also, draw_tag, finished_folds, fold_bundle, held_out_parser  # noqa: E402
+from choose_gate import add_also, finished_folds, fold_bundle, held_out_parser, view_tag  # noqa: E402
 
 from crossing_assist.actions import N_BINS  # noqa: E402
 from crossing_assist.data_tools.augment import PORTRAIT_SETS  # noqa: E402
@@ -80,7 +80,7 @@ def main(argv=None) -> int:
             t0 = engine.decision_config().threshold
             for view in views:
                 n = a.frames if view == "landscape" or a.portrait_frames is None else a.portrait_frames
-                path = fold / f"listened{draw_tag(a.mirror, n, a.seed)}{'' if view == 'landscape' else f'_{view}{a.portrait}'}.npz"
+                path = fold / f"listened{view_tag(a.mirror, n, a.seed, view, a.portrait)}.npz"
                 if not path.is_file():
                     print(f"error: {path} missing: run scripts/choose_gate.py {cv} with the same draw first", file=sys.stderr)
                     return 2
