@@ -10,7 +10,7 @@ of the beacon heard at the gate scales (the decision logic replayed, the fold's 
 times ``--scale`` / ``--portrait-scale``) against the labelled strip's, both at the clip's camera FOV.
 
     .venv/bin/python scripts/heading_error.py runs/res256 --also runs/res256_s1 --also runs/res256_s2 \
-        --mirror --frames 100000 --portrait-frames 200 --portrait 3 --scale 0.841 --portrait-scale 0.958
+        --mirror --frames 100000 --portrait-frames 200 --portrait 3 --scale 0.8409 --portrait-scale 0.9576
 """
 
 from __future__ import annotations
