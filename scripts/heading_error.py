@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from choose_gate import add_also, finished_folds, fold_bundle, held_out_parser, view_tag  # noqa: E402
 
-from crossing_assist.actions import N_BINS  # noqa: E402
+from crossing_assist.actions import N_BINS, bin_center_x, x_to_heading  # noqa: E402
 from crossing_assist.data_tools.augment import PORTRAIT_SETS  # noqa: E402
 from crossing_assist.data_tools.manifest import read_manifest  # noqa: E402
 from crossing_assist.runtime.listen import Listener  # noqa: E402
@@ -33,8 +33,7 @@ FAR_DEG = 10.0   # a heading this far off is reported apart
 
 def strip_heading(strip: np.ndarray, fov_deg: np.ndarray) -> np.ndarray:
     """Heading (degrees) of the centre of each strip 1..12 under a pinhole camera of ``fov_deg``."""
-    x = (np.asarray(strip, float) - 0.5) / N_BINS
-    return np.degrees(np.arctan((2 * x - 1) * np.tan(np.radians(np.asarray(fov_deg, float)) / 2)))
+    return np.asarray([x_to_heading(bin_center_x(int(b)), float(f)) for b, f in zip(strip, fov_deg)], float)
 
 
 def view_errors(lis: Listener, in_view: list[int], threshold: float) -> dict[str, np.ndarray]:
@@ -43,11 +42,11 @@ def view_errors(lis: Listener, in_view: list[int], threshold: float) -> dict[str
     (deg, the beacon at ``threshold`` against the label; NaN when off)."""
     idx = [i for i in in_view if lis.labels[i] != 0]
     labels = np.asarray([lis.labels[i] for i in idx])
-    fov = np.asarray([next((p.fov_deg for p in lis.clips[i] if p.ok and p.fov_deg is not None), np.nan) for i in idx])
+    heard = lis.heard(threshold, idx)
+    fov = np.asarray([h.fov_deg for h in heard], float)   # the FOV the decision logic read the clip with
     first = np.asarray([lis.clips[i][0].action if lis.clips[i][0].ok else 0 for i in idx])
     goal = strip_heading(labels, fov)
     model = np.where(first > 0, np.abs(strip_heading(np.maximum(first, 1), fov) - goal), np.nan)
-    heard = lis.heard(threshold, idx)
     played = np.asarray([np.nan if not h.on or h.heading_deg is None else h.heading_deg for h in heard], float)
     return {"fov": fov, "right": first == labels, "model": model, "heard": np.abs(played - goal)}
 

@@ -31,8 +31,8 @@ def test_summarise_rates_on_a_hand_made_list():
 
 def test_heading_errors_are_degrees_to_the_goal_at_each_clips_fov_on_and_in_view_only():
     heard = [Heard(6, True, 6, 5.0, 67.0), Heard(6, True, 6, 5.0, 40.0), Heard(6, False, 0, None, 67.0),
-             Heard(1, True, 1, -30.0, 53.0), Heard(UNKNOWN, True, 4, -10.0, 67.0)]
-    far_x = [0.6, 0.6, 0.6, -0.2, None]        # off, out of view and no goal are left out
+             Heard(1, True, 1, -30.0, 53.0), Heard(UNKNOWN, True, 4, -10.0, 67.0), Heard(UNKNOWN, True, 4, -10.0, 67.0)]
+    far_x = [0.6, 0.6, 0.6, -0.2, None, float("nan")]   # off, out of view and no goal (None or NaN) are left out
     e = heading_errors(heard, far_x)
     assert e == pytest.approx([abs(5.0 - x_to_heading(0.6, 67.0)), abs(5.0 - x_to_heading(0.6, 40.0))])
     assert e[0] > e[1] > 0        # the same x is a wider angle on the wider camera

@@ -206,7 +206,7 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
         entry.update(summarise(heard))
         inside = [h for h, (_, _, _, ins, _) in zip(heard, frames) if ins]
         entry["beacon_on_goal_in_view"] = float(np.mean([h.on for h in inside])) if inside else None
-        entry["heading_error_deg"] = error_stats(heading_errors(heard, [fx for _, fx, _, _, _ in frames]))
+        entry["heading_error_deg"] = error_stats(heading_errors(heard, far_x))
         orient = "landscape" if name == "landscape" else "portrait"
         t0 = float(engine.decision_config(orient).threshold)   # the view's orientation's gate threshold
         curve = lis.risk_coverage([t0 * m for m in GATE_SCALES])

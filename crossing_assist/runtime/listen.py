@@ -90,7 +90,7 @@ def summarise(heard: Iterable[Heard]) -> dict:
 def heading_errors(heard: Sequence[Heard], far_x: Sequence[float | None]) -> np.ndarray:
     """Degrees between the heading played and the goal's own heading (``far_x``, the far point's
     position across the frame, read with the clip's FOV), for the clips whose beacon is on and
-    whose goal is in view (``0 <= far_x <= 1``): the error a user walks with, comparable across
+    whose goal is in view (``0 <= far_x <= 1``; None or NaN = no goal): the error a user walks with, comparable across
     cameras of different FOV where strips are not (a 53 deg strip is 0.79 of a 67 deg one)."""
     if len(heard) != len(far_x):
         raise ValueError(f"{len(heard)} clips but {len(far_x)} goal positions")
