@@ -41,12 +41,17 @@ def session_from_bytes(model: bytes, threads: int = 0) -> Any:
 
 
 def open_session(bundle_dir: str | os.PathLike | Bundle, *, threads: int = 0, inter_threads: int = 0,
-                 quiet: bool = False) -> tuple[Bundle, Any]:
+                 quiet: bool = False, seed: int | None = None) -> tuple[Bundle, Any]:
     """Read and validate a bundle and open its graph (CPU, :func:`session_options`). Raises
-    BundleError (one line) when the bundle or its graph cannot be used or they disagree."""
+    BundleError (one line) when the bundle or its graph cannot be used or they disagree.
+    ``seed``: seeds onnxruntime's random ops first (``onnxruntime.set_seed``, process-wide), so
+    the session draws the same MC-dropout masks, run after run, as any session opened with that
+    seed; None leaves the per-process seed (two processes then differ)."""
     import onnxruntime as ort
 
     bundle = bundle_dir if isinstance(bundle_dir, Bundle) else read_bundle(bundle_dir)
+    if seed is not None:
+        ort.set_seed(check_seed(seed))
     try:
         sess = ort.InferenceSession(str(bundle.model_path), providers=["CPUExecutionProvider"],
                                     sess_options=session_options(threads, inter_threads=inter_threads, quiet=quiet))
@@ -56,6 +61,13 @@ def open_session(bundle_dir: str | os.PathLike | Bundle, *, threads: int = 0, in
                           "re-export the bundle") from None
     check_session(bundle, sess)
     return bundle, sess
+
+
+def check_seed(seed: Any) -> int:
+    """``seed`` as an int in 0 .. 2**63 - 1 (what onnxruntime's seed takes), else ValueError."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= int(seed) < 2 ** 63:
+        raise ValueError(f"Invalid seed {seed!r}; valid: an integer 0 .. 2**63 - 1")
+    return int(seed)
 
 
 def check_frame(frame: Any, where: str = "frame") -> np.ndarray:

@@ -40,6 +40,23 @@ def test_mc_samples_vary(engine):
     assert max(mis) > 0.01 and len(set(mis)) > 1
 
 
+def test_a_seed_replays_the_mc_masks_and_another_seed_draws_others(toy_bundle):  # noqa: F811
+    """``seed`` seeds onnxruntime's random ops: an engine opened with the same seed draws the same
+    masks frame after frame (so a rerun hears the same), another seed other masks."""
+    frames = [bar_frame(0.3)] * 40
+
+    def draws(seed):
+        e = Engine(toy_bundle, seed=seed)
+        return [e.predict(f).mutual_info for f in frames]
+
+    first, other, again = draws(1), draws(2), draws(1)
+    assert len(set(first)) > 1                       # still fresh masks from frame to frame
+    assert again == first and other != first
+    for bad in (-1, 2 ** 63, 1.5, True):
+        with pytest.raises(BundleError, match="Invalid seed"):
+            Engine(toy_bundle, seed=bad)
+
+
 def test_bad_frames_and_failing_sessions_come_back_as_failed_predictions(engine, monkeypatch):
     for bad in (np.zeros((4, 4), np.uint8), np.zeros((8, 8, 3), np.float32), None):
         p = engine.predict(bad)

@@ -181,6 +181,9 @@ def eval_parser() -> argparse.ArgumentParser:
                         "portrait FOV, and 3:4 windows of the photo (a narrower camera)")
     p.add_argument("--negatives", help="bundles: dataset of no-crossing frames (its SPLIT rows), for the silence rate")
     p.add_argument("--clip-seconds", type=float, default=1.0, help="bundles: each photo plays as a still clip this long")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the MC-dropout masks (onnxruntime for bundles, torch for --samples > 1): "
+                        "the same seed gives the same figures")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--cache-dir", default=_DEFAULTS["cache_dir"])
     p.add_argument("--quiet", action="store_true")
@@ -201,7 +204,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         cfg = EvalConfig(run=a.run, bundle=a.bundle, data=a.data, split=a.split, out=a.out, samples=a.samples,
                          examples=a.examples, tta_mirror=a.tta_mirror, actions=a.actions, listen=a.listen,
                          portrait=a.portrait, negatives=a.negatives, clip_seconds=a.clip_seconds,
-                         threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
+                         seed=a.seed, threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
         out, m = evaluate(cfg)
         print(f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f}), "
               f"bin MAE {m['bin_mae']:.3f} -> {out / 'metrics.json'}")

@@ -21,6 +21,7 @@ from ..actions import get_space
 from ..data_tools.images import load_frame
 from ..data_tools.manifest import Dataset, atomic_write_text, read_manifest
 from ..geometry import content_window, letterbox
+from ..inference import check_seed
 from .cache import compute_features
 from .checkpoint import load_checkpoint, load_policy
 from .config import ConfigError
@@ -47,6 +48,7 @@ class EvalConfig:
     portrait: int = 3               # bundles: portrait views per photo (phone and 3:4 window), beside landscape
     negatives: str | None = None    # a dataset of no-crossing frames (its SPLIT rows) for the silence rate
     clip_seconds: float = 1.0       # each photo is played as a still clip this long at 10 fps
+    seed: int = 0                   # the MC-dropout masks' seed (onnxruntime / torch): a rerun gives the same figures
     threads: int = 2
     cache_dir: str = "runs/.cache"
     progress: bool = True
@@ -64,6 +66,10 @@ class EvalConfig:
             raise ConfigError(f"Invalid portrait {self.portrait}; valid: 0..12 windows a photo")
         if not 0.1 <= self.clip_seconds <= 10:
             raise ConfigError(f"Invalid clip_seconds {self.clip_seconds}; valid: 0.1..10")
+        try:
+            check_seed(self.seed)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
 
 
 def _checkpoint_path(run: str) -> Path:
@@ -133,7 +139,7 @@ def _eval_checkpoint(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, 
 def _eval_bundle(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, Any]:
     from .. import inference
 
-    bundle, sess = inference.open_session(cfg.bundle, threads=cfg.threads)
+    bundle, sess = inference.open_session(cfg.bundle, threads=cfg.threads, seed=cfg.seed)
     images = [load_frame(part.image_path(r), r.flags) for r in part.rows]
     out = inference.predict(sess, bundle.actions.n, images, progress=cfg.progress)
     majority = bundle.training.get("majority_action")
@@ -189,7 +195,7 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
     from .metrics import compute_metrics
     from .plots import plot_risk_coverage
 
-    engine = Engine(cfg.bundle, threads=cfg.threads)
+    engine = Engine(cfg.bundle, threads=cfg.threads, seed=cfg.seed)
     space = engine.space
     result: dict = {"clip_seconds": cfg.clip_seconds, "fps": 10.0}
     for name, frames in _views(cfg, _split(cfg), engine.bundle.geometry).items():
@@ -222,6 +228,7 @@ def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
     from .metrics import compute_metrics
 
     torch.set_num_threads(cfg.threads)
+    torch.manual_seed(cfg.seed)
     part = _split(cfg)
     policy = None
     if cfg.run is not None:
@@ -249,7 +256,7 @@ def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
     m = compute_metrics(probs, labels, n_actions, part.far_x(), majority=majority)
     if cfg.bundle is not None and not grouped:  # the bundle's conformal threshold is for its own actions
         m["conformal"] = _bundle_conformal(bundle, probs, labels)
-    m.update({"split": cfg.split, "data": str(cfg.data), **info})
+    m.update({"split": cfg.split, "data": str(cfg.data), "seed": cfg.seed, **info})
     out = Path(cfg.out) if cfg.out else default_out
     out.mkdir(parents=True, exist_ok=True)
     if cfg.bundle is not None and cfg.listen and not grouped:

@@ -69,16 +69,22 @@ def measure_value(measure: str, entropy: float, mutual_info: float, variance: np
 class Engine:
     """Runs a bundle. ``threads`` = onnxruntime intra-op threads (0 = its default); ``fov_deg``:
     the camera's horizontal field of view (the user's or device's setting; None = the bundle's
-    default for each frame's orientation). A FOV outside 20..170 degrees raises BundleError."""
+    default for each frame's orientation); ``seed``: onnxruntime's random seed for the MC-dropout
+    masks (:func:`~crossing_assist.inference.open_session`), so a rerun on the same frames makes the
+    same decisions (None: the per-process seed). A FOV outside 20..170 degrees or a bad seed raises
+    BundleError."""
 
-    def __init__(self, bundle_dir: str | Path, *, threads: int = 1, fov_deg: float | None = None) -> None:
+    def __init__(self, bundle_dir: str | Path, *, threads: int = 1, fov_deg: float | None = None,
+                 seed: int | None = 0) -> None:
         try:
             self.fov_override = None if fov_deg is None else check_fov(fov_deg)
-        except GeometryError as exc:
+            if seed is not None:
+                inference.check_seed(seed)
+        except (GeometryError, ValueError) as exc:
             raise BundleError(str(exc)) from None
         self.bundle: Bundle
         self.bundle, self.session = inference.open_session(bundle_dir, threads=threads, inter_threads=1 if threads else 0,
-                                                           quiet=True)
+                                                           quiet=True, seed=seed)
         self.space = self.bundle.space
         self.measure = self.bundle.calibration.uncertainty.measure
         self.conformal_threshold = self.bundle.calibration.conformal.threshold
