@@ -33,10 +33,13 @@ def session_options(threads: int = 0, *, inter_threads: int = 0, quiet: bool = F
     return opts
 
 
-def session_from_bytes(model: bytes, threads: int = 0) -> Any:
-    """An onnxruntime session (CPU) on serialised graph bytes, default options but ``threads``."""
+def session_from_bytes(model: bytes, threads: int = 0, seed: int | None = None) -> Any:
+    """An onnxruntime session (CPU) on serialised graph bytes, default options but ``threads``;
+    ``seed`` as in :func:`open_session`."""
     import onnxruntime as ort
 
+    if seed is not None:
+        ort.set_seed(check_seed(seed))
     return ort.InferenceSession(model, sess_options=session_options(threads), providers=["CPUExecutionProvider"])
 
 

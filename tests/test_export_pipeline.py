@@ -180,6 +180,28 @@ def test_gate_scales_per_orientation(work, tmp_path):
     assert u.fitted_threshold == pytest.approx(fitted.threshold, rel=1e-6)   # recorded for later re-scaling
 
 
+def test_the_seed_makes_an_export_reproducible(work, tmp_path):
+    """The seed draws the dropout masks of PyTorch (cross-fitting) and of onnxruntime (the shipped
+    graph's fits and metrics): the same checkpoint and seed give the same bundle.json figures,
+    another seed other ones."""
+    root, _ = work
+
+    def export(name, seed):
+        export_bundle(ExportConfig(run=str(root / "run"), out=str(tmp_path / name), samples=8, seed=seed,
+                                   calib_data=str(root / "data"), batch=8, parity_frames=4, progress=False),
+                      log=lambda m: None)
+        b = read_bundle(tmp_path / name)
+        return b.calibration, b.metrics["full_split"], b.metrics["cross_fit"]
+
+    first = export("a", 1)
+    again, other = export("b", 1), export("c", 2)
+    assert again == first
+    assert other[1]["nll"] != first[1]["nll"]                  # onnxruntime's masks (the graph's own metrics)
+    assert other[2]["folds"] != first[2]["folds"]              # PyTorch's (the cross-fitted calibration)
+    with pytest.raises(ExportError, match="--seed -1"):
+        ExportConfig(run="r", out="o", seed=-1)
+
+
 def test_mirror_export_writes_the_flag_and_its_graph_is_mirror_equivariant(work, tmp_path):
     """--mirror: bundle.json says so, and (deterministic graph, p = 0) the mirrored frame gets the
     mirrored actions' probabilities (here 4 actions: left <-> right)."""

@@ -32,7 +32,7 @@ HELP = {
     "parity_tol": "largest allowed |probs| difference in the parity check",
     "batch": "frames per batch",
     "threads": "CPU threads for PyTorch",
-    "seed": "seed of the PyTorch dropout masks drawn while calibrating",
+    "seed": "seed of the dropout masks (PyTorch's and onnxruntime's) drawn while calibrating and measuring",
     "progress": "progress bars",
     "force": "replace --out even if it is not a bundle (deletes what is there)",
 }

@@ -85,7 +85,8 @@ class ExportConfig:
     parity_tol: float = PARITY_TOL
     batch: int = 32
     threads: int = 2
-    seed: int = 0                   # PyTorch's dropout masks while calibrating (global RNG untouched)
+    seed: int = 0                   # the dropout masks while calibrating and measuring (PyTorch's, global RNG
+                                    # untouched; onnxruntime's): the same checkpoint gives the same bundle.json
     progress: bool = True
     force: bool = False             # replace an existing --out even if it is not a bundle (deletes it)
 
@@ -103,6 +104,8 @@ class ExportConfig:
             (self.measure in ("entropy", "mutual_info"), f"--measure {self.measure!r}; valid: entropy, mutual_info"),
             (self.int8_mode in INT8_MODES, f"--int8-mode {self.int8_mode!r}; valid: {', '.join(INT8_MODES)}"),
             (not self.int8 or self.calib_data, "--int8 needs --calib-data (real frames to calibrate the int8 ranges)"),
+            (not isinstance(self.seed, bool) and isinstance(self.seed, int) and 0 <= self.seed < 2 ** 63,
+             f"--seed {self.seed!r}; valid: an integer 0 .. 2**63 - 1"),
         ]
         for ok, msg in checks:
             if not ok:
@@ -282,7 +285,7 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
 
     set_metadata(model, meta)
     bundle = parse_meta(meta, need_bytes=False)
-    sess = inference.session_from_bytes(model_bytes(model))
+    sess = inference.session_from_bytes(model_bytes(model), seed=cfg.seed)
     check_session(bundle, sess)
     got = inference.predict(sess, bundle.actions.n, data.images, batch=cfg.batch, progress=cfg.progress)
     correct = got["probs"].argmax(1) == data.actions
@@ -353,7 +356,8 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
         metrics["checkpoint"] = policy_metrics(ckpt)
         if cfg.int8:  # measured on the frames the int8 ranges were not calibrated on
             metrics["int8_vs_fp32"] = {"mode": cfg.int8_mode,
-                                       **compare_precisions(model, fp32_model, meta, data.take(unseen), cfg.batch)}
+                                       **compare_precisions(model, fp32_model, meta, data.take(unseen), cfg.batch,
+                                                            seed=cfg.seed)}
     metrics["parity_max_abs"] = parity
     meta = _meta(policy, ckpt, spec, calib, precision, metrics, cfg)
     set_metadata(model, meta)
@@ -383,14 +387,14 @@ def _latency_ms(sess: Any, frame: np.ndarray, repeats: int = 10) -> float:
 
 
 def compare_precisions(model: Any, fp32_model: Any, meta: dict, data: Labelled, batch: int,
-                       repeats: int = 5) -> dict:
+                       repeats: int = 5, seed: int | None = None) -> dict:
     """Size (bytes), single-frame latency (ms, median of 10, default session options) and
     evaluation-part accuracy (mean over ``repeats`` MC runs) of the int8 graph against fp32."""
     from crossing_assist import inference
 
     n = parse_meta(meta, need_bytes=False).actions.n
     b32, b8 = model_bytes(fp32_model), model_bytes(model)
-    s32, s8 = inference.session_from_bytes(b32), inference.session_from_bytes(b8)
+    s32, s8 = inference.session_from_bytes(b32, seed=seed), inference.session_from_bytes(b8, seed=seed)
     acc = {}
     for name, sess in (("fp32", s32), ("int8", s8)):  # mean over repeats: MC noise moves argmaxes
         acc[name] = float(np.mean([(inference.predict(sess, n, data.images, batch=batch)["probs"]
