@@ -66,10 +66,19 @@ def open_session(bundle_dir: str | os.PathLike | Bundle, *, threads: int = 0, in
     return bundle, sess
 
 
+#: The seeds onnxruntime's ``set_seed`` takes.
+SEED_RANGE = "an integer 0 .. 2**63 - 1"
+
+
+def is_seed(seed: Any) -> bool:
+    """Whether ``seed`` is in :data:`SEED_RANGE`."""
+    return not isinstance(seed, bool) and isinstance(seed, (int, np.integer)) and 0 <= int(seed) < 2 ** 63
+
+
 def check_seed(seed: Any) -> int:
-    """``seed`` as an int in 0 .. 2**63 - 1 (what onnxruntime's seed takes), else ValueError."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= int(seed) < 2 ** 63:
-        raise ValueError(f"Invalid seed {seed!r}; valid: an integer 0 .. 2**63 - 1")
+    """``seed`` as an int in :data:`SEED_RANGE`, else ValueError."""
+    if not is_seed(seed):
+        raise ValueError(f"Invalid seed {seed!r}; valid: {SEED_RANGE}")
     return int(seed)
 
 

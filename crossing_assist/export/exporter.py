@@ -46,6 +46,7 @@ from crossing_assist.bundle import (
 )
 from crossing_assist.conformal import conformal_report
 from crossing_assist.errors import UserError
+from crossing_assist import inference
 from crossing_assist.export import calibrate as cal
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
 from crossing_assist.export.quantize import INT8_MODES, quantize_convs
@@ -104,8 +105,7 @@ class ExportConfig:
             (self.measure in ("entropy", "mutual_info"), f"--measure {self.measure!r}; valid: entropy, mutual_info"),
             (self.int8_mode in INT8_MODES, f"--int8-mode {self.int8_mode!r}; valid: {', '.join(INT8_MODES)}"),
             (not self.int8 or self.calib_data, "--int8 needs --calib-data (real frames to calibrate the int8 ranges)"),
-            (not isinstance(self.seed, bool) and isinstance(self.seed, int) and 0 <= self.seed < 2 ** 63,
-             f"--seed {self.seed!r}; valid: an integer 0 .. 2**63 - 1"),
+            (inference.is_seed(self.seed), f"--seed {self.seed!r}; valid: {inference.SEED_RANGE}"),
         ]
         for ok, msg in checks:
             if not ok:
@@ -281,8 +281,6 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
     every labelled frame and record the graph's metrics there (coverage there is in-sample:
     the held-out figure is ``cross_fit``). In memory: the graph with ``meta`` embedded, checked
     against ``meta`` as a written bundle would be."""
-    from crossing_assist import inference
-
     set_metadata(model, meta)
     bundle = parse_meta(meta, need_bytes=False)
     sess = inference.session_from_bytes(model_bytes(model), seed=cfg.seed)
@@ -390,8 +388,6 @@ def compare_precisions(model: Any, fp32_model: Any, meta: dict, data: Labelled, 
                        repeats: int = 5, seed: int | None = None) -> dict:
     """Size (bytes), single-frame latency (ms, median of 10, default session options) and
     evaluation-part accuracy (mean over ``repeats`` MC runs) of the int8 graph against fp32."""
-    from crossing_assist import inference
-
     n = parse_meta(meta, need_bytes=False).actions.n
     b32, b8 = model_bytes(fp32_model), model_bytes(model)
     s32, s8 = inference.session_from_bytes(b32, seed=seed), inference.session_from_bytes(b8, seed=seed)
