@@ -21,7 +21,7 @@ from ..actions import get_space
 from ..data_tools.images import load_frame
 from ..data_tools.manifest import Dataset, atomic_write_text, read_manifest
 from ..geometry import content_window, letterbox
-from ..inference import check_seed
+from ..inference import SEED_RANGE, is_seed
 from .cache import compute_features
 from .checkpoint import load_checkpoint, load_policy
 from .config import ConfigError
@@ -66,10 +66,8 @@ class EvalConfig:
             raise ConfigError(f"Invalid portrait {self.portrait}; valid: 0..12 windows a photo")
         if not 0.1 <= self.clip_seconds <= 10:
             raise ConfigError(f"Invalid clip_seconds {self.clip_seconds}; valid: 0.1..10")
-        try:
-            check_seed(self.seed)
-        except ValueError as exc:
-            raise ConfigError(str(exc)) from None
+        if not is_seed(self.seed):
+            raise ConfigError(f"Invalid seed {self.seed!r}; valid: {SEED_RANGE}")
 
 
 def _checkpoint_path(run: str) -> Path:

@@ -78,10 +78,10 @@ class Engine:
                  seed: int | None = 0) -> None:
         try:
             self.fov_override = None if fov_deg is None else check_fov(fov_deg)
-            if seed is not None:
-                inference.check_seed(seed)
-        except (GeometryError, ValueError) as exc:
+        except GeometryError as exc:
             raise BundleError(str(exc)) from None
+        if seed is not None and not inference.is_seed(seed):
+            raise BundleError(f"Invalid seed {seed!r}; valid: {inference.SEED_RANGE}")
         self.bundle: Bundle
         self.bundle, self.session = inference.open_session(bundle_dir, threads=threads, inter_threads=1 if threads else 0,
                                                            quiet=True, seed=seed)
