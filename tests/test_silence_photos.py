@@ -1,0 +1,32 @@
+"""scripts/silence_photos.py: real no-crossing photos played through the runtime, both ways."""
+
+import sys
+from pathlib import Path
+
+import pytest
+from runtime_toy import bar_frame, toy_bundle  # noqa: F401  (fixture)
+
+from crossing_assist.actions import bin_center_x
+from crossing_assist.data_tools.images import save_rgb
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+import silence_photos as sp  # noqa: E402
+
+
+def test_reports_the_play_that_speaks_and_the_ones_that_stay_silent(tmp_path, toy_bundle, capsys):  # noqa: F811
+    """The toy speaks on a vertical bright bar (strip 4) and not on the same bar turned 90 degrees
+    (a horizontal bar lights every strip) nor on a flat frame: 3 of 4 plays silent."""
+    save_rgb(tmp_path / "photos" / "bar.png", bar_frame(bin_center_x(4)))
+    save_rgb(tmp_path / "photos" / "sub" / "flat.jpg", bar_frame(None))
+    assert sp.main([str(tmp_path / "photos"), "--bundle", str(toy_bundle)]) == 0
+    out = capsys.readouterr().out
+    assert "| bar.png (as taken, landscape) | ON, strip 4 |" in out
+    assert "| bar.png (turned, portrait) | off |" in out and "| flat.jpg (as taken, landscape) | off |" in out
+    assert "silent on 75.0% of 4 plays (2 photos, each both ways); beacon on for 1" in out
+
+
+def test_a_folder_without_images_is_one_line(tmp_path, toy_bundle):  # noqa: F811
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "empty" / "notes.txt").write_text("no photos")
+    with pytest.raises(SystemExit, match="error: no .png/.jpg image under"):
+        sp.main([str(tmp_path / "empty"), "--bundle", str(toy_bundle)])
