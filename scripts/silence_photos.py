@@ -12,7 +12,8 @@ wheel (read where pip installed them, never copied here; none shows a street cro
     .venv/bin/python scripts/silence_photos.py \
         "$(.venv/bin/python -c 'import os, skimage; print(os.path.dirname(skimage.__file__))')/data"
 
-Exits 1 when a folder has no image; the figures are printed, nothing is written.
+A missing folder, one without an image or an unusable bundle is one line and exit 1; the figures
+are printed, nothing is written.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from crossing_assist.actions import UNKNOWN
+from crossing_assist.bundle import BundleError
 from crossing_assist.data_tools.images import ImageError, load_frame
 from crossing_assist.geometry import orientation
 from crossing_assist.runtime.engine import Engine
@@ -34,9 +36,12 @@ SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
 def photos(folders: list[Path]) -> list[Path]:
-    """The images under ``folders``, sorted; a folder without one raises SystemExit (one line)."""
+    """The images under ``folders``, sorted; a missing folder or one without an image raises
+    SystemExit (one line)."""
     out = []
     for folder in folders:
+        if not folder.is_dir():
+            raise SystemExit(f"error: {folder} is not a folder")
         found = sorted(p for p in folder.rglob("*") if p.suffix.lower() in SUFFIXES)
         if not found:
             raise SystemExit(f"error: no .png/.jpg image under {folder}")
@@ -49,7 +54,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("folders", nargs="+", type=Path, help="folders of photos with no crossing in view")
     ap.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE, help="bundle folder (default: the embedded one)")
     a = ap.parse_args(argv)
-    engine = Engine(a.bundle, threads=2)
+    try:
+        engine = Engine(a.bundle, threads=2)
+    except BundleError as exc:
+        raise SystemExit(f"error: {exc}") from None
     lis = Listener(engine)
     names = []
     for path in photos(a.folders):
@@ -61,9 +69,11 @@ def main(argv: list[str] | None = None) -> int:
         for turn, view in (("as taken", frame), ("turned", np.ascontiguousarray(np.rot90(frame)))):
             lis.add(view, UNKNOWN)
             names.append(f"{path.name} ({turn}, {orientation(view.shape[1], view.shape[0])})")
+    if not lis.clips:
+        raise SystemExit("error: no image could be read")
     heard = lis.heard()
     margins = []   # a strip's play: the last frame's uncertainty minus the gate threshold; else NaN
-    print("| photo | beacon | the model's last frame | uncertainty - gate threshold |\n|---|---|---|---:|")
+    print("| image | beacon | the model's last frame | uncertainty - gate threshold |\n|---|---|---|---:|")
     for name, clip, h in zip(names, lis.clips, heard):
         last = clip[-1]
         if not last.ok:
@@ -78,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     s = summarise(heard)
     strips = [i for i, m in enumerate(margins) if not np.isnan(m)]
     least = min(strips, key=margins.__getitem__) if strips else None
-    print(f"\nsilent on {s['silence_no_crossing']:.1%} of {len(heard)} plays ({len(heard) // 2} photos, each both ways); "
+    print(f"\nsilent on {s['silence_no_crossing']:.1%} of {len(heard)} plays ({len(heard) // 2} images, each both ways); "
           f"beacon on for {sum(h.on for h in heard)}; the model names a strip on {len(strips)}"
           + (f", least margin {margins[least]:+.3f} ({names[least]})" if least is not None else ""))
     return 0

@@ -22,11 +22,15 @@ def test_reports_the_play_that_speaks_and_the_ones_that_stay_silent(tmp_path, to
     out = capsys.readouterr().out
     assert "| bar.png (as taken, landscape) | ON, strip 4 |" in out
     assert "| bar.png (turned, portrait) | off |" in out and "| flat.jpg (as taken, landscape) | off |" in out
-    assert "silent on 75.0% of 4 plays (2 photos, each both ways); beacon on for 1" in out
+    assert "silent on 75.0% of 4 plays (2 images, each both ways); beacon on for 1" in out
 
 
-def test_a_folder_without_images_is_one_line(tmp_path, toy_bundle):  # noqa: F811
+def test_bad_folders_and_bundles_are_one_line(tmp_path, toy_bundle):  # noqa: F811
     (tmp_path / "empty").mkdir()
     (tmp_path / "empty" / "notes.txt").write_text("no photos")
-    with pytest.raises(SystemExit, match="error: no .png/.jpg image under"):
-        sp.main([str(tmp_path / "empty"), "--bundle", str(toy_bundle)])
+    save_rgb(tmp_path / "photos" / "bar.png", bar_frame(bin_center_x(4)))
+    for args, match in (([str(tmp_path / "empty")], "error: no .png/.jpg image under"),
+                        ([str(tmp_path / "nowhere")], "is not a folder"),
+                        ([str(tmp_path / "photos"), "--bundle", str(tmp_path / "empty")], "^error: ")):
+        with pytest.raises(SystemExit, match=match):
+            sp.main([*args, *([] if "--bundle" in args else ["--bundle", str(toy_bundle)])])
