@@ -8,6 +8,7 @@ error is more strips off on a narrower camera. This script reads the predictions
 clips whose goal is in view, measures the heading of the model's argmax strip (first frame) and
 of the beacon heard at the gate scales (the decision logic replayed, the fold's fitted threshold
 times ``--scale`` / ``--portrait-scale``) against the labelled strip's, both at the clip's camera FOV.
+``--by-strip`` adds, per view and labelled strip, how often the beacon is on and confidently wrong.
 
     .venv/bin/python scripts/heading_error.py runs/res256 --also runs/res256_s1 --also runs/res256_s2 \
         --mirror --frames 100000 --portrait-frames 200 --portrait 3 --scale 0.8409 --portrait-scale 0.9576
@@ -26,7 +27,7 @@ from choose_gate import add_also, finished_folds, fold_bundle, held_out_parser, 
 from crossing_assist.actions import N_BINS, bin_center_x, x_to_heading  # noqa: E402
 from crossing_assist.data_tools.augment import PORTRAIT_SETS  # noqa: E402
 from crossing_assist.data_tools.manifest import read_manifest  # noqa: E402
-from crossing_assist.runtime.listen import Listener  # noqa: E402
+from crossing_assist.runtime.listen import WRONG_STRIPS, Listener  # noqa: E402
 
 FAR_DEG = 10.0   # a heading this far off is reported apart
 
@@ -37,9 +38,10 @@ def strip_heading(strip: np.ndarray, fov_deg: np.ndarray) -> np.ndarray:
 
 
 def view_errors(lis: Listener, in_view: list[int], threshold: float) -> dict[str, np.ndarray]:
-    """Per clip with a crossing and its goal in view: ``fov`` (deg), ``right`` (argmax = label),
-    ``model`` (deg, argmax against label; NaN for an unknown or failed argmax) and ``heard``
-    (deg, the beacon at ``threshold`` against the label; NaN when off)."""
+    """Per clip with a crossing and its goal in view: ``fov`` (deg), ``label`` (its strip),
+    ``right`` (argmax = label), ``model`` (deg, argmax against label; NaN for an unknown or failed
+    argmax), ``heard`` (deg, the beacon at ``threshold`` against the label; NaN when off) and
+    ``wrong`` (the beacon on and >= 2 strips off: confidently wrong)."""
     idx = [i for i in in_view if lis.labels[i] != 0]
     labels = np.asarray([lis.labels[i] for i in idx])
     heard = lis.heard(threshold, idx)
@@ -48,7 +50,9 @@ def view_errors(lis: Listener, in_view: list[int], threshold: float) -> dict[str
     goal = strip_heading(labels, fov)
     model = np.where(first > 0, np.abs(strip_heading(np.maximum(first, 1), fov) - goal), np.nan)
     played = np.asarray([np.nan if not h.on or h.heading_deg is None else h.heading_deg for h in heard], float)
-    return {"fov": fov, "right": first == labels, "model": model, "heard": np.abs(played - goal)}
+    wrong = np.asarray([h.on and abs(h.strip - h.label) >= WRONG_STRIPS for h in heard], bool)
+    return {"fov": fov, "label": labels, "right": first == labels, "model": model, "heard": np.abs(played - goal),
+            "wrong": wrong}
 
 
 def row(name: str, e: dict[str, np.ndarray]) -> str:
@@ -60,6 +64,18 @@ def row(name: str, e: dict[str, np.ndarray]) -> str:
             f"{100 * len(heard) / len(e['right']):.1f} % | {stat(heard)} |")
 
 
+def by_strip(name: str, e: dict[str, np.ndarray]) -> list[str]:
+    """Markdown rows of a view's beacon per labelled strip: clips, beacon on, confidently wrong
+    (shares of that strip's clips)."""
+    out = []
+    for b in range(1, N_BINS + 1):
+        sel = e["label"] == b
+        if sel.any():
+            out.append(f"| {name} | {b} | {int(sel.sum())} | {100 * (~np.isnan(e['heard'][sel])).mean():.1f} % | "
+                       f"{100 * e['wrong'][sel].mean():.2f} % |")
+    return out
+
+
 def main(argv=None) -> int:
     ap = held_out_parser(__doc__.split("\n\n")[0], frames=200)
     add_also(ap)
@@ -67,6 +83,7 @@ def main(argv=None) -> int:
     ap.add_argument("--portrait-frames", type=int, metavar="N", help="the portrait draw's photos a fold (default: --frames)")
     ap.add_argument("--scale", type=float, default=1.0, help="landscape gate threshold = the fold's fitted one x this")
     ap.add_argument("--portrait-scale", type=float, default=1.0, help="the same for portrait views")
+    ap.add_argument("--by-strip", action="store_true", help="also the beacon per labelled strip, each view")
     a = ap.parse_args(argv)
     from crossing_assist.runtime.engine import Engine
 
@@ -94,9 +111,13 @@ def main(argv=None) -> int:
           f"heard at the fitted threshold x {a.scale:g} (landscape), x {a.portrait_scale:g} (portrait)\n")
     print("| view | clips | camera FOV (a strip) | accuracy | model: error | beacon on | heard: error |")
     print("|---|---:|---|---:|---|---:|---|")
-    for view in views:
-        if pooled[view]:
-            print(row(view, {k: np.concatenate([f[k] for f in pooled[view]]) for k in pooled[view][0]}))
+    merged = {v: {k: np.concatenate([f[k] for f in pooled[v]]) for k in pooled[v][0]} for v in views if pooled[v]}
+    for view, e in merged.items():
+        print(row(view, e))
+    if a.by_strip:
+        print("\n| view | labelled strip | clips | beacon on | confidently wrong |\n|---|---:|---:|---:|---:|")
+        for view, e in merged.items():
+            print("\n".join(by_strip(view, e)))
     return 0
 
 

@@ -34,6 +34,10 @@ def test_view_errors_counts_in_view_clips_and_the_beacon_only_when_heard(toy_bun
     six_strips = abs(x_to_heading(bin_center_x(9), fov) - x_to_heading(bin_center_x(3), fov))
     assert e["model"] == pytest.approx([0, 0, 0, six_strips], abs=1e-9)
     assert (e["heard"][:3] < fov / 24).all() and e["heard"][3] == pytest.approx(six_strips, abs=fov / 24)
+    assert e["label"].tolist() == [2, 6, 11, 3] and e["wrong"].tolist() == [False, False, False, True]
+    assert he.by_strip("x", e) == ["| x | 2 | 1 | 100.0 % | 0.00 % |", "| x | 3 | 1 | 100.0 % | 100.00 % |",
+                                   "| x | 6 | 1 | 100.0 % | 0.00 % |", "| x | 11 | 1 | 100.0 % | 0.00 % |"]
     off = he.view_errors(lis, [0, 1], threshold=1e-6)      # nothing passes a tiny threshold: nothing heard
     assert np.isnan(off["heard"]).all() and off["model"] == pytest.approx([0, 0], abs=1e-9)
+    assert not off["wrong"].any() and he.by_strip("x", off)[0] == "| x | 2 | 1 | 0.0 % | 0.00 % |"
     assert "| x | 2 |" in he.row("x", off) and "| 0.0 % | n/a |" in he.row("x", off)
