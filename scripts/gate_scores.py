@@ -10,6 +10,10 @@ is always off) it prints the confidently-wrong rate (on and >= 2 strips off the 
 runs (``--with``) it scores their ensemble too: the mean of the members' probabilities. ``--sheet``
 draws the frames confidently wrong at 90 % beacon on and says how far each misses the far point.
 
+``--view portrait|portrait_window|landscape`` scores the clips ``scripts/choose_gate.py`` saved
+for that view instead (goal in view; no mutual information); ``--coverages`` sets the beacon-on
+rates read.
+
 Frame-level ranking, the first frame's outputs without the decision logic's filter: a still clip
 through the runtime sharpens the belief but keeps this order. ``scripts/choose_gate.py`` measures
 what is heard.
@@ -33,7 +37,8 @@ from crossing_assist.runtime.belief import entropy
 from crossing_assist.runtime.listen import WRONG_STRIPS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from choose_gate import draw_tag, finished_folds, fold_bundle, held_out_parser, held_out_rows, tag  # noqa: E402  (a sibling script)
+from choose_gate import (draw_tag, finished_folds, fold_bundle, held_out_parser, held_out_rows,  # noqa: E402  (a sibling script)
+                         tag, view_tag)
 
 COVERAGES = (0.5, 0.6, 0.7, 0.8, 0.9)
 
@@ -113,6 +118,23 @@ def fold_outputs(fold: Path, source: str, ptl, neg, used, frames: int, seed: int
     return out
 
 
+def saved_outputs(fold: Path, view: str, frames: int, seed: int, mirror: bool, portrait: int) -> dict | None:
+    """The first frame's outputs of each clip ``scripts/choose_gate.py`` listened to in ``view``
+    (its ``listened…npz``; None when missing): the no-crossing clips and those whose goal is in
+    view (all of them for landscape). No mutual information (not saved)."""
+    path = fold / f"listened{view_tag(mirror, frames, seed, view, portrait)}.npz"
+    if not path.is_file():
+        return None
+    with np.load(path) as z:
+        labels, probs, ok = z["labels"], z["probs"][:, 0], z["ok"][:, 0]
+        keep = np.ones(len(labels), bool)
+        if "in_view" in z.files:
+            keep = labels == 0
+            keep[z["in_view"]] = True
+    return {"labels": labels[keep].tolist(), "probs": [p.tolist() if o else None for p, o in zip(probs[keep], ok[keep])],
+            "mutual_info": None}
+
+
 def table(name: str, rows: list[dict]) -> str:
     return f"| {name} | " + " | ".join(f"{100 * r['confidently_wrong']:.2f} %" for r in rows) + " |"
 
@@ -150,7 +172,19 @@ def main(argv=None) -> int:
     ap.add_argument("--sheet", action="store_true",
                     help="also write CV/gate_scores_wrong[_mirror].png: the first run's frames confidently wrong at "
                          "90 %% beacon on (ranked by entropy, the gate's measure) and how far each misses the far point")
+    ap.add_argument("--view", choices=("landscape", "portrait", "portrait_window"),
+                    help="score the clips scripts/choose_gate.py saved for this view (the same --frames, --seed, "
+                         "--mirror and --portrait as it ran with; goal in view) instead of playing a draw here")
+    ap.add_argument("--portrait", type=int, default=3, help="with --view: portrait views a photo, as listened to")
+    ap.add_argument("--coverages", type=float, nargs="+", default=list(COVERAGES), metavar="C",
+                    help="beacon-on rates to read the confidently-wrong rate at (0 < C < 1)")
     a = ap.parse_args(argv)
+    if not all(0 < c < 1 for c in a.coverages):
+        print(f"error: --coverages {a.coverages}: each must lie in (0, 1)", file=sys.stderr)
+        return 2
+    if a.view and a.sheet:
+        print("error: --sheet draws a played draw's photos; it does not go with --view", file=sys.stderr)
+        return 2
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}
     runs = [a.cv, *a.others]
@@ -158,14 +192,23 @@ def main(argv=None) -> int:
     held = []   # (dataset, row) of every frame, in the order of the fold outputs
     for fold, source in finished_folds(a.cv):
         print(f"fold {source}", file=sys.stderr, flush=True)
-        pos, negs = held_out_rows(ptl, neg, source, used, a.frames, a.seed)
-        held += [(ptl, r) for r in pos] + [(neg, r) for r in negs]
+        if not a.view:
+            pos, negs = held_out_rows(ptl, neg, source, used, a.frames, a.seed)
+            held += [(ptl, r) for r in pos] + [(neg, r) for r in negs]
         for i, cv in enumerate(runs):
             other = cv / fold.name
             if not (other / "weights").is_dir():
                 print(f"error: {other} has no weights: every run needs the same folds", file=sys.stderr)
                 return 2
-            members[i].append(fold_outputs(other, source, ptl, neg, used, a.frames, a.seed, a.mirror))
+            if a.view:
+                out = saved_outputs(other, a.view, a.frames, a.seed, a.mirror, a.portrait)
+                if out is None:
+                    print(f"error: {other} has no saved {a.view} clips for this draw: run scripts/choose_gate.py first",
+                          file=sys.stderr)
+                    return 2
+                members[i].append(out)
+            else:
+                members[i].append(fold_outputs(other, source, ptl, neg, used, a.frames, a.seed, a.mirror))
     if not members[0]:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
@@ -180,12 +223,12 @@ def main(argv=None) -> int:
             return 2
         ok &= np.asarray([p is not None for p in probs])
         entries.append((str(cv), np.asarray([p or [np.nan] * width for p in probs], float),
-                        np.concatenate([f["mutual_info"] for f in run])))
+                        None if a.view else np.concatenate([f["mutual_info"] for f in run])))
     if len(entries) > 1:
         entries.append(("ensemble (mean probabilities)", np.mean([p for _, p, _ in entries], 0), None))
     labels = labels[ok]
     pos = labels != 0
-    head = "| score | " + " | ".join(f"on {c:.0%}" for c in COVERAGES) + " |\n|---|" + "---:|" * len(COVERAGES)
+    head = "| score | " + " | ".join(f"on {c:.0%}" for c in a.coverages) + " |\n|---|" + "---:|" * len(a.coverages)
     result = {"runs": [str(r) for r in runs], "frames": int(pos.sum()), "no_crossing_frames": int((~pos).sum()),
               "failed": int((~ok).sum()), "runs_scored": {}}
     print(f"{pos.sum()} held-out frames with a crossing, {(~pos).sum()} without; confidently wrong (of frames with a "
@@ -194,7 +237,7 @@ def main(argv=None) -> int:
         probs = probs[ok]
         pred = probs.argmax(1)
         acc = float((pred[pos] == labels[pos]).mean())
-        rows = {k: wrong_at_coverage(s, pred, labels) for k, s in scores(probs, None if mi is None else mi[ok]).items()}
+        rows = {k: wrong_at_coverage(s, pred, labels, a.coverages) for k, s in scores(probs, None if mi is None else mi[ok]).items()}
         result["runs_scored"][name] = {"accuracy": acc, "bin_mae": float(np.abs(pred[pos] - labels[pos]).mean()),
                                        "scores": rows}
         print(f"\n{name}: argmax accuracy {acc:.3f}\n{head}")
@@ -204,7 +247,7 @@ def main(argv=None) -> int:
         probs = entries[0][1][ok]
         kept = [h for h, k in zip(held, ok) if k]
         result["wrong_sheet"] = wrong_sheet(probs, labels, kept, a.cv / f"gate_scores_wrong{tag(a.mirror)}.png")
-    (a.cv / f"gate_scores{tag(a.mirror)}.json").write_text(json.dumps(result, indent=1))
+    (a.cv / f"gate_scores{tag(a.mirror)}{'_' + a.view if a.view else ''}.json").write_text(json.dumps(result, indent=1))
     return 0
 
 

@@ -295,3 +295,27 @@ def test_robustness_table_also_pools_the_folds_of_another_run_weighted_by_frames
     clean = out["conditions"]["clean"]
     assert clean["accuracy"] == pytest.approx((0.6 * 30 + 0.9 * 10) / 40)
     assert clean["accuracy_per_fold"] == {"ptl:x": 0.6, f"ptl:x ({tmp_path / 'b'})": 0.9}
+
+
+def test_saved_outputs_read_the_first_frames_of_choose_gates_clips_goal_in_view_and_no_crossing(tmp_path):
+    """--view: the clips scripts/choose_gate.py saved (``Listener.save``), each clip's first frame;
+    a portrait view keeps its no-crossing clips and those whose goal is in view, a failed frame is None."""
+    from runtime_toy import bar_frame, make_toy_bundle
+
+    from crossing_assist.actions import UNKNOWN, bin_center_x
+    from crossing_assist.runtime.engine import Engine
+    from crossing_assist.runtime.listen import Listener
+
+    lis = Listener(Engine(make_toy_bundle(tmp_path / "toy")), seconds=0.2)
+    for strip in (2, 6, 11):
+        lis.add(bar_frame(bin_center_x(strip)), strip)
+    lis.add(bar_frame(None), UNKNOWN)
+    lis.add(np.zeros((4, 4), np.uint8), 4)          # fails
+    fold = tmp_path / "fold-ptl_a"
+    fold.mkdir()
+    lis.save(fold / f"listened{gs.view_tag(True, 7, 0, 'portrait_window', 3)}.npz", in_view=np.asarray([0, 2, 4]))
+    out = gs.saved_outputs(fold, "portrait_window", 7, 0, True, 3)
+    assert out["labels"] == [2, 11, UNKNOWN, 4] and out["mutual_info"] is None   # strip 6's goal is out of view
+    assert [int(np.argmax(p)) for p in out["probs"][:2]] == [2, 11] and out["probs"][2] is not None
+    assert np.allclose(out["probs"][0], lis.clips[0][0].probs) and out["probs"][3] is None
+    assert gs.saved_outputs(fold, "portrait", 7, 0, True, 3) is None            # not listened to
