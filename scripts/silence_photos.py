@@ -28,10 +28,10 @@ from crossing_assist.actions import UNKNOWN
 from crossing_assist.bundle import BundleError
 from crossing_assist.data_tools.images import ImageError, load_frame
 from crossing_assist.geometry import orientation
+from crossing_assist.runtime.demo import DEFAULT_BUNDLE
 from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.listen import Listener, summarise
 
-DEFAULT_BUNDLE = Path(__file__).resolve().parents[1] / "crossing_assist" / "assets" / "default_bundle"
 SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
