@@ -53,6 +53,20 @@ from crossing_assist.runtime.listen import Listener, summarise
 from crossing_assist.models.evaluate import gate_scales  # noqa: E402  (crossing-eval's grid by default)
 
 GRID = 8                    # gate scales a doubling, as crossing-eval sweeps
+#: ``--measure far_mass``: the threshold its scales multiply (1 % of the mass beyond one strip of the
+#: argmax); the folds' bundles fitted an entropy threshold, not this, so far mass is swept absolutely.
+FAR_MASS_REFERENCE = 0.01
+
+
+def measure_tag(measure: str | None) -> str:
+    """File-name suffix of what was measured with a gate measure other than the bundle's (``_far_mass``)."""
+    return f"_{measure}" if measure else ""
+
+
+def reference_threshold(engine, measure: str | None) -> float:
+    """The threshold the sweep's scales multiply: the bundle's own fitted one for its own measure,
+    :data:`FAR_MASS_REFERENCE` for far mass."""
+    return FAR_MASS_REFERENCE if measure == "far_mass" else engine.decision_config().threshold
 
 
 def _subset(ds, rows, out: Path) -> Path:
@@ -161,14 +175,17 @@ def sweep_point(heard: list, in_view: list[int]) -> dict:
 
 
 def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, portrait: int,
-               mirror: bool = False, portrait_frames: int | None = None, grid: int = GRID, zoom: float = 1.0) -> dict:
+               mirror: bool = False, portrait_frames: int | None = None, grid: int = GRID, zoom: float = 1.0,
+               measure: str | None = None) -> dict:
     """The fold's held-out curves: ``{"landscape": {...}, "portrait": {...}, "portrait_window": {...}}``
     (the portrait ones only with ``portrait`` > 0 views a photo, on a draw of ``portrait_frames``
     photos, default ``n_frames``), swept over :func:`gate_scales` ``(grid)``; each curve cached in
     the fold folder (another grid is another cache), and the predictions listened to too
     (``listened…npz``, :meth:`Listener.save`), so another grid is swept without the model.
     ``zoom`` > 1: the portrait views magnified up to it (:func:`magnify_view_crop`), cached apart;
-    landscape frames at the training FOV are not magnified, so their curve is the same."""
+    landscape frames at the training FOV are not magnified, so their curve is the same.
+    ``measure``: the gate replayed with this measure (``far_mass``) instead of the bundle's, its
+    thresholds :data:`FAR_MASS_REFERENCE` times the scales, from the same listened predictions."""
     from crossing_assist.runtime.engine import Engine
 
     bundle = fold_bundle(fold, source, ptl, mirror)
@@ -177,7 +194,7 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
         n = n_frames if view == "landscape" or portrait_frames is None else portrait_frames
         draw = view_tag(mirror, n, seed, view, portrait, zoom)
-        done = fold / f"gate_curve{draw}{'' if grid == GRID else f'_grid{grid}'}.json"
+        done = fold / f"gate_curve{draw}{'' if grid == GRID else f'_grid{grid}'}{measure_tag(measure)}.json"
         if done.is_file():   # listened to already (the fold does not change once finished)
             out[view] = json.loads(done.read_text())
             continue
@@ -185,16 +202,16 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
             engine = Engine(bundle, threads=1)
             geometry = magnify_view_crop(engine, zoom)
         heard = fold / f"listened{draw}.npz"
-        if heard.is_file():
-            lis, extra = Listener.load(engine, heard)
-            in_view = extra["in_view"].tolist()
-        else:
+        if not heard.is_file():
             lis, in_view = listen(engine, view, ptl, neg, held_out_rows(ptl, neg, source, used, n, seed), portrait,
                                   geometry)
             lis.save(heard, in_view=np.asarray(in_view, np.int64))
-        t0 = engine.decision_config().threshold
+        lis, extra = Listener.load(engine, heard, measure)
+        in_view = extra["in_view"].tolist()
+        t0 = reference_threshold(engine, measure)
         labels = np.asarray(lis.labels)
-        result = {"source": source, "view": view, "threshold": t0, "frames": int((labels != 0).sum()),
+        result = {"source": source, "view": view, "measure": measure or engine.measure, "threshold": t0,
+                  "frames": int((labels != 0).sum()),
                   "no_crossing_frames": int((labels == 0).sum()), "goal_in_view_frames": len(in_view),
                   **model_accuracy(lis, in_view),
                   "curve": [{"scale": m, **sweep_point(lis.heard(m * t0), in_view)} for m in gate_scales(grid)]}
@@ -301,6 +318,11 @@ def main(argv=None) -> int:
                     help=f"gate scales a doubling, from x1/4 to x4 (default {GRID}, crossing-eval's grid); another grid "
                          "is a curve cache of its own, swept from the fold's saved predictions (listened*.npz)")
     add_also(ap)
+    ap.add_argument("--measure", choices=("far_mass",),
+                    help="replay the gate with this measure instead of the bundles' own (entropy), from the saved "
+                         f"predictions: far_mass, the probability beyond one strip of the argmax, at absolute "
+                         f"thresholds ({FAR_MASS_REFERENCE:g} x the scales); results are written apart (gate…_far_mass.json) "
+                         "and scripts/stamp_bundle.py --gate-measure sets them")
     ap.add_argument("--zoom", type=float, default=1.0, metavar="Z",
                     help="portrait frames (narrower than the training camera) shown magnified up to Z instead of at "
                          "the training scale, as crossing-export --view-zoom Z bundles show them (for models trained "
@@ -319,7 +341,7 @@ def main(argv=None) -> int:
         for fold, source in finished_folds(cv):
             print(f"{cv} fold {source}: export + listen", file=sys.stderr, flush=True)
             curves = fold_curve(fold, source, ptl, neg, used, a.frames, a.seed, a.portrait, a.mirror, a.portrait_frames,
-                                a.grid, a.zoom)
+                                a.grid, a.zoom, a.measure)
             if i:   # one key per fold in the pooled per-fold figures
                 curves = {view: {**c, "source": f"{source} ({cv})"} for view, c in curves.items()}
             folds.append(curves)
@@ -337,20 +359,26 @@ def main(argv=None) -> int:
         one = next(c for c in curve if c["scale"] == 1.0)
         model = pooled_accuracy([f[view] for f in folds])
         result[view] = {"scale": best["scale"], "targets_met": met, "at_scale": best, "at_fitted_threshold": one,
+                        "measure": a.measure or folds[0][view].get("measure", "entropy"),   # older caches: entropy
+                        **({"threshold": best["scale"] * FAR_MASS_REFERENCE} if a.measure else {}),
                         **model, "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
         if a.also:
             result[view]["pooled_runs"] = [str(cv) for cv in (a.cv, *a.also)]
-        suffix = tag(a.mirror) + ("" if view == "landscape" else f"_{view}") + zoom_tag(a.zoom)
+        suffix = tag(a.mirror) + ("" if view == "landscape" else f"_{view}") + zoom_tag(a.zoom) + measure_tag(a.measure)
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
-                           a.cv / f"gate_risk_coverage{suffix}.png", f"held out, {view}: gate threshold x scale")
+                           a.cv / f"gate_risk_coverage{suffix}.png",
+                           f"held out, {view}: " + (f"far mass threshold / {FAR_MASS_REFERENCE:g}" if a.measure
+                                                    else "gate threshold x scale"))
         if model:
             print(f"{view}: the model's own accuracy {model['accuracy']:.3f}, bin MAE {model['bin_mae']:.3f}"
                   + (f", goal in view {model['accuracy_goal_in_view']:.3f}" if "accuracy_goal_in_view" in model else ""))
-        print(f"{view}: fitted threshold (scale 1): {fmt(one)}")
-        print(f"{view}: chosen scale {best['scale']:g} ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
+        ref = f"far mass {FAR_MASS_REFERENCE:g}" if a.measure else "fitted threshold"
+        print(f"{view}: {ref} (scale 1): {fmt(one)}")
+        print(f"{view}: chosen scale {best['scale']:g}" + (f" (far mass {best['scale'] * FAR_MASS_REFERENCE:.4g})" if a.measure else "")
+              + f" ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
     # landscape stays at the top level (what build_default_bundle.sh and older readers take)
     portrait = {k: result[k] for k in PORTRAIT_SETS if k in result}   # "portrait" sets the portrait threshold
-    (a.cv / f"gate{tag(a.mirror)}{zoom_tag(a.zoom)}.json").write_text(json.dumps({**result["landscape"], **portrait}, indent=1))
+    (a.cv / f"gate{tag(a.mirror)}{zoom_tag(a.zoom)}{measure_tag(a.measure)}.json").write_text(json.dumps({**result["landscape"], **portrait}, indent=1))
     return 0
 
 

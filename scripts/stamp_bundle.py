@@ -10,7 +10,9 @@ atomically. The graph itself is left as it is.
   bundles, scripts/cv_bundles.py; ``cv_bundles.json`` for a bundle without mirror TTA) and
   ``metrics.gate_held_out`` from ``CV/GATE_JSON`` (scripts/choose_gate.py), where present.
 * ``--rescale-gate``: the gate thresholds become the bundle's fitted threshold times the scales in
-  ``GATE_JSON`` (landscape, and portrait where chosen). The fitted threshold is the bundle's
+  ``GATE_JSON`` (landscape, and portrait where chosen); a ``GATE_JSON`` of ``choose_gate.py
+  --measure far_mass`` (``gate_mirror_far_mass.json``) sets that measure and its held-out
+  thresholds instead (absolute: no fitted threshold to scale). The fitted threshold is the bundle's
   ``calibration.uncertainty.fitted_threshold`` (bundles exported before it was recorded: their
   landscape threshold over their recorded held-out scale), so a shipped bundle takes new held-out
   scales without a re-export.
@@ -45,8 +47,8 @@ from choose_gate import tag  # noqa: E402  (a sibling script: the file-name suff
 
 def summary(g: dict) -> dict:
     """One view of choose_gate.py's result, without its curves (``pooled_runs``: the CV runs it pooled)."""
-    return {k: g[k] for k in ("scale", "targets_met", "folds", "accuracy", "bin_mae", "accuracy_goal_in_view",
-                              "pooled_runs") if k in g} | {
+    return {k: g[k] for k in ("measure", "scale", "threshold", "targets_met", "folds", "accuracy", "bin_mae",
+                              "accuracy_goal_in_view", "pooled_runs") if k in g} | {
         "at_scale": {k: v for k, v in g["at_scale"].items() if k != "per_fold"},
         "at_fitted_threshold": {k: v for k, v in g["at_fitted_threshold"].items() if k != "per_fold"}}
 
@@ -96,8 +98,18 @@ def main(argv=None) -> int:
     if gate_path.is_file():
         g = json.loads(gate_path.read_text())
         meta["metrics"]["gate_held_out"] = summary(g) | {k: summary(g[k]) for k in ("portrait", "portrait_window") if k in g}
-        if a.rescale_gate:
+        if a.rescale_gate and "threshold" in g:   # choose_gate.py --measure: absolute thresholds of that measure
+            views = {"landscape": g, **{k: g[k] for k in ("portrait",) if k in g}}
+            meta["calibration"]["uncertainty"] = {"measure": g["measure"], "threshold": g["threshold"],
+                                                  **({"portrait_threshold": g["portrait"]["threshold"]} if "portrait" in g else {})}
+            stamped.append(f"gate measure {g['measure']}, held-out thresholds "
+                           + ", ".join(f"{v['threshold']:.4g} ({k})" for k, v in views.items()))
+        elif a.rescale_gate:
             unc = meta["calibration"]["uncertainty"]
+            if (chosen := g.get("measure", "entropy")) != unc["measure"]:
+                print(f"error: {gate_path} chose scales of {chosen}, {a.src} gates with {unc['measure']}",
+                      file=sys.stderr)
+                return 2
             fitted = unc.get("fitted_threshold")
             if fitted is None:   # exported before bundles recorded it: undo the recorded scale
                 if not old_gate:

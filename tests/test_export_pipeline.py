@@ -1,6 +1,7 @@
 """crossing-export end to end on a tiny real checkpoint and a tiny labelled dataset:
 calibrated bundle, onnxruntime predictions, graph/json mismatches, CLI errors."""
 
+import dataclasses
 import json
 import shutil
 import subprocess
@@ -11,7 +12,7 @@ import pytest
 import torch
 
 from crossing_assist.bundle import BundleError, embedded_meta, read_bundle
-from crossing_assist.data_tools.images import save_rgb
+from crossing_assist.data_tools.images import load_frame, save_rgb
 from crossing_assist.data_tools.manifest import Row, write_manifest
 from crossing_assist.conformal import bundle_conformal_report
 from crossing_assist.inference import open_session, predict, predict_bundle
@@ -344,3 +345,25 @@ def test_view_zoom_makes_a_schema4_letterbox_geometry_and_is_refused_for_a_stret
     with pytest.raises(ExportError, match="--view-zoom 1.3: the checkpoint stretches frames"):
         export_bundle(cfg, log=lambda m: None)
     assert not (tmp_path / "z").exists()
+
+
+def test_far_mass_export_fits_its_threshold_on_the_graphs_probabilities(work, tmp_path):
+    """``--measure far_mass``: the bundle's gate reads the probability beyond one strip of the
+    argmax, its threshold fitted (P(correct | far mass) = 1/2) on the far masses of the shipped
+    graph's outputs, inside their range; the runtime gates with it. ``variance`` has no export fit."""
+    from crossing_assist.runtime import belief as bf
+    from crossing_assist.runtime.engine import Engine
+
+    root, _ = work
+    cfg = ExportConfig(run=str(root / "run"), out=str(tmp_path / "b"), samples=8, calib_data=str(root / "data"),
+                       batch=8, parity_frames=4, progress=False, seed=1)
+    export_bundle(dataclasses.replace(cfg, measure="far_mass"), log=lambda m: None)
+    u = read_bundle(tmp_path / "b").calibration.uncertainty
+    assert u.measure == "far_mass" and 0 < u.threshold < 1 and u.fitted_threshold == pytest.approx(u.threshold)
+    engine = Engine(tmp_path / "b")
+    frame = np.asarray(load_frame(root / "data" / "f0.png"))
+    p = engine.predict(frame)
+    assert p.ok and p.uncertainty == pytest.approx(bf.far_mass(p.probs)) and p.uncertainty != pytest.approx(p.entropy)
+    assert engine.decision_config().measure == "far_mass" and engine.decision_config().threshold == u.threshold
+    with pytest.raises(ExportError, match="--measure 'variance'; valid: entropy, mutual_info, far_mass"):
+        dataclasses.replace(cfg, measure="variance")

@@ -203,6 +203,30 @@ def test_choose_gate_grid_sweeps_a_finer_grid_under_its_own_cache(tmp_path, monk
         cg.main([str(tmp_path / "cv"), "--grid", "0"])
 
 
+def test_choose_gate_measure_far_mass_replays_the_saved_clips_at_absolute_thresholds(tmp_path, monkeypatch):
+    """``--measure far_mass``: the fold's saved predictions decided again with the far-mass gate at
+    :data:`FAR_MASS_REFERENCE` times each scale, without the model, cached apart from the bundle's
+    own (entropy) curve; the curve's result says which measure and reference it swept."""
+    from crossing_assist.runtime.engine import Engine
+    from crossing_assist.runtime.listen import Listener
+
+    cg, ptl, neg, fold = _toy_fold(tmp_path, monkeypatch, photos=4, no_crossing=2)
+    own = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 4, 0, 0)["landscape"]
+
+    def no_model(*a, **k):
+        raise AssertionError("another measure replays the saved predictions")
+
+    monkeypatch.setattr(Engine, "predict", no_model)
+    fm = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 4, 0, 0, measure="far_mass")["landscape"]
+    assert (own["measure"], fm["measure"], fm["threshold"]) == ("entropy", "far_mass", cg.FAR_MASS_REFERENCE)
+    assert {p.name for p in fold.glob("gate_curve*.json")} == {"gate_curve_4.json", "gate_curve_4_far_mass.json"}
+    lis, extra = Listener.load(Engine(cg.fold_bundle()), fold / "listened_4.npz", "far_mass")
+    at = {c["scale"]: c for c in fm["curve"]}
+    for m in (0.25, 1.0, 4.0):   # each point is the saved clips decided with the far-mass gate at 0.01 x m
+        want = cg.sweep_point(lis.heard(m * cg.FAR_MASS_REFERENCE), extra["in_view"].tolist())
+        assert {k: at[m][k] for k in want} == want
+
+
 def test_choose_gate_zoom_magnifies_narrow_frames_up_to_z_and_caches_them_apart(tmp_path, monkeypatch):
     """``--zoom Z``: the engine's geometry gets ``view_zoom`` Z, so a frame narrower than the training
     camera keeps the rows of a view magnified ``min(t, Z)`` times (``t = tan(train / 2) / tan(fov / 2)``)

@@ -162,3 +162,38 @@ def test_decisions_are_deterministic():
     a = [x.to_json() for x in run(Decider(DecisionConfig()), seq, yaw=5.0)]
     b = [x.to_json() for x in run(Decider(DecisionConfig()), seq, yaw=5.0)]
     assert a == b
+
+
+def test_far_mass_is_the_probability_beyond_one_strip_of_the_argmax():
+    p = np.zeros(13)
+    p[[5, 6, 7]] = (0.3, 0.4, 0.3)                # spread over neighbours: nothing beyond one strip
+    assert bf.far_mass(p) == pytest.approx(0.0) and bf.entropy(p) > 1.0
+    p = np.zeros(13)
+    p[[3, 9]] = (0.6, 0.4)                        # split between far strips
+    assert bf.far_mass(p) == pytest.approx(0.4)
+    p = np.zeros(13)
+    p[[0, 1, 2, 12]] = (0.1, 0.5, 0.2, 0.2)       # an edge strip: its only neighbour is strip 2, never unknown
+    assert bf.far_mass(p) == pytest.approx(0.3)
+    p = np.zeros(13)
+    p[[0, 4]] = (0.7, 0.3)                        # unknown wins: everything that is not unknown
+    assert bf.far_mass(p) == pytest.approx(0.3)
+
+
+def test_far_mass_gate_speaks_for_neighbour_spread_and_not_for_far_doubt():
+    """The same entropy, two answers: with ``far_mass`` a frame spread over strips 5-7 guides to
+    strip 6 (the belief, gated with the same measure, speaks), a frame split between strips 3
+    and 9 never does; gated by entropy at the level of that spread, neither speaks."""
+    near = np.full(13, 0.004)
+    near[5:8] = (0.3, 0.4, 0.3 - 0.04)
+    far = np.full(13, 0.004)
+    far[[3, 9]] = (0.6, 0.4 - 0.044)
+    cfg = DecisionConfig(measure="far_mass", threshold=0.06)
+    d = run(Decider(cfg), [Observation(near, bf.far_mass(near))] * 30)[-1]
+    assert d.gate == GATE_LEARNER and d.learner_action == 6 and abs(d.heading_deg - heading(6)) < 3.0
+    assert d.learner_u == pytest.approx(cfg.learner_uncertainty(d.belief, get_space(13))) and d.learner_u < 0.06
+    d = run(Decider(cfg), [Observation(far, bf.far_mass(far))] * 30)[-1]
+    assert d.stop and d.frame_weight == 0.0
+    ent = DecisionConfig(measure="entropy", threshold=0.9 * bf.entropy(near))
+    assert run(Decider(ent), [Observation(near, bf.entropy(near))] * 30)[-1].stop
+    with pytest.raises(ValueError, match="Unknown uncertainty measure"):
+        DecisionConfig(measure="far")

@@ -180,3 +180,27 @@ def test_listener_saved_and_loaded_replays_the_same_decisions(tmp_path, toy_bund
     for t in (None, 0.01, 0.5, 2.0):
         assert again.heard(t) == lis.heard(t)
     assert again.risk_coverage([0.1, 1.0], idx=[0, 2]) == lis.risk_coverage([0.1, 1.0], idx=[0, 2])
+
+
+def test_listener_load_replays_another_measure_from_the_saved_probabilities(tmp_path, toy_bundle):  # noqa: F811
+    """``load(measure="far_mass")``: each saved frame's uncertainty becomes its far mass and the
+    decisions are taken with that measure (the bundle's threshold scale is the caller's)."""
+    from crossing_assist.runtime import belief as bf
+
+    lis = Listener(Engine(toy_bundle), seconds=0.3)
+    for strip in (2, 6, 11):
+        lis.add(bar_frame(bin_center_x(strip)), strip)
+    lis.add(bar_frame(None, noise=0.3), UNKNOWN)
+    lis.save(tmp_path / "heard.npz")
+    fm, _ = Listener.load(Engine(toy_bundle), tmp_path / "heard.npz", measure="far_mass")
+    assert fm.measure == "far_mass"
+    for clip, saved in zip(fm.clips, lis.clips):
+        for p, q in zip(clip, saved):
+            assert p.uncertainty == pytest.approx(bf.far_mass(q.probs))
+    t = max(p.uncertainty for clip in fm.clips[:3] for p in clip) * 1.01   # every bar frame passes
+    heard = fm.heard(t)
+    assert [h.on for h in heard[:3]] == [True] * 3 and [h.strip for h in heard[:3]] == [2, 6, 11]
+    assert not heard[3].on                                                   # noise stays silent
+    assert heard != lis.heard(t)    # the bundle's own measure (entropy) at that threshold decides otherwise
+    with pytest.raises(ValueError, match="cannot replay measure 'variance'"):
+        Listener.load(Engine(toy_bundle), tmp_path / "heard.npz", measure="variance")

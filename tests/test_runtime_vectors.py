@@ -83,6 +83,7 @@ def test_vectors_replay_from_json_alone(stored):
             if o is not None and o["ok"]:  # the port starts from the graph's raw outputs
                 measure = sc["config"]["measure"]
                 u = (o["entropy"] if measure == "entropy" else o["mutual_info"] if measure == "mutual_info"
+                     else bf.far_mass(np.array(o["probs"])) if measure == "far_mass"
                      else o["variance"][int(np.argmax(o["probs"]))])
                 assert u == o["uncertainty"]
                 obs = Observation(np.array(o["probs"]), u)
@@ -101,7 +102,7 @@ def test_vectors_replay_from_json_alone(stored):
 
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == 6
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == 7
     assert "decision steps" in capsys.readouterr().out
 
 

@@ -130,3 +130,25 @@ def test_stamp_refuses_a_bad_sensor_aspect_in_one_line(shipped, tmp_path, bad):
     r = _stamp(src, tmp_path / "out", "--cv", cv, "--sensor-aspect", bad)
     assert r.returncode == 2 and r.stderr.startswith("error: --sensor-aspect") and "1..3" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
+
+
+def test_stamp_sets_the_far_mass_gate_chosen_held_out(shipped, tmp_path):
+    """A gate file of ``choose_gate.py --measure far_mass`` (absolute thresholds) makes the bundle
+    gate with far mass at those thresholds, in bundle.json and the graph's copy alike, and the
+    runtime follows; an entropy gate file of scales is then refused for it in one line."""
+    from crossing_assist.runtime.engine import Engine
+
+    src, cv = shipped
+    fm = lambda t: _gate(t / 0.01) | {"measure": "far_mass", "threshold": t}   # noqa: E731
+    (cv / "gate_far_mass.json").write_text(json.dumps(fm(0.007) | {"portrait": fm(0.015), "portrait_window": fm(0.015)}))
+    r = _stamp(src, tmp_path / "out", "--cv", cv, "--rescale-gate", "--gate-json", "gate_far_mass.json")
+    assert r.returncode == 0, r.stderr
+    assert "gate measure far_mass, held-out thresholds 0.007 (landscape), 0.015 (portrait)" in r.stdout
+    b = read_bundle(tmp_path / "out")
+    unc = b.calibration.uncertainty
+    assert (unc.measure, unc.threshold, unc.portrait_threshold, unc.fitted_threshold) == ("far_mass", 0.007, 0.015, None)
+    assert b.metrics["gate_held_out"]["threshold"] == 0.007 and b.metrics["gate_held_out"]["measure"] == "far_mass"
+    cfg = Engine(tmp_path / "out").decision_config("portrait")   # check_session: the graph's copy agrees
+    assert (cfg.measure, cfg.threshold, cfg.learner_threshold) == ("far_mass", 0.015, 0.015)
+    r = _stamp(tmp_path / "out", tmp_path / "again", "--cv", cv, "--rescale-gate")
+    assert r.returncode == 2 and "gates with far_mass" in r.stderr.strip() and len(r.stderr.strip().splitlines()) == 1

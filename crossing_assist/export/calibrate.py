@@ -205,5 +205,5 @@ class CalibrationResult:
 def uncalibrated(n_actions: int, measure: str = "entropy") -> CalibrationResult:
     """Honest defaults when no labelled data is given: temperature 1, every action in every
     conformal set (threshold 0), gate threshold at half the maximum of the measure."""
-    max_u = {"entropy": math.log(n_actions), "mutual_info": math.log(n_actions), "variance": 0.25}[measure]
+    max_u = {"entropy": math.log(n_actions), "mutual_info": math.log(n_actions), "variance": 0.25, "far_mass": 1.0}[measure]
     return CalibrationResult(1.0, 0.9, 0.0, 0, measure, max_u / 2)

@@ -21,7 +21,7 @@ HELP = {
     "calib_split": "split of --calib-data to calibrate on (all of it; held-out coverage by folds of sources)",
     "calib_folds": "folds (whole sources) for the held-out coverage: each measured with a calibration fitted on the others",
     "coverage": "target coverage of the conformal action sets",
-    "measure": "the gate's uncertainty measure: entropy | mutual_info",
+    "measure": "the gate's uncertainty measure: entropy | mutual_info | far_mass (the probability beyond one strip of the argmax)",
     "gate_scale": "multiply the fitted gate threshold by this (pick it on held-out sources' risk-coverage curve: scripts/choose_gate.py)",
     "gate_scale_portrait": "the same for portrait frames, written as calibration.uncertainty.portrait_threshold (default: portrait uses --gate-scale's)",
     "view_zoom": "show frames from a camera narrower than the training one (a phone in portrait) magnified by up to this instead of at the training scale (bundle schema 4); for models trained with crossing-train --field-zoom; 1 = the training scale",

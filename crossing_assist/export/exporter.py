@@ -51,11 +51,14 @@ from crossing_assist.export import calibrate as cal
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
 from crossing_assist.export.quantize import INT8_MODES, quantize_convs
 from crossing_assist.geometry import SENSOR_ASPECT, VIEW_ZOOM_RANGE, Geometry
+from crossing_assist.runtime.belief import far_mass
 
 if TYPE_CHECKING:  # annotations only: models is imported where it is used (_load_policy)
     from crossing_assist.models.policy import PolicyConfig
 
 PARITY_TOL = 1e-4
+#: Gate measures an export fits (variance is per action: no single threshold to fit).
+EXPORT_MEASURES = ("entropy", "mutual_info", "far_mass")
 
 
 class ExportError(UserError):
@@ -102,7 +105,7 @@ class ExportConfig:
              f"--gate-scale-portrait {self.gate_scale_portrait}; valid: 0.05..20"),
             (VIEW_ZOOM_RANGE[0] <= self.view_zoom <= VIEW_ZOOM_RANGE[1],
              f"--view-zoom {self.view_zoom}; valid: {VIEW_ZOOM_RANGE[0]:g}..{VIEW_ZOOM_RANGE[1]:g}"),
-            (self.measure in ("entropy", "mutual_info"), f"--measure {self.measure!r}; valid: entropy, mutual_info"),
+            (self.measure in EXPORT_MEASURES, f"--measure {self.measure!r}; valid: {', '.join(EXPORT_MEASURES)}"),
             (self.int8_mode in INT8_MODES, f"--int8-mode {self.int8_mode!r}; valid: {', '.join(INT8_MODES)}"),
             (not self.int8 or self.calib_data, "--int8 needs --calib-data (real frames to calibrate the int8 ranges)"),
             (inference.is_seed(self.seed), f"--seed {self.seed!r}; valid: {inference.SEED_RANGE}"),
@@ -287,7 +290,8 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
     check_session(bundle, sess)
     got = inference.predict(sess, bundle.actions.n, data.images, batch=cfg.batch, progress=cfg.progress)
     correct = got["probs"].argmax(1) == data.actions
-    fitted = cal.uncertainty_threshold(got[cfg.measure], correct)
+    u = np.array([far_mass(p) for p in got["probs"]]) if cfg.measure == "far_mass" else got[cfg.measure]
+    fitted = cal.uncertainty_threshold(u, correct)
     calib = cal.CalibrationResult(
         temperature=temperature, coverage=cfg.coverage,
         threshold=cal.conformal_threshold(got["probs"], data.actions, cfg.coverage),

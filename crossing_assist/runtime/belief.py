@@ -133,9 +133,17 @@ def entropy(p: np.ndarray) -> float:
     return float(-(p * np.log(p)).sum())
 
 
-def belief_entropy(b: np.ndarray, space: ActionSpace) -> float:
-    """Entropy (nats) of the belief summed into the bundle's action space (0 log 0 = 0)."""
-    return entropy(space.bin_probs_to_action_probs(b))
+def far_mass(p: np.ndarray) -> float:
+    """Probability outside the most probable action and its neighbours: ``1 - sum p[a-1..a+1]``
+    over the strips (``a`` = argmax, first on ties; the neighbours stop at strips 1 and A-1, never
+    unknown), ``1 - p[0]`` when ``a`` is unknown. Low = the mass sits within one strip of the
+    argmax, so the beacon, if on, is at most one strip off by the model's own account; a central goal whose
+    probability spreads over neighbouring strips is not doubted for that, as entropy doubts it."""
+    p = np.asarray(p, dtype=np.float64)
+    a = int(np.argmax(p))
+    if a == 0:
+        return float(1.0 - p[0])
+    return float(max(0.0, 1.0 - p[max(1, a - 1):min(len(p) - 1, a + 1) + 1].sum()))
 
 
 def belief_heading(b: np.ndarray, space: ActionSpace, fov_deg: float) -> tuple[int, float | None]:

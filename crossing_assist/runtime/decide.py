@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from crossing_assist.actions import DEFAULT_FOV_DEG, ActionSpace, get_space, heading_to_pan
+from crossing_assist.bundle import UNCERTAINTY_MEASURES
 from crossing_assist.runtime import belief as bf
 from crossing_assist.runtime.gate import GATE_STOP, GateConfig, alpha, mix
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
@@ -23,6 +24,8 @@ REASON_OK = "ok"
 REASON_UNCERTAIN = "uncertain"
 REASON_STALE = "stale"
 REASON_FAILED = "failed"
+#: Measures that read a probability vector, so the belief is gated with the frames' measure and threshold.
+BELIEF_MEASURES = ("entropy", "far_mass")
 
 
 @dataclass(frozen=True)
@@ -53,6 +56,8 @@ class DecisionConfig:
 
     def __post_init__(self) -> None:
         get_space(self.n_actions)
+        if self.measure not in UNCERTAINTY_MEASURES:
+            raise ValueError(f"Unknown uncertainty measure: {self.measure!r}; valid: {', '.join(UNCERTAINTY_MEASURES)}")
         if not float(self.threshold) > 0:
             raise ValueError(f"Invalid threshold: {self.threshold}; valid: > 0")
         if not float(self.watchdog_s) > 0:
@@ -62,8 +67,16 @@ class DecisionConfig:
 
     @property
     def learner_threshold(self) -> float:
-        """Threshold (nats) for the belief's entropy: the bundle's, when its measure is entropy."""
-        return self.threshold if self.measure == "entropy" else self.gate.belief_entropy_threshold
+        """Threshold for the belief's uncertainty (:meth:`learner_uncertainty`): the bundle's, when
+        its measure reads a probability vector (entropy, far_mass), else the gate's
+        ``belief_entropy_threshold`` (nats)."""
+        return self.threshold if self.measure in BELIEF_MEASURES else self.gate.belief_entropy_threshold
+
+    def learner_uncertainty(self, belief: np.ndarray, space: ActionSpace) -> float:
+        """The belief's uncertainty, summed into the action space: its far mass when the bundle's
+        measure is ``far_mass``, else its entropy (nats)."""
+        p = space.bin_probs_to_action_probs(belief)
+        return bf.far_mass(p) if self.measure == "far_mass" else bf.entropy(p)
 
 
 @dataclass(frozen=True)
@@ -165,7 +178,7 @@ class Decider:
             self.hold_turned += abs(psi)
         w = self._evidence(t, obs)  # 4
         a_l, h_l = bf.belief_heading(self.belief, self.space, cfg.fov_deg)  # 5
-        u_l = bf.belief_entropy(self.belief, self.space) if h_l is not None else math.inf
+        u_l = cfg.learner_uncertainty(self.belief, self.space) if h_l is not None else math.inf
         al_l = alpha(u_l, self.c_learner)
         h_f, u_f, al_f = self._hold(t)  # 6
         m = mix(h_l, al_l, h_f, al_f, cfg.gate)  # 7

@@ -17,8 +17,9 @@ from typing import Callable
 import numpy as np
 
 from crossing_assist import inference
-from crossing_assist.bundle import Bundle, BundleError
+from crossing_assist.bundle import UNCERTAINTY_MEASURES, Bundle, BundleError
 from crossing_assist.geometry import ORIENTATIONS, GeometryError, check_fov, check_frame_shape, orientation
+from crossing_assist.runtime import belief as bf
 from crossing_assist.runtime.decide import DecisionConfig, Observation
 
 
@@ -56,14 +57,17 @@ class Prediction:
 
 
 def measure_value(measure: str, entropy: float, mutual_info: float, variance: np.ndarray, probs: np.ndarray) -> float:
-    """The gate's frame uncertainty: ``entropy``, ``mutual_info``, or ``variance[argmax probs]``."""
+    """The gate's frame uncertainty: ``entropy``, ``mutual_info``, ``variance[argmax probs]`` or
+    ``far_mass`` (:func:`~crossing_assist.runtime.belief.far_mass` of ``probs``)."""
     if measure == "entropy":
         return float(entropy)
     if measure == "mutual_info":
         return float(mutual_info)
     if measure == "variance":
         return float(variance[int(np.argmax(probs))])
-    raise ValueError(f"Unknown uncertainty measure: {measure!r}; valid: entropy, mutual_info, variance")
+    if measure == "far_mass":
+        return bf.far_mass(probs)
+    raise ValueError(f"Unknown uncertainty measure: {measure!r}; valid: {', '.join(UNCERTAINTY_MEASURES)}")
 
 
 class Engine:

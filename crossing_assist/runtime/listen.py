@@ -15,6 +15,7 @@ label; a frame with no crossing (label ``unknown``) should be *silent* (beacon o
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, replace
 from typing import Iterable, Sequence
@@ -24,7 +25,8 @@ import numpy as np
 from crossing_assist.actions import UNKNOWN, heading_to_x, x_to_bin, x_to_heading
 from crossing_assist.fileio import atomic_path
 from crossing_assist.geometry import ORIENTATIONS
-from crossing_assist.runtime.decide import Decider, DecisionConfig
+from crossing_assist.runtime.belief import entropy, far_mass
+from crossing_assist.runtime.decide import BELIEF_MEASURES, Decider, DecisionConfig
 from crossing_assist.runtime.engine import Engine, Prediction
 
 WRONG_STRIPS = 2     # >= this many strips off with the beacon on: confidently wrong
@@ -114,6 +116,7 @@ class Listener:
     engine: Engine
     seconds: float = 1.0
     fps: float = 10.0
+    measure: str | None = None   # the gate's measure for decisions; None = the bundle's
 
     def __post_init__(self) -> None:
         self.clips: list[list[Prediction]] = []
@@ -149,12 +152,21 @@ class Listener:
                 orientation=at(lambda p: p.orientation or "", "", str), **extra)
 
     @classmethod
-    def load(cls, engine: Engine, path: str | os.PathLike) -> tuple["Listener", dict[str, np.ndarray]]:
+    def load(cls, engine: Engine, path: str | os.PathLike,
+             measure: str | None = None) -> tuple["Listener", dict[str, np.ndarray]]:
         """A Listener over the predictions :meth:`save` wrote (decisions replayed with ``engine``'s
-        bundle: its decision settings and gate thresholds), and the saved ``extra`` arrays."""
+        bundle: its decision settings and gate thresholds), and the saved ``extra`` arrays.
+        ``measure``: replay the gate with this measure instead of the bundle's, recomputed from
+        the saved probabilities (``entropy`` or ``far_mass``: the measures a probability vector
+        gives; MC-dropout spreads are not saved)."""
+        if measure is not None and measure not in BELIEF_MEASURES:
+            raise ValueError(f"cannot replay measure {measure!r} from saved probabilities; valid: {', '.join(BELIEF_MEASURES)}")
         with np.load(path) as z:
-            lis = cls(engine, float(z["seconds"]), float(z["fps"]))
+            lis = cls(engine, float(z["seconds"]), float(z["fps"]), measure)
             d = {k: z[k] for k in z.files}
+        if measure is not None:
+            of = entropy if measure == "entropy" else far_mass
+            d["uncertainty"] = np.apply_along_axis(lambda p: of(p) if np.all(np.isfinite(p)) else math.inf, 2, d["probs"])
         for k, label in enumerate(d["labels"]):
             lis.clips.append([
                 Prediction(ok=True, probs=d["probs"][k, i], uncertainty=float(d["uncertainty"][k, i]),
@@ -168,7 +180,8 @@ class Listener:
     def heard(self, threshold: float | None = None, idx: Sequence[int] | None = None) -> list[Heard]:
         """The last decisions at the bundle's gate threshold for each clip's orientation (or
         ``threshold`` for all)."""
-        over = {} if threshold is None else {"threshold": float(threshold)}
+        over = ({} if threshold is None else {"threshold": float(threshold)}) | \
+            ({} if self.measure is None else {"measure": self.measure})
         cfgs = {o: self.engine.decision_config(o, **over) for o in ORIENTATIONS}
         out = []
         for i in range(len(self.clips)) if idx is None else idx:

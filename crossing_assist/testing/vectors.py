@@ -57,6 +57,11 @@ Version 6: ``geometry.view_zoom`` (bundle schema 4): ``geometry.view_rows_zoom``
 under :data:`GEOMETRY_V4` with each case's ``zoom`` (frames from a camera narrower than the
 training one shown magnified up to it; a large zoom fills the canvas). Its own cases, no
 generator: the vectors above are those of version 5.
+
+Version 7: the ``far_mass`` measure (:func:`crossing_assist.runtime.belief.far_mass`): scenario
+``far_mass_neighbours`` gates frames and the belief by the probability beyond one strip of the
+argmax; frames spread over neighbouring strips speak, frames split between far strips do not.
+The scenarios before it are those of version 6.
 """
 
 from __future__ import annotations
@@ -84,7 +89,7 @@ from crossing_assist.runtime.status import STATUS_STOP, status_message
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 6
+VERSION = 7
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -165,6 +170,14 @@ def _scenarios(rng: np.random.Generator) -> list[tuple[str, DecisionConfig, list
         obs = None if i % 7 == 3 else _frame(13, k, float(rng.uniform(0.5, 0.99)), rng)
         irregular.append((t, float(rng.uniform(-40, 40)), obs))
     out.append(("irregular_random", base, irregular))
+    near = np.full(13, 0.004)
+    near[5:8] = (0.3, 0.4, 0.3 - 0.004 * 10)   # strips 5..7: high entropy, little mass beyond one strip
+    far = np.full(13, 0.004)
+    far[[3, 9]] = (0.6, 0.4 - 0.004 * 11)       # strips 3 and 9: the same doubt, two strips and more apart
+    raw = lambda p: RawOutputs(p, entropy(p), 0.1, np.zeros(13))  # noqa: E731
+    cf = dataclasses.replace(base, measure="far_mass", threshold=0.06)
+    out.append(("far_mass_neighbours", cf, [(i / FPS, 0.0, raw(near if i < 30 or i >= 90 else far))
+                                            for i in range(120)]))
     return out
 
 

@@ -11,7 +11,7 @@ export const SCHEMA_VERSIONS = [1, 2, 3, 4];
 export const FITS = ['letterbox', 'stretch'];
 export const INPUT_NAME = 'frames';
 export const OUTPUT_NAMES = ['probs', 'entropy', 'mutual_info', 'variance', 'votes'];
-export const UNCERTAINTY_MEASURES = ['entropy', 'mutual_info', 'variance'];
+export const UNCERTAINTY_MEASURES = ['entropy', 'mutual_info', 'variance', 'far_mass'];
 
 export class BundleError extends Error {
   constructor(message) {

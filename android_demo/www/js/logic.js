@@ -8,6 +8,7 @@
 // left), yaw rate in degrees per second (positive = the user turns right).
 
 import { DEFAULT_FOV_DEG, N_BINS, headingToPan, spaceGroups, xToHeading } from './actions.js';
+import { UNCERTAINTY_MEASURES } from './bundle.js';
 
 export const N_STATES = N_BINS + 1;
 export const SATURATION_HALF = Math.atanh(0.5); // alpha(threshold) = 1/2
@@ -126,11 +127,33 @@ export function binProbsToActionProbs(b, groups) {
   return groups.map((g, a) => (a === 0 ? b[0] : g.reduce((s, k) => s + b[k], 0)));
 }
 
-/** Entropy (nats) of the belief summed into the action space (0 log 0 = 0). */
-export function beliefEntropy(b, groups) {
+/** Entropy (nats) of a probability vector (0 log 0 = 0). */
+export function entropy(probs) {
   let h = 0;
-  for (const p of binProbsToActionProbs(b, groups)) if (p > 0) h -= p * Math.log(p);
+  for (const p of probs) if (p > 0) h -= p * Math.log(p);
   return h;
+}
+
+/**
+ * Probability outside the most probable action and its neighbours (belief.far_mass): 1 - sum of
+ * probs[a-1..a+1] over the strips (a = argmax, first on ties; never unknown), 1 - probs[0] when
+ * a is unknown.
+ */
+export function farMass(probs) {
+  const a = argmax(probs);
+  if (a === 0) return 1 - probs[0];
+  let near = 0;
+  for (let k = Math.max(1, a - 1); k <= Math.min(probs.length - 1, a + 1); k += 1) near += probs[k];
+  return Math.max(0, 1 - near);
+}
+
+/** Measures that read a probability vector: the belief is gated with the frames' measure and threshold. */
+export const BELIEF_MEASURES = ['entropy', 'far_mass'];
+
+/** The belief's uncertainty in the action space (DecisionConfig.learner_uncertainty). */
+export function beliefUncertainty(b, groups, measure) {
+  const p = binProbsToActionProbs(b, groups);
+  return measure === 'far_mass' ? farMass(p) : entropy(p);
 }
 
 function argmax(values) {
@@ -211,6 +234,9 @@ export function decisionConfig(cfg = {}) {
     gate: { ...DEFAULT_GATE, ...(cfg.gate || {}) },
   };
   spaceGroups(out.n_actions);
+  if (!UNCERTAINTY_MEASURES.includes(out.measure)) {
+    throw new RangeError(`Unknown uncertainty measure: ${JSON.stringify(out.measure)}; valid: ${UNCERTAINTY_MEASURES.join(', ')}`);
+  }
   for (const [name, v] of Object.entries(out.filter)) if (!(v > 0)) throw new RangeError(`Invalid ${name}: ${v}; valid: > 0`);
   for (const name of ['saturation', 'hold_time_s', 'hold_turn_deg', 'agree_deg', 'belief_entropy_threshold']) {
     if (!(out.gate[name] > 0)) throw new RangeError(`Invalid ${name}: ${out.gate[name]}; valid: > 0`);
@@ -242,7 +268,7 @@ export class Decider {
     this.groups = spaceGroups(this.cfg.n_actions);
     this.lookup = new Array(N_STATES).fill(0);
     this.groups.forEach((g, a) => g.forEach((k) => { this.lookup[k] = a; }));
-    const learnerThreshold = this.cfg.measure === 'entropy' ? this.cfg.threshold : this.cfg.gate.belief_entropy_threshold;
+    const learnerThreshold = BELIEF_MEASURES.includes(this.cfg.measure) ? this.cfg.threshold : this.cfg.gate.belief_entropy_threshold;
     this.cFrame = this.cfg.gate.saturation / this.cfg.threshold;
     this.cLearner = this.cfg.gate.saturation / learnerThreshold;
     this.reset();
@@ -282,7 +308,7 @@ export class Decider {
       this.tLastOk = t;
     }
     const [aL, hL] = beliefHeading(this.belief, this.groups, cfg.fov_deg);
-    const uL = hL !== null ? beliefEntropy(this.belief, this.groups) : Infinity;
+    const uL = hL !== null ? beliefUncertainty(this.belief, this.groups, cfg.measure) : Infinity;
     const alL = alpha(uL, this.cLearner);
     const uF = this.holdHeading !== null && Math.abs(this.holdHeading) < 90
       ? (t - this.holdT) / cfg.gate.hold_time_s + this.holdTurned / cfg.gate.hold_turn_deg
@@ -320,12 +346,13 @@ export class Decider {
 
 // ----------------------------------------------------------------------------- engine / beacon
 
-/** The gate's frame uncertainty (engine.measure_value): entropy, mutual_info or variance[argmax probs]. */
-export function measureValue(measure, entropy, mutualInfo, variance, probs) {
-  if (measure === 'entropy') return entropy;
+/** The gate's frame uncertainty (engine.measure_value): entropy, mutual_info, variance[argmax probs] or farMass(probs). */
+export function measureValue(measure, entropyNats, mutualInfo, variance, probs) {
+  if (measure === 'entropy') return entropyNats;
   if (measure === 'mutual_info') return mutualInfo;
   if (measure === 'variance') return variance[argmax(probs)];
-  throw new RangeError(`Unknown uncertainty measure: ${JSON.stringify(measure)}; valid: entropy, mutual_info, variance`);
+  if (measure === 'far_mass') return farMass(probs);
+  throw new RangeError(`Unknown uncertainty measure: ${JSON.stringify(measure)}; valid: ${UNCERTAINTY_MEASURES.join(', ')}`);
 }
 
 /**

@@ -4,6 +4,7 @@
 // decision, heading, uncertainty against the bundle's threshold, the audio levels, speed.
 
 import { N_BINS } from './actions.js';
+import { measureValue } from './logic.js';
 
 /** Stop sentences by reason: the Decider's (uncertain, stale, failed) and the app's own. */
 export const STATUS_STOP = Object.freeze({
@@ -118,7 +119,7 @@ export class HelperView {
     const label = Array.from(perBin, (p, k) => `${k === 0 ? 'unknown' : k} ${Math.round(100 * p)}%`).join(', ');
     this.el('strips').setAttribute('aria-label', `Goal probability per strip: ${label}`);
     const measure = meta.calibration.uncertainty.measure;
-    const u = measure === 'entropy' ? out.entropy : measure === 'mutual_info' ? out.mutual_info : out.variance[best];
+    const u = measureValue(measure, out.entropy, out.mutual_info, out.variance, out.probs);
     this.el('uncertainty').textContent = `${measure} ${fmt(u)} (threshold ${fmt(meta.calibration.uncertainty.threshold)}), `
       + `mutual info ${fmt(out.mutual_info, 3)}, top ${meta.actions.names[best]} ${Math.round(100 * out.probs[best])}%`;
   }
