@@ -58,6 +58,18 @@ fi
 PORTRAIT_ARGS=()
 if [ -n "${GATE_SCALE_PORTRAIT:-}" ]; then PORTRAIT_ARGS=(--gate-scale-portrait "$GATE_SCALE_PORTRAIT"); fi
 echo "gate threshold scale: landscape $GATE_SCALE, portrait ${GATE_SCALE_PORTRAIT:-the same}" >&2
+# The gate's measure: far_mass (the probability beyond one strip of the argmax) at the thresholds
+# choose_gate.py --measure far_mass chose on the same held-out folds, when it has; else entropy.
+GATE_MEASURE=${GATE_MEASURE:-far_mass}
+STAMP_JSON=$GATE_JSON
+if [ "$GATE_MEASURE" != entropy ]; then
+    if [ -f "$CV_DIR/${GATE_JSON%.json}_$GATE_MEASURE.json" ]; then
+        STAMP_JSON="${GATE_JSON%.json}_$GATE_MEASURE.json"
+        echo "gate measure: $GATE_MEASURE, thresholds from $CV_DIR/$STAMP_JSON" >&2
+    else
+        echo "no $CV_DIR/${GATE_JSON%.json}_$GATE_MEASURE.json (scripts/choose_gate.py $CV_DIR ${MIRROR_ARGS[*]} --measure $GATE_MEASURE): gate on entropy" >&2
+    fi
+fi
 
 TMP=$(mktemp -d "${TMPDIR:-/tmp}/default_bundle.XXXXXX")
 trap 'rm -rf "$TMP"' EXIT
@@ -93,7 +105,8 @@ fi
 # Replace the embedded bundle in one rename (write_bundle validates and swaps atomically).
 # bundle.json (and the graph's copy) also carry the leave-one-photographer-out figures.
 # With a gate choice, the thresholds are re-derived from the fitted one and the scales stamped beside
-# them, so the two agree even if choose_gate.py rewrote the choice while this script ran.
+# them, so the two agree even if choose_gate.py rewrote the choice while this script ran; with a
+# far-mass choice, its measure and held-out thresholds replace the fitted entropy gate.
 RESCALE=()
-if [ -f "$CV_DIR/$GATE_JSON" ]; then RESCALE=(--rescale-gate); fi
-"$PY" scripts/stamp_bundle.py "$SRC" "$OUT" --cv "$CV_DIR" --gate-json "$GATE_JSON" "${RESCALE[@]}"
+if [ -f "$CV_DIR/$STAMP_JSON" ]; then RESCALE=(--rescale-gate); fi
+"$PY" scripts/stamp_bundle.py "$SRC" "$OUT" --cv "$CV_DIR" --gate-json "$STAMP_JSON" "${RESCALE[@]}"

@@ -1,6 +1,6 @@
 """scripts/build_default_bundle.sh end to end on a tiny run: the held-out gate choice it reads
-(with VIEW_ZOOM, choose_gate.py --zoom's file), the schema-4 view zoom it exports, the scales
-stamped on the fitted threshold, and one error line without a run."""
+(with VIEW_ZOOM, choose_gate.py --zoom's file), the schema-4 view zoom it exports, the far-mass gate
+chosen held out stamped over the fitted one, and one error line without a run."""
 
 import json
 import os
@@ -32,7 +32,7 @@ def test_build_default_bundle_without_a_run_says_so_in_one_line(tmp_path):
 
 
 @pytest.mark.slow
-def test_build_default_bundle_exports_the_zoomed_view_with_the_held_out_gate_scales(tmp_path):
+def test_build_default_bundle_exports_the_zoomed_view_with_the_held_out_gate(tmp_path):
     data = make_tiny_dataset(tmp_path / "data", n_train=8, n_val=8)
     run = train(TrainConfig(data=str(data), out=str(tmp_path / "run"), backbone="mobilenet_v3_small", weights="none",
                             head="spatial", epochs=1, batch_size=4, input_size=(48, 64), fit="letterbox",
@@ -45,16 +45,18 @@ def test_build_default_bundle_exports_the_zoomed_view_with_the_held_out_gate_sca
     # the un-zoomed choice must not be the one taken
     (cv / "gate_mirror.json").write_text(json.dumps(_gate(2.0) | {"portrait": _gate(2.0)}))
     (cv / "gate_mirror_zoom1.3.json").write_text(json.dumps(_gate(0.5) | {"portrait": _gate(0.75)}))
+    fm = lambda t: _gate(t / 0.01) | {"measure": "far_mass", "threshold": t}   # noqa: E731  (choose_gate.py --measure)
+    (cv / "gate_mirror_zoom1.3_far_mass.json").write_text(json.dumps(fm(0.007) | {"portrait": fm(0.015)}))
     out = tmp_path / "bundle"
     r = _build(tmp_path, RUN=str(run), DATA=str(data), OUT=str(out), CV_DIR=str(cv), VIEW_ZOOM="1.3", SAMPLES="4")
     assert r.returncode == 0, r.stderr
     assert "gate threshold scale: landscape 0.5, portrait 0.75" in r.stderr
     b = read_bundle(out)
     assert b.schema_version == 4 and b.geometry.view_crop and b.geometry.view_zoom == pytest.approx(1.3)
-    unc = b.calibration.uncertainty
-    assert unc.threshold == pytest.approx(0.5 * unc.fitted_threshold)
-    assert unc.portrait_threshold == pytest.approx(0.75 * unc.fitted_threshold)
-    assert b.metrics["gate_held_out"]["scale"] == 0.5 and b.metrics["gate_held_out"]["portrait"]["scale"] == 0.75
+    unc = b.calibration.uncertainty   # the far-mass gate chosen held out replaces the fitted entropy gate
+    assert "gate measure: far_mass" in r.stderr
+    assert (unc.measure, unc.threshold, unc.portrait_threshold, unc.fitted_threshold) == ("far_mass", 0.007, 0.015, None)
+    assert b.metrics["gate_held_out"]["threshold"] == 0.007 and b.metrics["gate_held_out"]["portrait"]["threshold"] == 0.015
     assert b.metrics["leave_one_photographer_out"]["accuracy"]["mean"] == 0.6
     q = b.metrics.get("int8_vs_fp32")   # int8 kept only within 1 point of fp32 and not slower, else fp32
     if q is None:
