@@ -9,6 +9,8 @@ clips whose goal is in view, measures the heading of the model's argmax strip (f
 of the beacon heard at the gate scales (the decision logic replayed, the fold's fitted threshold
 times ``--scale`` / ``--portrait-scale``) against the labelled strip's, both at the clip's camera FOV.
 ``--by-strip`` adds, per view and labelled strip, how often the beacon is on and confidently wrong.
+``--measure far_mass`` replays the far-mass gate instead (thresholds ``0.01 x --scale``, as
+``choose_gate.py --measure far_mass`` chose them).
 
     .venv/bin/python scripts/heading_error.py runs/res256 --also runs/res256_s1 --also runs/res256_s2 \
         --mirror --frames 100000 --portrait-frames 200 --portrait 3 --scale 0.8409 --portrait-scale 0.9576
@@ -22,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from choose_gate import add_also, finished_folds, fold_bundle, held_out_parser, view_tag  # noqa: E402
+from choose_gate import (FAR_MASS_REFERENCE, add_also, finished_folds, fold_bundle, held_out_parser,  # noqa: E402
+                         reference_threshold, view_tag)
 
 from crossing_assist.actions import N_BINS, bin_center_x, x_to_heading  # noqa: E402
 from crossing_assist.data_tools.augment import PORTRAIT_SETS  # noqa: E402
@@ -84,6 +87,8 @@ def main(argv=None) -> int:
     ap.add_argument("--scale", type=float, default=1.0, help="landscape gate threshold = the fold's fitted one x this")
     ap.add_argument("--portrait-scale", type=float, default=1.0, help="the same for portrait views")
     ap.add_argument("--by-strip", action="store_true", help="also the beacon per labelled strip, each view")
+    ap.add_argument("--measure", choices=("far_mass",), help="the gate replayed with this measure, as choose_gate.py "
+                    "--measure: thresholds are the scales x its reference, not x the fold's fitted one")
     a = ap.parse_args(argv)
     from crossing_assist.runtime.engine import Engine
 
@@ -93,14 +98,14 @@ def main(argv=None) -> int:
     for cv in (a.cv, *a.also):
         for fold, source in finished_folds(cv):
             engine = Engine(fold_bundle(fold, source, ptl, a.mirror), threads=1)
-            t0 = engine.decision_config().threshold
+            t0 = reference_threshold(engine, a.measure)
             for view in views:
                 n = a.frames if view == "landscape" or a.portrait_frames is None else a.portrait_frames
                 path = fold / f"listened{view_tag(a.mirror, n, a.seed, view, a.portrait)}.npz"
                 if not path.is_file():
                     print(f"error: {path} missing: run scripts/choose_gate.py {cv} with the same draw first", file=sys.stderr)
                     return 2
-                lis, extra = Listener.load(engine, path)
+                lis, extra = Listener.load(engine, path, a.measure)
                 scale = a.scale if view == "landscape" else a.portrait_scale
                 pooled[view].append(view_errors(lis, extra["in_view"].tolist(), scale * t0))
                 print(f"{cv} {source} {view}: {len(pooled[view][-1]['right'])} clips, goal in view", file=sys.stderr, flush=True)
@@ -108,7 +113,8 @@ def main(argv=None) -> int:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
     print(f"goal in view; heading errors in degrees against the labelled strip's centre, mean / p90 / share >= {FAR_DEG:g} deg; "
-          f"heard at the fitted threshold x {a.scale:g} (landscape), x {a.portrait_scale:g} (portrait)\n")
+          + (f"heard with far mass <= {a.scale * FAR_MASS_REFERENCE:.4g} (landscape), {a.portrait_scale * FAR_MASS_REFERENCE:.4g} (portrait)\n"
+             if a.measure else f"heard at the fitted threshold x {a.scale:g} (landscape), x {a.portrait_scale:g} (portrait)\n"))
     print("| view | clips | camera FOV (a strip) | accuracy | model: error | beacon on | heard: error |")
     print("|---|---:|---|---:|---|---:|---|")
     merged = {v: {k: np.concatenate([f[k] for f in pooled[v]]) for k in pooled[v][0]} for v in views if pooled[v]}
