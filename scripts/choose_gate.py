@@ -26,7 +26,10 @@ portrait views too. ``--grid 16`` sweeps twice as many scales as crossing-eval (
 a curve that jumps between neighbouring scales. ``--zoom Z`` is for models trained with
 ``crossing-train --field-zoom``: the portrait views are shown magnified up to Z instead of at the
 training scale, as ``crossing-export --view-zoom Z`` bundles show them (:func:`magnify_view_crop`),
-cached and written apart.
+cached and written apart. ``--measure far_mass`` replays the saved plays with the far-mass gate (the
+probability beyond one strip of the argmax) at absolute thresholds, ``FAR_MASS_REFERENCE`` (0.01) x
+the scales (the folds' records carry it as ``threshold``), written to ``gate…_far_mass.json``, which
+``scripts/stamp_bundle.py --rescale-gate`` and ``scripts/build_default_bundle.sh`` stamp.
 
     .venv/bin/python scripts/choose_gate.py runs/default/cv --ptl runs/data/ptl --neg runs/data/neg \
         --used-neg runs/data/neg_half --frames 200 --portrait 3
