@@ -205,12 +205,14 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
             engine = Engine(bundle, threads=1)
             geometry = magnify_view_crop(engine, zoom)
         heard = fold / f"listened{draw}.npz"
+        lis = None
         if not heard.is_file():
             lis, in_view = listen(engine, view, ptl, neg, held_out_rows(ptl, neg, source, used, n, seed), portrait,
                                   geometry)
             lis.save(heard, in_view=np.asarray(in_view, np.int64))
-        lis, extra = Listener.load(engine, heard, measure)
-        in_view = extra["in_view"].tolist()
+        if lis is None or measure:   # listened before, or another measure: recomputed from the saved probabilities
+            lis, extra = Listener.load(engine, heard, measure)
+            in_view = extra["in_view"].tolist()
         t0 = reference_threshold(engine, measure)
         labels = np.asarray(lis.labels)
         result = {"source": source, "view": view, "measure": measure or engine.measure, "threshold": t0,

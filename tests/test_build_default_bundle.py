@@ -14,7 +14,7 @@ from crossing_assist.bundle import read_bundle
 from crossing_assist.models.config import TrainConfig
 from crossing_assist.models.train import train
 from test_models_train import make_tiny_dataset
-from test_stamp_bundle import _gate   # a choose_gate.py result at one scale
+from test_stamp_bundle import _far_mass_gate, _gate   # choose_gate.py results at one scale / far-mass threshold
 
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "build_default_bundle.sh"
 
@@ -45,8 +45,7 @@ def test_build_default_bundle_exports_the_zoomed_view_with_the_held_out_gate(tmp
     # the un-zoomed choice must not be the one taken
     (cv / "gate_mirror.json").write_text(json.dumps(_gate(2.0) | {"portrait": _gate(2.0)}))
     (cv / "gate_mirror_zoom1.3.json").write_text(json.dumps(_gate(0.5) | {"portrait": _gate(0.75)}))
-    fm = lambda t: _gate(t / 0.01) | {"measure": "far_mass", "threshold": t}   # noqa: E731  (choose_gate.py --measure)
-    (cv / "gate_mirror_zoom1.3_far_mass.json").write_text(json.dumps(fm(0.007) | {"portrait": fm(0.015)}))
+    (cv / "gate_mirror_zoom1.3_far_mass.json").write_text(json.dumps(_far_mass_gate(0.007) | {"portrait": _far_mass_gate(0.015)}))
     out = tmp_path / "bundle"
     r = _build(tmp_path, RUN=str(run), DATA=str(data), OUT=str(out), CV_DIR=str(cv), VIEW_ZOOM="1.3", SAMPLES="4")
     assert r.returncode == 0, r.stderr

@@ -25,6 +25,11 @@ def _gate(scale: float) -> dict:
             "at_scale": point, "at_fitted_threshold": point}
 
 
+def _far_mass_gate(threshold: float) -> dict:
+    """A choose_gate.py --measure far_mass result at one absolute threshold (0.01 x its scale)."""
+    return _gate(threshold / 0.01) | {"measure": "far_mass", "threshold": threshold}
+
+
 @pytest.fixture
 def shipped(tmp_path):
     """A letterboxed schema-2-style bundle (no view crop) whose landscape threshold 0.5 is its
@@ -139,7 +144,7 @@ def test_stamp_sets_the_far_mass_gate_chosen_held_out(shipped, tmp_path):
     from crossing_assist.runtime.engine import Engine
 
     src, cv = shipped
-    fm = lambda t: _gate(t / 0.01) | {"measure": "far_mass", "threshold": t}   # noqa: E731
+    fm = _far_mass_gate
     (cv / "gate_far_mass.json").write_text(json.dumps(fm(0.007) | {"portrait": fm(0.015), "portrait_window": fm(0.015)}))
     r = _stamp(src, tmp_path / "out", "--cv", cv, "--rescale-gate", "--gate-json", "gate_far_mass.json")
     assert r.returncode == 0, r.stderr

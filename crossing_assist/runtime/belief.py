@@ -146,6 +146,11 @@ def far_mass(p: np.ndarray) -> float:
     return float(max(0.0, 1.0 - p[max(1, a - 1):min(len(p) - 1, a + 1) + 1].sum()))
 
 
+#: The gate measures a probability vector gives (a frame's ``probs`` or the belief in the action
+#: space), by name: the belief is gated with the frames' measure when it is one of these.
+PROBS_MEASURES = {"entropy": entropy, "far_mass": far_mass}
+
+
 def belief_heading(b: np.ndarray, space: ActionSpace, fov_deg: float) -> tuple[int, float | None]:
     """The belief's most probable action (first on ties) and its heading in degrees.
 

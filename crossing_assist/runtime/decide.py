@@ -24,8 +24,6 @@ REASON_OK = "ok"
 REASON_UNCERTAIN = "uncertain"
 REASON_STALE = "stale"
 REASON_FAILED = "failed"
-#: Measures that read a probability vector, so the belief is gated with the frames' measure and threshold.
-BELIEF_MEASURES = ("entropy", "far_mass")
 
 
 @dataclass(frozen=True)
@@ -70,13 +68,12 @@ class DecisionConfig:
         """Threshold for the belief's uncertainty (:meth:`learner_uncertainty`): the bundle's, when
         its measure reads a probability vector (entropy, far_mass), else the gate's
         ``belief_entropy_threshold`` (nats)."""
-        return self.threshold if self.measure in BELIEF_MEASURES else self.gate.belief_entropy_threshold
+        return self.threshold if self.measure in bf.PROBS_MEASURES else self.gate.belief_entropy_threshold
 
     def learner_uncertainty(self, belief: np.ndarray, space: ActionSpace) -> float:
-        """The belief's uncertainty, summed into the action space: its far mass when the bundle's
-        measure is ``far_mass``, else its entropy (nats)."""
-        p = space.bin_probs_to_action_probs(belief)
-        return bf.far_mass(p) if self.measure == "far_mass" else bf.entropy(p)
+        """The belief's uncertainty, summed into the action space: the bundle's measure when a
+        probability vector gives it (entropy, far_mass), else its entropy (nats)."""
+        return bf.PROBS_MEASURES.get(self.measure, bf.entropy)(space.bin_probs_to_action_probs(belief))
 
 
 @dataclass(frozen=True)

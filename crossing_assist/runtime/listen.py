@@ -25,8 +25,8 @@ import numpy as np
 from crossing_assist.actions import UNKNOWN, heading_to_x, x_to_bin, x_to_heading
 from crossing_assist.fileio import atomic_path
 from crossing_assist.geometry import ORIENTATIONS
-from crossing_assist.runtime.belief import entropy, far_mass
-from crossing_assist.runtime.decide import BELIEF_MEASURES, Decider, DecisionConfig
+from crossing_assist.runtime.belief import PROBS_MEASURES
+from crossing_assist.runtime.decide import Decider, DecisionConfig
 from crossing_assist.runtime.engine import Engine, Prediction
 
 WRONG_STRIPS = 2     # >= this many strips off with the beacon on: confidently wrong
@@ -159,13 +159,13 @@ class Listener:
         ``measure``: replay the gate with this measure instead of the bundle's, recomputed from
         the saved probabilities (``entropy`` or ``far_mass``: the measures a probability vector
         gives; MC-dropout spreads are not saved)."""
-        if measure is not None and measure not in BELIEF_MEASURES:
-            raise ValueError(f"cannot replay measure {measure!r} from saved probabilities; valid: {', '.join(BELIEF_MEASURES)}")
+        if measure is not None and measure not in PROBS_MEASURES:
+            raise ValueError(f"cannot replay measure {measure!r} from saved probabilities; valid: {', '.join(PROBS_MEASURES)}")
         with np.load(path) as z:
             lis = cls(engine, float(z["seconds"]), float(z["fps"]), measure)
             d = {k: z[k] for k in z.files}
         if measure is not None:
-            of = entropy if measure == "entropy" else far_mass
+            of = PROBS_MEASURES[measure]
             d["uncertainty"] = np.apply_along_axis(lambda p: of(p) if np.all(np.isfinite(p)) else math.inf, 2, d["probs"])
         for k, label in enumerate(d["labels"]):
             lis.clips.append([

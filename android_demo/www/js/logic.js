@@ -147,13 +147,12 @@ export function farMass(probs) {
   return Math.max(0, 1 - near);
 }
 
-/** Measures that read a probability vector: the belief is gated with the frames' measure and threshold. */
-export const BELIEF_MEASURES = ['entropy', 'far_mass'];
+/** The gate measures a probability vector gives, by name (belief.PROBS_MEASURES): the belief is gated with the frames' measure when it is one. */
+export const PROBS_MEASURES = { entropy, far_mass: farMass };
 
 /** The belief's uncertainty in the action space (DecisionConfig.learner_uncertainty). */
 export function beliefUncertainty(b, groups, measure) {
-  const p = binProbsToActionProbs(b, groups);
-  return measure === 'far_mass' ? farMass(p) : entropy(p);
+  return (Object.hasOwn(PROBS_MEASURES, measure) ? PROBS_MEASURES[measure] : entropy)(binProbsToActionProbs(b, groups));
 }
 
 function argmax(values) {
@@ -268,7 +267,7 @@ export class Decider {
     this.groups = spaceGroups(this.cfg.n_actions);
     this.lookup = new Array(N_STATES).fill(0);
     this.groups.forEach((g, a) => g.forEach((k) => { this.lookup[k] = a; }));
-    const learnerThreshold = BELIEF_MEASURES.includes(this.cfg.measure) ? this.cfg.threshold : this.cfg.gate.belief_entropy_threshold;
+    const learnerThreshold = Object.hasOwn(PROBS_MEASURES, this.cfg.measure) ? this.cfg.threshold : this.cfg.gate.belief_entropy_threshold;
     this.cFrame = this.cfg.gate.saturation / this.cfg.threshold;
     this.cLearner = this.cfg.gate.saturation / learnerThreshold;
     this.reset();
