@@ -42,7 +42,7 @@ from crossing_assist import __version__
 from crossing_assist.actions import DEFAULT_FOV_DEG, VALID_SPACES, ActionSpace, get_space
 from crossing_assist.errors import UserError
 from crossing_assist.errors import short_repr as _short  # one cut-to-length repr for every error line
-from crossing_assist.geometry import FITS, SENSOR_ASPECT_RANGE, VIEW_ZOOM_RANGE, Geometry, GeometryError, check_fov
+from crossing_assist.geometry import FITS, FOV_RANGE_DEG, SENSOR_ASPECT_RANGE, VIEW_ZOOM_RANGE, Geometry, GeometryError, check_fov
 
 SCHEMA_VERSION = 4
 READABLE_SCHEMAS = (1, 2, 3, 4)
@@ -144,28 +144,40 @@ class UncertaintySpec:
     gate's coefficient should be about one half, for landscape frames; ``portrait_threshold``
     the same for portrait frames (optional; absent = ``threshold``). A portrait strip is narrower
     (0.56 of a landscape one with a 3:4 frame on a 4:3 canvas), so the same doubt in degrees
-    spreads over more strips and reads as a higher entropy. ``fitted_threshold`` (optional,
-    informative): the threshold as fitted on the calibration frames, before the held-out scales
-    (``scripts/choose_gate.py``) made ``threshold`` and ``portrait_threshold``; tools that re-scale
-    the gate start from it (``scripts/stamp_bundle.py --rescale-gate``)."""
+    spreads over more strips and reads as a higher entropy. ``narrow_threshold`` (optional, with
+    ``narrow_fov_deg``): the threshold for portrait frames whose camera sees at most
+    ``narrow_fov_deg`` across (e.g. 9:16 portrait video, ~41 deg), whose central goals spread over
+    neighbouring strips; older readers ignore it and give such frames the stricter
+    ``portrait_threshold``. ``fitted_threshold`` (optional, informative): the threshold as fitted
+    on the calibration frames, before the held-out scales (``scripts/choose_gate.py``) made
+    ``threshold`` and ``portrait_threshold``; tools that re-scale the gate start from it
+    (``scripts/stamp_bundle.py --rescale-gate``)."""
 
     measure: str
     threshold: float
     portrait_threshold: float | None = None
     fitted_threshold: float | None = None
+    narrow_threshold: float | None = None
+    narrow_fov_deg: float | None = None
 
-    def threshold_for(self, orientation: str) -> float:
-        """The threshold for frames of this orientation (``landscape`` or ``portrait``)."""
-        if orientation == "portrait" and self.portrait_threshold is not None:
-            return self.portrait_threshold
-        return self.threshold
+    def __post_init__(self) -> None:
+        if (self.narrow_threshold is None) != (self.narrow_fov_deg is None):
+            raise ValueError("narrow_threshold and narrow_fov_deg go together")
+
+    def threshold_for(self, orientation: str, fov_deg: float | None = None) -> float:
+        """The threshold for frames of this orientation (``landscape`` or ``portrait``) from a
+        camera ``fov_deg`` across (None: the orientation's own threshold)."""
+        if orientation != "portrait":
+            return self.threshold
+        if self.narrow_threshold is not None and fov_deg is not None and fov_deg <= self.narrow_fov_deg:
+            return self.narrow_threshold
+        return self.threshold if self.portrait_threshold is None else self.portrait_threshold
 
     def to_json(self) -> dict:
         d = {"measure": self.measure, "threshold": self.threshold}
-        if self.portrait_threshold is not None:
-            d["portrait_threshold"] = self.portrait_threshold
-        if self.fitted_threshold is not None:
-            d["fitted_threshold"] = self.fitted_threshold
+        for k in ("portrait_threshold", "narrow_threshold", "narrow_fov_deg", "fitted_threshold"):
+            if getattr(self, k) is not None:
+                d[k] = getattr(self, k)
         return d
 
 
@@ -326,6 +338,9 @@ def _parse_calibration(d: Any) -> Calibration:
         n_frames=_int(_get(c, "n_frames", "calibration.conformal"), "calibration.conformal.n_frames", 0),
     )
     u = _get(d, "uncertainty", "calibration")
+    if isinstance(u, Mapping) and (u.get("narrow_threshold") is None) != (u.get("narrow_fov_deg") is None):
+        raise BundleError("bundle.json: calibration.uncertainty.narrow_threshold and narrow_fov_deg go together; "
+                          "set both or neither")
     unc = UncertaintySpec(
         measure=_choice(_get(u, "measure", "calibration.uncertainty"), "calibration.uncertainty.measure",
                         UNCERTAINTY_MEASURES),
@@ -335,6 +350,10 @@ def _parse_calibration(d: Any) -> Calibration:
         _num(u["portrait_threshold"], "calibration.uncertainty.portrait_threshold", 0.0, 1e6, lo_open=True),
         fitted_threshold=None if u.get("fitted_threshold") is None else
         _num(u["fitted_threshold"], "calibration.uncertainty.fitted_threshold", 0.0, 1e6, lo_open=True),
+        narrow_threshold=None if u.get("narrow_threshold") is None else
+        _num(u["narrow_threshold"], "calibration.uncertainty.narrow_threshold", 0.0, 1e6, lo_open=True),
+        narrow_fov_deg=None if u.get("narrow_fov_deg") is None else
+        _num(u["narrow_fov_deg"], "calibration.uncertainty.narrow_fov_deg", *FOV_RANGE_DEG),
     )
     return Calibration(temperature=temp, conformal=conformal, uncertainty=unc)
 

@@ -107,6 +107,15 @@ fi
 # With a gate choice, the thresholds are re-derived from the fitted one and the scales stamped beside
 # them, so the two agree even if choose_gate.py rewrote the choice while this script ran; with a
 # far-mass choice, its measure and held-out thresholds replace the fitted entropy gate.
+# A narrow camera (portrait frames at most NARROW_FOV degrees across, e.g. 9:16 video at ~41)
+# takes the threshold chosen on the 3:4 windows when that choice met the targets (NARROW_FOV=
+# for none; docs/runtime.md, "A narrow camera's threshold").
+NARROW_FOV=${NARROW_FOV-42}
 RESCALE=()
-if [ -f "$CV_DIR/$STAMP_JSON" ]; then RESCALE=(--rescale-gate); fi
+if [ -f "$CV_DIR/$STAMP_JSON" ]; then
+    RESCALE=(--rescale-gate)
+    if [ -n "$NARROW_FOV" ] && "$PY" -c "import json,sys; sys.exit(not json.load(open(sys.argv[1])).get('portrait_window', {}).get('targets_met'))" "$CV_DIR/$STAMP_JSON"; then
+        RESCALE+=(--narrow-fov "$NARROW_FOV")
+    fi
+fi
 "$PY" scripts/stamp_bundle.py "$SRC" "$OUT" --cv "$CV_DIR" --gate-json "$STAMP_JSON" "${RESCALE[@]}"

@@ -7,7 +7,8 @@ error is more strips off on a narrower camera. This script reads the predictions
 ``scripts/choose_gate.py`` saved in each fold (``listened…npz``; no model runs) and, over the
 clips whose goal is in view, measures the heading of the model's argmax strip (first frame) and
 of the beacon heard at the gate scales (the decision logic replayed, the fold's fitted threshold
-times ``--scale`` / ``--portrait-scale``) against the labelled strip's, both at the clip's camera FOV.
+times ``--scale`` / ``--portrait-scale``; ``--window-scale`` for the 3:4 windows, as a bundle with
+a narrow camera's threshold gates them) against the labelled strip's, both at the clip's camera FOV.
 ``--by-strip`` adds, per view and labelled strip, how often the beacon is on and confidently wrong.
 ``--measure far_mass`` replays the far-mass gate instead (thresholds ``0.01 x --scale``, as
 ``choose_gate.py --measure far_mass`` chose them).
@@ -86,11 +87,16 @@ def main(argv=None) -> int:
     ap.add_argument("--portrait-frames", type=int, metavar="N", help="the portrait draw's photos a fold (default: --frames)")
     ap.add_argument("--scale", type=float, default=1.0, help="landscape gate threshold = the fold's fitted one x this")
     ap.add_argument("--portrait-scale", type=float, default=1.0, help="the same for portrait views")
+    ap.add_argument("--window-scale", type=float, metavar="S", help="the same for the 3:4 windows, as a bundle with a "
+                    "narrow camera's threshold gates them (default: --portrait-scale)")
     ap.add_argument("--by-strip", action="store_true", help="also the beacon per labelled strip, each view")
     ap.add_argument("--measure", choices=("far_mass",), help="the gate replayed with this measure, as choose_gate.py "
                     "--measure: thresholds are the scales x its reference, not x the fold's fitted one")
     a = ap.parse_args(argv)
     from crossing_assist.runtime.engine import Engine
+
+    window = a.portrait_scale if a.window_scale is None else a.window_scale
+    scales = {"landscape": a.scale, "portrait": a.portrait_scale, "portrait_window": window}
 
     ptl = read_manifest(a.ptl)
     views = ("landscape", *(PORTRAIT_SETS if a.portrait else ()))
@@ -106,15 +112,17 @@ def main(argv=None) -> int:
                     print(f"error: {path} missing: run scripts/choose_gate.py {cv} with the same draw first", file=sys.stderr)
                     return 2
                 lis, extra = Listener.load(engine, path, a.measure)
-                scale = a.scale if view == "landscape" else a.portrait_scale
+                scale = scales[view]
                 pooled[view].append(view_errors(lis, extra["in_view"].tolist(), scale * t0))
                 print(f"{cv} {source} {view}: {len(pooled[view][-1]['right'])} clips, goal in view", file=sys.stderr, flush=True)
     if not any(pooled.values()):
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
     print(f"goal in view; heading errors in degrees against the labelled strip's centre, mean / p90 / share >= {FAR_DEG:g} deg; "
-          + (f"heard with far mass <= {a.scale * FAR_MASS_REFERENCE:.4g} (landscape), {a.portrait_scale * FAR_MASS_REFERENCE:.4g} (portrait)\n"
-             if a.measure else f"heard at the fitted threshold x {a.scale:g} (landscape), x {a.portrait_scale:g} (portrait)\n"))
+          + (f"heard with far mass <= {a.scale * FAR_MASS_REFERENCE:.4g} (landscape), {a.portrait_scale * FAR_MASS_REFERENCE:.4g} "
+             f"(portrait), {window * FAR_MASS_REFERENCE:.4g} (3:4 window)\n"
+             if a.measure else f"heard at the fitted threshold x {a.scale:g} (landscape), x {a.portrait_scale:g} (portrait), "
+             f"x {window:g} (3:4 window)\n"))
     print("| view | clips | camera FOV (a strip) | accuracy | model: error | beacon on | heard: error |")
     print("|---|---:|---|---:|---|---:|---|")
     merged = {v: {k: np.concatenate([f[k] for f in pooled[v]]) for k in pooled[v][0]} for v in views if pooled[v]}

@@ -52,7 +52,7 @@ def main(argv=None) -> int:
         for name, eng, img, lab in (("landscape", crop, land, lab_l), ("portrait, whole frame", whole, port, lab_p),
                                     ("portrait, view crop", crop, port, lab_p)):
             p = eng.predict(img)          # the bundle's default FOV per orientation: the ratio of this camera's
-            thr = eng.decision_config(p.orientation).threshold
+            thr = eng.decision_config(p.orientation, p.fov_deg).threshold
             rows[name].append((p.action, lab, p.ok and p.action != 0 and p.uncertainty <= thr))
     print(f"{len(rows['landscape'])} synthetic corners with the goal in view both ways ({a.bundle})")
     print("| view | accuracy | bin MAE | beacon on | confidently wrong |\n|---|---|---|---|---|")

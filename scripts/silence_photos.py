@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"| {name} | {'ON' if h.on else 'off'} | failed: {last.error} | |")
             continue
         says = f"unknown (p {last.probs[UNKNOWN]:.2f})" if last.action == UNKNOWN else f"strip {last.action}"
-        thr = engine.decision_config(last.orientation or "landscape").threshold
+        thr = engine.decision_config(last.orientation or "landscape", last.fov_deg).threshold
         margins.append(float("nan") if last.action == UNKNOWN else last.uncertainty - thr)
         print(f"| {name} | {'ON, strip ' + str(h.strip) if h.on else 'off'} | {says}, {engine.measure} "
               f"{last.uncertainty:.3f} | {'' if np.isnan(margins[-1]) else format(margins[-1], '+.3f')} |")

@@ -3,7 +3,7 @@ geometry schema) into its bundle.json and the graph's embedded copy, writing a n
 atomically. The graph itself is left as it is.
 
     .venv/bin/python scripts/stamp_bundle.py SRC OUT --cv runs/default/cv --gate-json gate_mirror.json
-        [--rescale-gate] [--view-crop] [--sensor-aspect 4:3]
+        [--rescale-gate [--narrow-fov 45]] [--view-crop] [--sensor-aspect 4:3]
 
 * Always: ``metrics.leave_one_photographer_out`` from ``CV/cv.json`` (the folds' checkpoints),
   ``metrics.leave_one_photographer_out_bundle`` from ``CV/cv_bundles_mirror.json`` (the folds'
@@ -15,7 +15,10 @@ atomically. The graph itself is left as it is.
   thresholds instead (absolute: no fitted threshold to scale). The fitted threshold is the bundle's
   ``calibration.uncertainty.fitted_threshold`` (bundles exported before it was recorded: their
   landscape threshold over their recorded held-out scale), so a shipped bundle takes new held-out
-  scales without a re-export.
+  scales without a re-export. With ``--narrow-fov DEG`` the threshold chosen on the 3:4 windows
+  (``portrait_window``: a ~41 deg camera, what 9:16 portrait video gives) becomes
+  ``narrow_threshold``, for portrait frames at most DEG across (``narrow_fov_deg``); without it a
+  rescaled bundle has none.
 * ``--view-crop``: upgrade a letterbox bundle to the current schema with ``geometry.view_crop``
   (consumers crop rows beyond the training camera's view, crossing_assist/geometry.py): right for
   models trained on windows of the training photos at their own scale, as the default is.
@@ -39,7 +42,7 @@ import onnx
 
 from crossing_assist.bundle import BundleError, read_bundle, write_bundle
 from crossing_assist.export.graph import model_bytes, set_metadata
-from crossing_assist.geometry import GeometryError, check_sensor_aspect, parse_ratio
+from crossing_assist.geometry import FOV_RANGE_DEG, GeometryError, check_sensor_aspect, parse_ratio
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from choose_gate import tag  # noqa: E402  (a sibling script: the file-name suffix of mirror-TTA measurements)
@@ -51,6 +54,11 @@ def summary(g: dict) -> dict:
                               "accuracy_goal_in_view", "pooled_runs") if k in g} | {
         "at_scale": {k: v for k, v in g["at_scale"].items() if k != "per_fold"},
         "at_fitted_threshold": {k: v for k, v in g["at_fitted_threshold"].items() if k != "per_fold"}}
+
+
+def narrow(fov_deg: float | None, threshold: float | None) -> dict:
+    """The narrow camera's threshold fields of ``calibration.uncertainty`` (none without ``fov_deg``)."""
+    return {} if fov_deg is None else {"narrow_threshold": threshold, "narrow_fov_deg": fov_deg}
 
 
 def _number_or_ratio(text: str) -> float | str:
@@ -68,10 +76,17 @@ def main(argv=None) -> int:
     ap.add_argument("--cv", type=Path, required=True, help="the --cv source run folder")
     ap.add_argument("--gate-json", default="gate.json", help="choose_gate.py's result in CV")
     ap.add_argument("--rescale-gate", action="store_true", help="thresholds = fitted x the held-out scales")
+    ap.add_argument("--narrow-fov", type=float, metavar="DEG",
+                    help="with --rescale-gate: portrait frames at most DEG across take the threshold chosen on the "
+                         "3:4 windows (calibration.uncertainty.narrow_threshold, narrow_fov_deg)")
     ap.add_argument("--view-crop", action="store_true", help="current schema, geometry.view_crop true")
     ap.add_argument("--sensor-aspect", metavar="X", help="geometry.sensor_aspect = X (long / short side of the "
                     "sensor camera_fov_deg describes, 1..3; a number or a ratio such as 4:3)")
     a = ap.parse_args(argv)
+    if a.narrow_fov is not None and not a.rescale_gate:
+        ap.error("--narrow-fov needs --rescale-gate")
+    if a.narrow_fov is not None and not FOV_RANGE_DEG[0] <= a.narrow_fov <= FOV_RANGE_DEG[1]:
+        ap.error(f"--narrow-fov {a.narrow_fov:g}: valid {FOV_RANGE_DEG[0]:g}..{FOV_RANGE_DEG[1]:g} degrees")
     try:
         aspect = None if a.sensor_aspect is None else check_sensor_aspect(_number_or_ratio(a.sensor_aspect))
     except GeometryError as exc:
@@ -98,10 +113,17 @@ def main(argv=None) -> int:
     if gate_path.is_file():
         g = json.loads(gate_path.read_text())
         meta["metrics"]["gate_held_out"] = summary(g) | {k: summary(g[k]) for k in ("portrait", "portrait_window") if k in g}
+        window = g.get("portrait_window")
+        if a.narrow_fov is not None and not (window and window.get("targets_met")):
+            print(f"error: --narrow-fov: {gate_path} has no 3:4-window choice that meets the targets "
+                  "(run scripts/choose_gate.py with --portrait)", file=sys.stderr)
+            return 2
         if a.rescale_gate and "threshold" in g:   # choose_gate.py --measure: absolute thresholds of that measure
-            views = {"landscape": g, **{k: g[k] for k in ("portrait",) if k in g}}
+            views = {"landscape": g, **{k: g[k] for k in ("portrait",) if k in g},
+                     **({f"portrait frames at most {a.narrow_fov:g} deg": window} if a.narrow_fov is not None else {})}
             meta["calibration"]["uncertainty"] = {"measure": g["measure"], "threshold": g["threshold"],
-                                                  **({"portrait_threshold": g["portrait"]["threshold"]} if "portrait" in g else {})}
+                                                  **({"portrait_threshold": g["portrait"]["threshold"]} if "portrait" in g else {}),
+                                                  **narrow(a.narrow_fov, window and window["threshold"])}
             stamped.append(f"gate measure {g['measure']}, held-out thresholds "
                            + ", ".join(f"{v['threshold']:.4g} ({k})" for k, v in views.items()))
         elif a.rescale_gate:
@@ -121,8 +143,13 @@ def main(argv=None) -> int:
             unc["threshold"] = fitted * g["scale"]
             if "portrait" in g:
                 unc["portrait_threshold"] = fitted * g["portrait"]["scale"]
+            for k in ("narrow_threshold", "narrow_fov_deg"):   # a rescaled gate keeps no stale narrow threshold
+                unc.pop(k, None)
+            unc.update(narrow(a.narrow_fov, window and fitted * window["scale"]))
             stamped.append(f"gate thresholds = fitted {fitted:.4f} x held-out scales {g['scale']:.4f} (landscape), "
-                           f"{g.get('portrait', {}).get('scale', 'unchanged')} (portrait)")
+                           f"{g.get('portrait', {}).get('scale', 'unchanged')} (portrait)"
+                           + (f", {window['scale']:.4f} (portrait frames at most {a.narrow_fov:g} deg)"
+                              if a.narrow_fov is not None else ""))
     elif a.rescale_gate:
         print(f"error: {gate_path} not found (run scripts/choose_gate.py {a.cv})", file=sys.stderr)
         return 2

@@ -45,7 +45,8 @@ def test_build_default_bundle_exports_the_zoomed_view_with_the_held_out_gate(tmp
     # the un-zoomed choice must not be the one taken
     (cv / "gate_mirror.json").write_text(json.dumps(_gate(2.0) | {"portrait": _gate(2.0)}))
     (cv / "gate_mirror_zoom1.3.json").write_text(json.dumps(_gate(0.5) | {"portrait": _gate(0.75)}))
-    (cv / "gate_mirror_zoom1.3_far_mass.json").write_text(json.dumps(_far_mass_gate(0.007) | {"portrait": _far_mass_gate(0.015)}))
+    (cv / "gate_mirror_zoom1.3_far_mass.json").write_text(json.dumps(_far_mass_gate(0.007) | {
+        "portrait": _far_mass_gate(0.015), "portrait_window": _far_mass_gate(0.038)}))
     out = tmp_path / "bundle"
     r = _build(tmp_path, RUN=str(run), DATA=str(data), OUT=str(out), CV_DIR=str(cv), VIEW_ZOOM="1.3", SAMPLES="4")
     assert r.returncode == 0, r.stderr
@@ -55,6 +56,7 @@ def test_build_default_bundle_exports_the_zoomed_view_with_the_held_out_gate(tmp
     unc = b.calibration.uncertainty   # the far-mass gate chosen held out replaces the fitted entropy gate
     assert "gate measure: far_mass" in r.stderr
     assert (unc.measure, unc.threshold, unc.portrait_threshold, unc.fitted_threshold) == ("far_mass", 0.007, 0.015, None)
+    assert (unc.narrow_threshold, unc.narrow_fov_deg) == (0.038, 42.0)   # the windows' choice, NARROW_FOV's default
     assert b.metrics["gate_held_out"]["threshold"] == 0.007 and b.metrics["gate_held_out"]["portrait"]["threshold"] == 0.015
     assert b.metrics["leave_one_photographer_out"]["accuracy"]["mean"] == 0.6
     q = b.metrics.get("int8_vs_fp32")   # int8 kept only within 1 point of fp32 and not slower, else fp32

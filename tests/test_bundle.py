@@ -105,6 +105,29 @@ def test_the_writer_writes_schema2_with_geometry_and_portrait_threshold():
     assert json.loads(B.graph_metadata(meta)["bundle_json"]) == meta
 
 
+def test_a_narrow_cameras_threshold_round_trips_and_applies_to_narrow_portrait_frames_only():
+    """``narrow_threshold`` with ``narrow_fov_deg``: portrait frames at most that wide (9:16 video,
+    ~41 deg) take it, wider portrait frames the portrait threshold, landscape frames of any FOV
+    theirs; one without the other, or a FOV outside 20..170, is refused in one line."""
+    from crossing_assist import bundle as B
+
+    unc = B.UncertaintySpec("far_mass", 0.007, 0.015, narrow_threshold=0.038, narrow_fov_deg=45.0)
+    meta = B.make_meta(**_typed_parts(calibration=B.Calibration(1.0, B.ConformalSpec(0.9, 0.1, 5), unc)))
+    assert meta["calibration"]["uncertainty"] == {"measure": "far_mass", "threshold": 0.007, "portrait_threshold": 0.015,
+                                                  "narrow_threshold": 0.038, "narrow_fov_deg": 45.0}
+    got = B.parse_meta(meta, need_bytes=False).calibration.uncertainty
+    assert got == unc
+    assert [got.threshold_for("portrait", f) for f in (41.0, 45.0, 45.01, 53.0, None)] == [0.038, 0.038, 0.015, 0.015, 0.015]
+    assert got.threshold_for("landscape", 41.0) == 0.007
+    for change, msg in (({"narrow_fov_deg": None}, "narrow_threshold and narrow_fov_deg go together"),
+                        ({"narrow_fov_deg": 10}, "narrow_fov_deg = 10 is out of range"),
+                        ({"narrow_threshold": 0}, "narrow_threshold = 0")):
+        bad = json.loads(json.dumps(meta))
+        bad["calibration"]["uncertainty"].update(change)
+        with pytest.raises(B.BundleError, match=msg):
+            B.parse_meta(bad, need_bytes=False)
+
+
 def test_mirror_tta_is_written_only_when_on_and_read_back():
     """``mc.mirror``: absent (older bundles, and mirror off) reads as False."""
     from crossing_assist import bundle as B

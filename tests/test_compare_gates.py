@@ -37,6 +37,11 @@ def test_rows_read_each_view_at_its_thresholds_choice_and_windows_at_the_portrai
     assert "| portrait_window | entropy (gate.json) | 20.0 % (10.0 %) | 0.20 % (2 of 1000) |" in r.stdout
     assert "| portrait_window | far_mass (gate_far_mass.json) | 50.0 % (25.0 %) | 0.70 % (7 of 1000) |" in r.stdout
     assert (tmp_path / "c.png").stat().st_size > 1000
+    # --narrow: a window at its own choice (scale 1), as a bundle with a narrow camera's threshold gates it
+    r = subprocess.run([sys.executable, str(SCRIPT), a, b, "--narrow"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "| portrait_window | far_mass (gate_far_mass.json) | 20.0 % (10.0 %) | 0.20 % (2 of 1000) |" in r.stdout
+    assert "| portrait | far_mass (gate_far_mass.json) | 50.0 % (25.0 %) | 0.30 % (3 of 1000) |" in r.stdout
 
 
 def test_a_file_that_is_no_gate_choice_is_one_line(tmp_path):

@@ -189,6 +189,23 @@ def test_each_orientation_gets_its_own_gate_threshold(tmp_path, toy2):
     assert plain.decision_config("portrait").threshold == plain.decision_config("landscape").threshold == base
 
 
+def test_a_narrow_portrait_camera_gets_the_narrow_threshold(tmp_path, toy2):
+    """A bundle whose portrait threshold silences every frame and whose narrow camera's threshold
+    does not: portrait frames from a 41 deg camera (at most narrow_fov_deg) guide, the same
+    frames at the bundle's 53 deg stop, and landscape frames at 41 deg keep the landscape one."""
+    base = Engine(toy2).decision_config().threshold
+    folder = make_toy_bundle(tmp_path / "b", TOY2, threshold=1e-3, portrait_threshold=1e-3, narrow_threshold=base,
+                             narrow_fov_deg=42.0)
+    narrow = Pipeline(Engine(folder, fov_deg=41.0))
+    steps = _run(narrow, [_portrait()] * 10)
+    assert narrow.decider.cfg.threshold == base and steps[-1].cue.kind == KIND_BEACON
+    wide = Pipeline(Engine(folder))
+    assert all(s.cue.kind == KIND_STOP for s in _run(wide, [_portrait()] * 10))
+    assert wide.decider.cfg.threshold == 1e-3 and wide.decider.cfg.fov_deg == PORTRAIT_FOV
+    land = _run(narrow, [_landscape()] * 10, t0=1.0)
+    assert narrow.decider.cfg.threshold == 1e-3 and all(s.cue.kind == KIND_STOP for s in land)
+
+
 @pytest.mark.parametrize("bad", [-1.0, 0.0, "1.2", float("inf")])
 def test_a_bad_portrait_threshold_is_one_line(tmp_path, bad):
     from crossing_assist.bundle import read_bundle

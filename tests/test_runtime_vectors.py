@@ -72,8 +72,8 @@ def test_vectors_replay_from_json_alone(stored):
         d = Decider(_config(sc["config"]))
         now = None
         for row in sc["steps"]:
-            if "frame" in row:   # the FOV and gate threshold of the frame's orientation (version 3)
-                threshold = gate_threshold(sc["uncertainty"], *row["frame"])
+            if "frame" in row:   # the FOV and gate threshold of the frame's orientation and FOV (versions 3, 8)
+                threshold = gate_threshold(sc["uncertainty"], *row["frame"], row["fov_deg"])
                 assert threshold == row["threshold"]
                 if (row["fov_deg"], threshold) != now:   # the phone turned: a fresh Decider
                     now = (row["fov_deg"], threshold)
@@ -100,9 +100,23 @@ def test_vectors_replay_from_json_alone(stored):
     assert {("learner", "ok"), ("hold", "ok"), ("stop", "uncertain"), ("stop", "stale"), ("stop", "failed")} <= kinds
 
 
+def test_narrow_camera_vectors_speak_only_at_the_narrow_threshold(stored):
+    """Version 8: 9:16 portrait video (~41 deg, at most narrow_fov_deg) gets narrow_threshold,
+    a 3:4 frame (53 deg) the portrait one and landscape its own; frames whose doubt lies between
+    the portrait and the narrow thresholds are guided only while the video is 9:16."""
+    sc = next(sc for sc in stored["scenarios"] if sc["name"] == "narrow_threshold_9x16_video")
+    unc = sc["uncertainty"]
+    by_frame = {tuple(r["frame"]): r["threshold"] for r in sc["steps"]}
+    assert by_frame == {(1080, 1920): unc["narrow_threshold"], (480, 640): unc["portrait_threshold"],
+                        (1920, 1080): unc["threshold"]}
+    assert all(unc["portrait_threshold"] < r["obs"]["uncertainty"] < unc["narrow_threshold"] for r in sc["steps"])
+    guided = {(tuple(r["frame"]), not r["expect"]["stop"]) for i, r in enumerate(sc["steps"]) if i % 30 >= 10}
+    assert guided == {((1080, 1920), True), ((480, 640), False), ((1920, 1080), False)}
+
+
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == 7
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == 8
     assert "decision steps" in capsys.readouterr().out
 
 

@@ -157,3 +157,38 @@ def test_stamp_sets_the_far_mass_gate_chosen_held_out(shipped, tmp_path):
     assert (cfg.measure, cfg.threshold, cfg.learner_threshold) == ("far_mass", 0.015, 0.015)
     r = _stamp(tmp_path / "out", tmp_path / "again", "--cv", cv, "--rescale-gate")
     assert r.returncode == 2 and "gates with far_mass" in r.stderr.strip() and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_narrow_fov_stamps_the_windows_threshold_for_narrow_portrait_frames(shipped, tmp_path):
+    """``--narrow-fov DEG``: the threshold chosen on the 3:4 windows becomes the narrow camera's
+    (absolute for far mass, fitted x scale for the bundle's own measure); the runtime gives it to
+    portrait frames at most DEG across (9:16 video, ~41 deg) and the portrait threshold to a
+    3:4 frame (53 deg). A re-scale without it drops the narrow threshold; a window choice that
+    missed the targets, or the option without --rescale-gate, is refused in one line."""
+    from crossing_assist.runtime.engine import Engine
+
+    src, cv = shipped
+    fm = _far_mass_gate
+    (cv / "gate_far_mass.json").write_text(json.dumps(fm(0.007) | {"portrait": fm(0.015), "portrait_window": fm(0.038)}))
+    r = _stamp(src, tmp_path / "out", "--cv", cv, "--rescale-gate", "--gate-json", "gate_far_mass.json",
+               "--narrow-fov", 45, "--sensor-aspect", "4:3")
+    assert r.returncode == 0, r.stderr
+    assert "0.038 (portrait frames at most 45 deg)" in r.stdout
+    unc = read_bundle(tmp_path / "out").calibration.uncertainty
+    assert (unc.narrow_threshold, unc.narrow_fov_deg) == (0.038, 45.0)
+    eng = Engine(tmp_path / "out")
+    assert [eng.decision_config("portrait", eng.camera_fov(w, h)).threshold for w, h in ((720, 1280), (480, 640))] == [0.038, 0.015]
+    r = _stamp(src, tmp_path / "scaled", "--cv", cv, "--rescale-gate", "--narrow-fov", 44)
+    assert r.returncode == 0, r.stderr     # the bundle's own measure: fitted 1.0 x the window's scale 2.0
+    meta = json.loads((tmp_path / "scaled" / "bundle.json").read_text())
+    assert meta["calibration"]["uncertainty"]["narrow_threshold"] == pytest.approx(2.0)
+    r = _stamp(tmp_path / "scaled", tmp_path / "plain", "--cv", cv, "--rescale-gate")
+    assert r.returncode == 0, r.stderr
+    assert read_bundle(tmp_path / "plain").calibration.uncertainty.narrow_threshold is None
+    (cv / "gate.json").write_text(json.dumps(_gate(0.25) | {"portrait_window": _gate(2.0) | {"targets_met": False}}))
+    r = _stamp(src, tmp_path / "bad", "--cv", cv, "--rescale-gate", "--narrow-fov", 45)
+    assert r.returncode == 2 and "no 3:4-window choice that meets the targets" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    r = _stamp(src, tmp_path / "bad", "--cv", cv, "--narrow-fov", 45)
+    assert r.returncode == 2 and "--narrow-fov needs --rescale-gate" in r.stderr
+    assert not (tmp_path / "bad").exists()

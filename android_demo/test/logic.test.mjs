@@ -159,6 +159,8 @@ test('bundle.json validation accepts a good bundle and names the bad field', () 
     [(m) => { m.geometry.sensor_aspect = '4:3'; }, /geometry.sensor_aspect = "4:3" is not a finite number/],
     [(m) => { m.actions.names[1] = 'west'; }, /actions.names disagree/],
     [(m) => { m.calibration.uncertainty.measure = 'votes'; }, /measure = "votes" unknown/],
+    [(m) => { m.calibration.uncertainty.narrow_threshold = 2; }, /narrow_threshold and narrow_fov_deg go together/],
+    [(m) => { Object.assign(m.calibration.uncertainty, { narrow_threshold: 2, narrow_fov_deg: 10 }); }, /narrow_fov_deg = 10 is out of range/],
     [(m) => { m.input.size = [8, 8]; }, /input.size/],
     [(m) => { delete m.mc; }, /missing field 'mc'/],
     [(m) => { m.model_file = '../x.onnx'; }, /model_file/],

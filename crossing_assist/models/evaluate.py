@@ -212,7 +212,8 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
         entry["beacon_on_goal_in_view"] = float(np.mean([h.on for h in inside])) if inside else None
         entry["heading_error_deg"] = error_stats(heading_errors(heard, far_x))
         orient = "landscape" if name == "landscape" else "portrait"
-        t0 = float(engine.decision_config(orient).threshold)   # the view's orientation's gate threshold
+        fov = next((f for *_, f in frames if f is not None), None)
+        t0 = float(engine.decision_config(orient, fov).threshold)   # the gate threshold of the view's orientation and FOV
         curve = lis.risk_coverage([t0 * m for m in GATE_SCALES])
         entry.update(bundle_threshold=t0, risk_coverage=curve, best_threshold_here=choose_threshold(curve))
         plot_risk_coverage(curve, t0, out / ("risk_coverage.png" if name == "landscape" else f"risk_coverage_{name}.png"),

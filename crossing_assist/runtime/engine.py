@@ -99,15 +99,18 @@ class Engine:
         else the engine's override, else the bundle's default for the frame's orientation."""
         return self.bundle.camera_fov(width, height, self.fov_override if fov_deg is None else fov_deg)
 
-    def decision_config(self, orientation: str = "landscape", **overrides) -> DecisionConfig:
-        """The decision logic's config for this bundle and frames of ``orientation``: actions,
-        measure, that orientation's gate threshold and FOV (the override, else the bundle's for
-        a full-sensor frame). A starting point: :class:`Pipeline` and ``listen.decide_still``
-        take each frame's own FOV (:meth:`camera_fov`: a crop narrower than the sensor, e.g.
-        9:16 video with ``geometry.sensor_aspect``, gets a narrower one) and orientation."""
+    def decision_config(self, orientation: str = "landscape", fov_deg: float | None = None,
+                        **overrides) -> DecisionConfig:
+        """The decision logic's config for this bundle and frames of ``orientation`` from a camera
+        ``fov_deg`` across (None: the override, else the bundle's for a full-sensor frame):
+        actions, measure, FOV and the gate threshold for that orientation and FOV
+        (:meth:`~crossing_assist.bundle.UncertaintySpec.threshold_for`). A starting point:
+        :class:`Pipeline` and ``listen.decide_still`` take each frame's own FOV
+        (:meth:`camera_fov`: a crop narrower than the sensor, e.g. 9:16 video with
+        ``geometry.sensor_aspect``, gets a narrower one) and orientation."""
         unc = self.bundle.calibration.uncertainty
-        fov = self.fov_override or self.bundle.geometry.camera_fov_deg[ORIENTATIONS.index(orientation)]
-        kw = {"fov_deg": fov, "measure": unc.measure, "threshold": unc.threshold_for(orientation), **overrides}
+        fov = fov_deg or self.fov_override or self.bundle.geometry.camera_fov_deg[ORIENTATIONS.index(orientation)]
+        kw = {"fov_deg": fov, "measure": unc.measure, "threshold": unc.threshold_for(orientation, fov), **overrides}
         return DecisionConfig(n_actions=self.bundle.actions.n, **kw)
 
     def _check_frame(self, frame: np.ndarray) -> np.ndarray:

@@ -24,7 +24,6 @@ import numpy as np
 
 from crossing_assist.actions import UNKNOWN, heading_to_x, x_to_bin, x_to_heading
 from crossing_assist.fileio import atomic_path
-from crossing_assist.geometry import ORIENTATIONS
 from crossing_assist.runtime.belief import PROBS_MEASURES
 from crossing_assist.runtime.decide import Decider, DecisionConfig
 from crossing_assist.runtime.engine import Engine, Prediction
@@ -178,15 +177,18 @@ class Listener:
         return lis, {k: v for k, v in d.items() if k not in SAVED}
 
     def heard(self, threshold: float | None = None, idx: Sequence[int] | None = None) -> list[Heard]:
-        """The last decisions at the bundle's gate threshold for each clip's orientation (or
-        ``threshold`` for all)."""
+        """The last decisions at the bundle's gate threshold for each clip's orientation and FOV
+        (or ``threshold`` for all)."""
         over = ({} if threshold is None else {"threshold": float(threshold)}) | \
             ({} if self.measure is None else {"measure": self.measure})
-        cfgs = {o: self.engine.decision_config(o, **over) for o in ORIENTATIONS}
+        cfgs: dict = {}
         out = []
         for i in range(len(self.clips)) if idx is None else idx:
-            o = next((p.orientation for p in self.clips[i] if p.ok), "landscape")
-            out.append(replace(decide_still(self.clips[i], cfgs[o], self.fps), label=self.labels[i]))
+            first = next((p for p in self.clips[i] if p.ok), None)
+            key = ("landscape", None) if first is None else (first.orientation or "landscape", first.fov_deg)
+            if key not in cfgs:
+                cfgs[key] = self.engine.decision_config(*key, **over)
+            out.append(replace(decide_still(self.clips[i], cfgs[key], self.fps), label=self.labels[i]))
         return out
 
     def risk_coverage(self, thresholds: Sequence[float], idx: Sequence[int] | None = None) -> list[dict]:

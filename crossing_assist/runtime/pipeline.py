@@ -42,7 +42,7 @@ class Pipeline:
     """Engine + decision logic + beacon synthesis for one stream of frames.
 
     Headings follow the camera: each successful frame's field of view (its orientation's, or
-    the user's setting) and its orientation's gate threshold become the decision logic's; when
+    the user's setting) and the gate threshold of its orientation and FOV become the decision logic's; when
     either changes (the phone turned between portrait and landscape) the belief starts afresh,
     since old strips no longer mean the same directions. ``decision_cfg``'s other fields
     (watchdog, filter, gate, pulse rates) are kept."""
@@ -58,7 +58,7 @@ class Pipeline:
         pred = self.engine.predict(frame_rgb) if frame_rgb is not None else Prediction(ok=False, error="no frame")
         obs = pred.observation() if frame_rgb is not None else None
         if pred.ok and pred.fov_deg is not None:
-            threshold = self.engine.bundle.calibration.uncertainty.threshold_for(pred.orientation)
+            threshold = self.engine.bundle.calibration.uncertainty.threshold_for(pred.orientation, pred.fov_deg)
             cfg = self.decider.cfg
             if (pred.fov_deg, threshold) != (cfg.fov_deg, cfg.threshold):
                 self.decider = Decider(replace(cfg, fov_deg=pred.fov_deg, threshold=threshold))

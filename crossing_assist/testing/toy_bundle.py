@@ -62,6 +62,8 @@ class Toy:
     noise: float = 0.0
     threshold: float = 1.0          # the gate's entropy threshold (nats)
     portrait_threshold: float | None = None  # the same for portrait frames (None: threshold)
+    narrow_threshold: float | None = None    # portrait frames at most narrow_fov_deg across (None: none)
+    narrow_fov_deg: float | None = None
     geometry: Geometry | None = None  # None: a schema-1 bundle
     name: str = "toy-bright-strip"
 
@@ -89,7 +91,9 @@ def toy_meta(toy: Toy = RUNTIME_TOY) -> dict:
         input=InputSpec(size=toy.size, mean=toy.mean, std=toy.std),
         geometry=toy.geometry,
         mc=McSpec(toy.samples, toy.drop_p),
-        calibration=Calibration(1.0, ConformalSpec(0.9, 0.05, 0), UncertaintySpec("entropy", toy.threshold, toy.portrait_threshold)),
+        calibration=Calibration(1.0, ConformalSpec(0.9, 0.05, 0), UncertaintySpec(
+            "entropy", toy.threshold, toy.portrait_threshold, narrow_threshold=toy.narrow_threshold,
+            narrow_fov_deg=toy.narrow_fov_deg)),
         training={"backbone": toy.name, "head": "none", "data": "none", "counts": {}},
         provenance={"command": "crossing_assist.testing.toy_bundle", "created": "test"},
     )

@@ -62,6 +62,13 @@ Version 7: the ``far_mass`` measure (:func:`crossing_assist.runtime.belief.far_m
 ``far_mass_neighbours`` gates frames and the belief by the probability beyond one strip of the
 argmax; frames spread over neighbouring strips speak, frames split between far strips do not.
 The scenarios before it are those of version 6.
+
+Version 8: a narrow camera's gate threshold (``calibration.uncertainty.narrow_threshold`` for
+portrait frames at most ``narrow_fov_deg`` across; each step's threshold is
+``gate_threshold(frame, its FOV)``): scenario ``narrow_threshold_9x16_video`` films 9:16 video
+upright (~41 deg: the narrow threshold), then 3:4 (53 deg: the portrait one), landscape, and
+9:16 again, with frames whose doubt lies between the two portrait thresholds. The scenarios
+before it are those of version 7.
 """
 
 from __future__ import annotations
@@ -89,7 +96,7 @@ from crossing_assist.runtime.status import STATUS_STOP, status_message
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 7
+VERSION = 8
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -230,17 +237,24 @@ def _geometry_scenarios(rng: np.random.Generator) -> list[tuple]:
     sizes = ((1080, 1920), (1920, 1080))
     steps = [(i / FPS, 0.0, _frame(13, 8, 0.9, own), sizes[(i // 30) % 2]) for i in range(90)]
     out.append(("sensor_aspect_9x16_video_turned", GEOMETRY_V3_SENSOR, {}, two, steps))
+    # Version 8: a narrow camera's threshold. Frames of entropy ~1.9 nats (between the portrait
+    # threshold and the narrow one) speak only while the frame is 9:16 portrait video (~41 deg).
+    own = np.random.default_rng(8)
+    narrow = {**two, "narrow_threshold": 2.4, "narrow_fov_deg": 45.0}
+    sizes = ((1080, 1920), (480, 640), (1920, 1080), (1080, 1920))
+    steps = [(i / FPS, 0.0, _frame(13, 4, 0.5, own), sizes[i // 30]) for i in range(120)]
+    out.append(("narrow_threshold_9x16_video", GEOMETRY_V3_SENSOR, {}, narrow, steps))
     return out
 
 
 def _run_geometry_scenario(geometry: dict, overrides: dict, uncertainty: dict, steps: list,
                            base: DecisionConfig) -> list[dict]:
     """The app's rule: each step's FOV is camera_fov(frame) and its gate threshold
-    gate_threshold(frame); a new FOV or threshold starts a fresh Decider."""
+    gate_threshold(frame, FOV); a new FOV or threshold starts a fresh Decider."""
     rows, decider, now = [], None, None
     for t, yaw, raw, (w, h) in steps:
         fov = camera_fov(geometry, w, h, overrides.get(orientation(w, h)))
-        threshold = gate_threshold(uncertainty, w, h)
+        threshold = gate_threshold(uncertainty, w, h, fov)
         if (fov, threshold) != now:
             decider, now = Decider(dataclasses.replace(base, fov_deg=fov, threshold=threshold)), (fov, threshold)
         dec = decider.step(t, raw.observation(base.measure), yaw)

@@ -226,10 +226,10 @@ async function step(frame, captured, dt) {
     return;
   }
   app.orientation = cam.orientation;
-  const threshold = gateThreshold(app.meta.calibration.uncertainty, frame.width, frame.height);
+  const threshold = gateThreshold(app.meta.calibration.uncertainty, frame.width, frame.height, cam.fov);
   if (cam.fov !== app.fov || threshold !== app.decider?.cfg.threshold) {
     // The phone turned (or the setting changed): strips mean other headings, and the
-    // orientation has its own gate threshold; start afresh.
+    // orientation (a narrow camera in portrait) has its own gate threshold; start afresh.
     app.decider = new Decider(configFromBundle(app.meta, { fov_deg: cam.fov, threshold }));
     app.fov = cam.fov;
     record({ kind: 'fov', t: captured, fov_deg: cam.fov, orientation: cam.orientation, threshold,

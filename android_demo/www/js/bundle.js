@@ -94,6 +94,9 @@ function parseCalibration(d) {
   if (!UNCERTAINTY_MEASURES.includes(measure)) {
     throw new BundleError(`bundle.json: calibration.uncertainty.measure = ${JSON.stringify(measure)} unknown; valid: ${UNCERTAINTY_MEASURES.join(', ')}`);
   }
+  if ((u.narrow_threshold == null) !== (u.narrow_fov_deg == null)) {
+    throw new BundleError('bundle.json: calibration.uncertainty.narrow_threshold and narrow_fov_deg go together; set both or neither');
+  }
   return {
     temperature: num(get(d, 'temperature', 'calibration'), 'calibration.temperature', 0, 100, { loOpen: true }),
     conformal: {
@@ -107,6 +110,11 @@ function parseCalibration(d) {
       // optional: portrait frames' threshold (absent or null: portrait uses `threshold`)
       portrait_threshold: u.portrait_threshold == null ? null
         : num(u.portrait_threshold, 'calibration.uncertainty.portrait_threshold', 0, 1e6, { loOpen: true }),
+      // optional, together: portrait frames at most narrow_fov_deg across (e.g. 9:16 video) use narrow_threshold
+      narrow_threshold: u.narrow_threshold == null ? null
+        : num(u.narrow_threshold, 'calibration.uncertainty.narrow_threshold', 0, 1e6, { loOpen: true }),
+      narrow_fov_deg: u.narrow_fov_deg == null ? null
+        : num(u.narrow_fov_deg, 'calibration.uncertainty.narrow_fov_deg', FOV_RANGE_DEG[0], FOV_RANGE_DEG[1]),
     },
   };
 }

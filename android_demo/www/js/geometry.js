@@ -109,12 +109,17 @@ export function cameraFov(geometry, width, height, override = null) {
 }
 
 /**
- * The gate threshold for a width x height frame (Python: runtime/camera.py gate_threshold):
- * `uncertainty` is the bundle's calibration.uncertainty.
+ * The gate threshold for a width x height frame from a camera `fov` degrees across (its
+ * cameraFov; Python: runtime/camera.py gate_threshold): `uncertainty` is the bundle's
+ * calibration.uncertainty. Portrait frames at most narrow_fov_deg across take narrow_threshold
+ * (when the bundle has one), other portrait frames portrait_threshold (when it has one), the
+ * rest threshold.
  */
-export function gateThreshold(uncertainty, width, height) {
-  const portrait = uncertainty.portrait_threshold;
-  return orientation(width, height) === 'portrait' && portrait != null ? portrait : uncertainty.threshold;
+export function gateThreshold(uncertainty, width, height, fov = null) {
+  if (orientation(width, height) !== 'portrait') return uncertainty.threshold;
+  const { narrow_threshold: narrow, narrow_fov_deg: narrowFov, portrait_threshold: portrait } = uncertainty;
+  if (narrow != null && narrowFov != null && fov != null && fov <= narrowFov) return narrow;
+  return portrait ?? uncertainty.threshold;
 }
 
 /**

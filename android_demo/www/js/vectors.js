@@ -12,7 +12,7 @@ import { isFresh, sameFrame, Watchdog } from './live.js';
 import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains } from './logic.js';
 import { statusMessage } from './view.js';
 
-const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7];
+const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8];
 
 function close(a, b, tol) {
   return Math.abs(a - b) <= tol * Math.max(1, Math.abs(b));
@@ -75,7 +75,7 @@ export function replayVectors(vectors) {
         // threshold starts a fresh Decider (version 2 vectors: one threshold, the config's).
         const [w, h] = row.frame;
         const fov = cameraFov(sc.geometry, w, h, sc.fov_override?.[orientation(w, h)] ?? null);
-        const threshold = gateThreshold(sc.uncertainty ?? { threshold: decisionConfig(sc.config).threshold }, w, h);
+        const threshold = gateThreshold(sc.uncertainty ?? { threshold: decisionConfig(sc.config).threshold }, w, h, fov);
         checks += 2;
         if (!close(fov, row.fov_deg, tol)) fail({ scenario: sc.name, step: i, field: 'fov_deg', got: fov, expected: row.fov_deg });
         if (row.threshold !== undefined && !close(threshold, row.threshold, tol)) {
