@@ -108,8 +108,9 @@ fi
 # them, so the two agree even if choose_gate.py rewrote the choice while this script ran; with a
 # far-mass choice, its measure and held-out thresholds replace the fitted entropy gate.
 # A narrow camera (portrait frames at most NARROW_FOV degrees across, e.g. 9:16 video at ~41)
-# takes the threshold chosen on the 3:4 windows when that choice met the targets (NARROW_FOV=
-# for none; docs/runtime.md, "A narrow camera's threshold").
+# takes the threshold chosen on the 3:4 windows (40.3-41.0 deg) when that choice met the targets
+# (NARROW_FOV= for none). Keep the cut near the windows: portrait phone views at 45 deg were 0.92 %
+# confidently wrong at the windows' far-mass threshold (README, "What the user hears").
 NARROW_FOV=${NARROW_FOV-42}
 RESCALE=()
 if [ -f "$CV_DIR/$STAMP_JSON" ]; then

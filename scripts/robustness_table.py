@@ -16,15 +16,22 @@ gate thresholds). Per condition, pooled over folds: the model's accuracy and bin
 the clip's first frame), beacon on, confidently wrong and silence on no-crossing views; the
 change against ``clean`` beside each; ``--also CV2`` pools the folds of more runs of the recipe
 (other seeds) with CV's. Writes ``CV/robustness[_mirror].json`` and prints a
-markdown table.
+markdown table. Each condition's plays are saved in the fold folder
+(``listened_robustness…_CONDITION.npz``), so ``--gate BUNDLE`` replays them with that bundle's
+gate (its measure, recomputed from the saved probabilities, and its thresholds per orientation
+and camera FOV, e.g. the shipped default's) instead of each fold's own, without running the
+model again; written to ``CV/robustness[_mirror]_gate.json``.
 
-    .venv/bin/python scripts/robustness_table.py runs/default/cv [--mirror] [--frames 100] [--also CV2 ...]
+    .venv/bin/python scripts/robustness_table.py runs/default/cv [--mirror] [--frames 100] [--also CV2 ...] \
+        [--gate crossing_assist/assets/default_bundle]
 """
 
 from __future__ import annotations
 
+import copy
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -34,10 +41,12 @@ from choose_gate import (  # noqa: E402  (a sibling script)
     add_also, draw_tag, finished_folds, fold_bundle, held_out_parser, held_out_rows, model_accuracy, tag,
 )
 
+from crossing_assist.bundle import BundleError, UncertaintySpec, read_bundle  # noqa: E402
 from crossing_assist.data_tools.augment import PORTRAIT_SETS, roll, user_views  # noqa: E402
 from crossing_assist.data_tools.corrupt import CORRUPTIONS, corrupt  # noqa: E402
 from crossing_assist.data_tools.images import flag_value, load_frame  # noqa: E402
 from crossing_assist.data_tools.manifest import read_manifest  # noqa: E402
+from crossing_assist.runtime.belief import PROBS_MEASURES  # noqa: E402
 from crossing_assist.runtime.listen import Listener, summarise  # noqa: E402
 
 CONDITIONS = ("clean", *CORRUPTIONS, "roll", *PORTRAIT_SETS)
@@ -58,28 +67,49 @@ def render(condition: str, img: np.ndarray, far_x: float | None, far_y: float, l
     return corrupt(img, condition, rng), label, None
 
 
-def fold_table(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, mirror: bool) -> dict:
-    """Per condition, the fold's rates (cached in the fold folder once measured)."""
+def gated(engine, gate: UncertaintySpec | None):
+    """``engine`` deciding with ``gate``'s measure and thresholds (None: its bundle's own); a copy,
+    the engine itself is untouched."""
+    if gate is None:
+        return engine
+    out = copy.copy(engine)
+    out.bundle = replace(engine.bundle, calibration=replace(engine.bundle.calibration, uncertainty=gate))
+    return out
+
+
+def fold_table(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, mirror: bool,
+               gate: UncertaintySpec | None = None) -> dict:
+    """Per condition, the fold's rates, decided by the fold's own gate or ``gate``; each
+    condition's plays are saved in the fold folder and replayed, and the own-gate table is cached."""
     from crossing_assist.runtime.engine import Engine
 
-    done = fold / f"robustness{draw_tag(mirror, n_frames, seed)}.json"
-    if done.is_file():
+    draw = draw_tag(mirror, n_frames, seed)
+    done = fold / f"robustness{draw}.json"
+    if gate is None and done.is_file():
         return json.loads(done.read_text())
     engine = Engine(fold_bundle(fold, source, ptl, mirror), threads=1)
-    pos, negs = held_out_rows(ptl, neg, source, used, n_frames, seed)
-    images = [(ds, r, load_frame(ds.image_path(r), r.flags)) for ds, rows in ((ptl, pos), (neg, negs)) for r in rows]
+    images = None
     out = {"source": source}
     for c, condition in enumerate(CONDITIONS):
-        rng = np.random.default_rng([seed, c])
-        lis = Listener(engine)
-        for ds, r, img in images:
-            far_y = float(flag_value(r.flags, "far_y") or 0.5)
-            view, label, fov = render(condition, img, r.far_x, far_y, r.label, rng, engine.bundle.geometry)
-            lis.add(view, label, fov)
+        saved = fold / f"listened_robustness{draw}_{condition}.npz"
+        if not saved.is_file():
+            if images is None:
+                pos, negs = held_out_rows(ptl, neg, source, used, n_frames, seed)
+                images = [(ds, r, load_frame(ds.image_path(r), r.flags)) for ds, rows in ((ptl, pos), (neg, negs))
+                          for r in rows]
+            rng = np.random.default_rng([seed, c])
+            lis = Listener(engine)
+            for ds, r, img in images:
+                far_y = float(flag_value(r.flags, "far_y") or 0.5)
+                view, label, fov = render(condition, img, r.far_x, far_y, r.label, rng, engine.bundle.geometry)
+                lis.add(view, label, fov)
+            lis.save(saved)
+        lis, _ = Listener.load(gated(engine, gate), saved, None if gate is None else gate.measure)
         out[condition] = {**model_accuracy(lis), **summarise(lis.heard())}
         print(f"  {source} {condition}: accuracy {out[condition]['accuracy']:.3f}, beacon on "
               f"{out[condition]['beacon_on']:.3f}, wrong {out[condition]['confidently_wrong']:.4f}", file=sys.stderr, flush=True)
-    done.write_text(json.dumps(out, indent=1))
+    if gate is None:
+        done.write_text(json.dumps(out, indent=1))
     return out
 
 
@@ -113,7 +143,21 @@ def markdown(table: dict) -> str:
 def main(argv=None) -> int:
     ap = held_out_parser(__doc__.split("\n\n")[0], frames=100)
     add_also(ap)
+    ap.add_argument("--gate", type=Path, metavar="BUNDLE",
+                    help="decide with this bundle's gate (measure and thresholds, e.g. the shipped default's) "
+                         "instead of each fold's own, replaying the saved plays")
     a = ap.parse_args(argv)
+    gate = None
+    if a.gate is not None:
+        try:
+            gate = read_bundle(a.gate).calibration.uncertainty
+        except BundleError as exc:
+            print(f"error: --gate: {exc}", file=sys.stderr)
+            return 2
+        if gate.measure not in PROBS_MEASURES:
+            print(f"error: --gate: {a.gate} gates with {gate.measure}, which saved plays cannot replay "
+                  f"(valid: {', '.join(PROBS_MEASURES)})", file=sys.stderr)
+            return 2
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}
     folds = []
@@ -121,15 +165,16 @@ def main(argv=None) -> int:
         for fold, source in finished_folds(cv):
             print(f"{cv} fold {source}", file=sys.stderr, flush=True)
             # one key per fold in the pooled per-fold figures
-            folds.append({**fold_table(fold, source, ptl, neg, used, a.frames, a.seed, a.mirror),
+            folds.append({**fold_table(fold, source, ptl, neg, used, a.frames, a.seed, a.mirror, gate),
                           "fold": f"{source} ({cv})" if i else source})
     if not folds:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
     table = pool(folds)
-    (a.cv / f"robustness{tag(a.mirror)}.json").write_text(
+    (a.cv / f"robustness{tag(a.mirror)}{'' if gate is None else '_gate'}.json").write_text(
         json.dumps({"frames_per_fold": a.frames, "folds": [f["fold"] for f in folds], "conditions": table,
-                    **({"pooled_runs": [str(cv) for cv in (a.cv, *a.also)]} if a.also else {})}, indent=1))
+                    **({"pooled_runs": [str(cv) for cv in (a.cv, *a.also)]} if a.also else {}),
+                    **({} if gate is None else {"gate": {"bundle": str(a.gate), **gate.to_json()}})}, indent=1))
     print(markdown(table))
     return 0
 

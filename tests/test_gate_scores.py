@@ -1,5 +1,6 @@
 """scripts/gate_scores.py: per-frame scores and confidently-wrong rates at fixed beacon-on rates."""
 
+import json
 import sys
 from pathlib import Path
 
@@ -343,3 +344,48 @@ def test_saved_outputs_read_the_first_frames_of_choose_gates_clips_goal_in_view_
     assert [int(np.argmax(p)) for p in out["probs"][:2]] == [2, 11] and out["probs"][2] is not None
     assert np.allclose(out["probs"][0], lis.clips[0][0].probs) and out["probs"][3] is None
     assert gs.saved_outputs(fold, "portrait", 7, 0, True, 3) is None            # not listened to
+
+
+def test_robustness_table_replays_saved_plays_with_another_bundles_gate(tmp_path, monkeypatch):
+    """``robustness_table.py --gate BUNDLE``: each condition's saved plays are decided again with
+    that bundle's measure and thresholds, without the model: a far-mass gate that trusts nothing
+    silences the beacon, one that trusts everything plays it for every crossing; the fold's own
+    gate is cached apart; a gate whose measure saved plays cannot replay is one error line."""
+    from runtime_toy import bar_frame, make_toy_bundle
+
+    import robustness_table as rt
+    from crossing_assist.actions import UNKNOWN, bin_center_x
+    from crossing_assist.bundle import UncertaintySpec
+    from crossing_assist.runtime.engine import Engine
+    from crossing_assist.runtime.listen import Listener
+
+    toy = make_toy_bundle(tmp_path / "toy")
+    lis = Listener(Engine(toy), seconds=0.3)
+    for strip in (2, 6, 11):
+        lis.add(bar_frame(bin_center_x(strip)), strip)
+    lis.add(bar_frame(None), UNKNOWN)
+    fold = tmp_path / "cv" / "fold-ptl_a"
+    fold.mkdir(parents=True)
+    for condition in rt.CONDITIONS:
+        lis.save(fold / f"listened_robustness{rt.draw_tag(True, 7, 0)}_{condition}.npz")
+    monkeypatch.setattr(rt, "fold_bundle", lambda *a: toy)
+    monkeypatch.setattr(rt, "held_out_rows", lambda *a: pytest.fail("saved plays must be replayed, not listened again"))
+
+    def table(gate):
+        return rt.fold_table(fold, "ptl:a", None, None, set(), 7, 0, True, gate)
+
+    never, always = UncertaintySpec("far_mass", 1e-12), UncertaintySpec("far_mass", 1.0)
+    assert all(table(never)[c]["beacon_on"] == 0.0 for c in rt.CONDITIONS)
+    loud = table(always)
+    assert all(loud[c]["beacon_on"] == 1.0 for c in rt.CONDITIONS)
+    assert not (fold / "robustness_mirror_7.json").exists()       # only the fold's own gate is cached
+    own = table(None)
+    assert (fold / "robustness_mirror_7.json").is_file() and own["clean"]["accuracy"] == loud["clean"]["accuracy"]
+    mi = make_toy_bundle(tmp_path / "mi")
+    meta = json.loads((mi / "bundle.json").read_text())
+    meta["calibration"]["uncertainty"]["measure"] = "mutual_info"
+    (mi / "bundle.json").write_text(json.dumps(meta))
+    monkeypatch.setattr(rt, "read_manifest", lambda path: type("M", (), {"rows": []})())
+    monkeypatch.setattr(rt, "read_bundle", lambda path: type("B", (), {"calibration": type("C", (), {
+        "uncertainty": UncertaintySpec("mutual_info", 0.2)})()})())
+    assert rt.main([str(tmp_path / "cv"), "--gate", str(mi)]) == 2
