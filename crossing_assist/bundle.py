@@ -164,14 +164,28 @@ class UncertaintySpec:
         if (self.narrow_threshold is None) != (self.narrow_fov_deg is None):
             raise ValueError("narrow_threshold and narrow_fov_deg go together")
 
-    def threshold_for(self, orientation: str, fov_deg: float | None = None) -> float:
-        """The threshold for frames of this orientation (``landscape`` or ``portrait``) from a
-        camera ``fov_deg`` across (None: the orientation's own threshold)."""
+    def which(self, orientation: str, fov_deg: float | None = None) -> str:
+        """Which threshold frames of this orientation (``landscape`` or ``portrait``) from a
+        camera ``fov_deg`` across (None: the orientation's own) take: ``landscape`` (the
+        ``threshold``), ``portrait`` or ``narrow``."""
         if orientation != "portrait":
-            return self.threshold
+            return "landscape"
         if self.narrow_threshold is not None and fov_deg is not None and fov_deg <= self.narrow_fov_deg:
-            return self.narrow_threshold
-        return self.threshold if self.portrait_threshold is None else self.portrait_threshold
+            return "narrow"
+        return "landscape" if self.portrait_threshold is None else "portrait"
+
+    def threshold_for(self, orientation: str, fov_deg: float | None = None) -> float:
+        """The threshold for frames of this orientation from a camera ``fov_deg`` across (:meth:`which`)."""
+        return {"landscape": self.threshold, "portrait": self.portrait_threshold,
+                "narrow": self.narrow_threshold}[self.which(orientation, fov_deg)]
+
+    def describe(self, orientation: str, fov_deg: float | None = None) -> str:
+        """The gate threshold a frame gets, in words: ``far_mass 0.0383 (a narrow camera's:
+        portrait frames at most 42 deg across)``."""
+        which = self.which(orientation, fov_deg)
+        why = (f"a narrow camera's: portrait frames at most {self.narrow_fov_deg:g} deg across" if which == "narrow"
+               else which)
+        return f"{self.measure} {self.threshold_for(orientation, fov_deg):.4g} ({why})"
 
     def to_json(self) -> dict:
         d = {"measure": self.measure, "threshold": self.threshold}

@@ -204,6 +204,15 @@ def test_a_narrow_portrait_camera_gets_the_narrow_threshold(tmp_path, toy2):
     assert wide.decider.cfg.threshold == 1e-3 and wide.decider.cfg.fov_deg == PORTRAIT_FOV
     land = _run(narrow, [_landscape()] * 10, t0=1.0)
     assert narrow.decider.cfg.threshold == 1e-3 and all(s.cue.kind == KIND_STOP for s in land)
+    # crossing-demo says which threshold the frames took
+    from runtime_toy import write_clip
+
+    clip = write_clip(tmp_path / "p.mp4", [bin_center_x(STRIP)] * 6, fps=10, h=128, w=96)
+    for extra, said in ((["--fov", "41"], f"gate threshold: entropy {base:.4g} (a narrow camera's: portrait frames at "
+                                          "most 42 deg across)"), ([], "gate threshold: entropy 0.001 (portrait)")):
+        r = subprocess.run([*DEMO, str(clip), "--bundle", str(folder), "--out", str(tmp_path / "o"), "--no-video",
+                            "--quiet", *extra], capture_output=True, text=True)
+        assert r.returncode == 0 and said in r.stdout, (r.stdout, r.stderr)
 
 
 @pytest.mark.parametrize("bad", [-1.0, 0.0, "1.2", float("inf")])

@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from crossing_assist.fileio import sweep_orphans, tmp_tag
-from crossing_assist.geometry import GeometryError
+from crossing_assist.geometry import GeometryError, orientation
 from crossing_assist.runtime.annotate import annotate
 from crossing_assist.runtime.audio import write_wav
 from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
@@ -69,6 +69,7 @@ class Summary:
     frame_size: tuple[int, int] | None = None      # (W, H) of the decoded frames
     fov_deg: tuple[float, ...] = ()                # the horizontal FOVs the headings assumed
     view_rows: tuple[int, int] | None = None       # (top, rows) the graph saw (Bundle.rows_seen)
+    thresholds: tuple[str, ...] = ()               # the gate thresholds the frames took, in words
     warnings: tuple[str, ...] = ()
 
     def lines(self) -> list[str]:
@@ -89,6 +90,8 @@ class Summary:
             portrait = h > w
             out.insert(1, f"frames {w}x{h} ({'portrait' if portrait else 'landscape'}); headings assume a "
                           f"horizontal field of view of {fovs} deg{seen}")
+            if self.thresholds:
+                out.insert(2, f"gate threshold: {', '.join(self.thresholds)}")
             unsure = self.reasons.get(REASON_UNCERTAIN, 0) / n
             if portrait and unsure >= SIDEWAYS_UNSURE:   # the phone app's SidewaysHint, for a whole video
                 out.insert(2, f"advice: the model was unsure on {100 * unsure:.0f}% of these portrait frames; "
@@ -266,10 +269,13 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
                         "the trace and beacon.wav end with a stop")
     outputs = rec.finish(n, end_s)
     truth = load_truth(cfg.video)
-    view = None
+    view, thresholds = None, ()
     if rec.frame_size and len(rec.fovs) == 1:
         view = pipeline.engine.bundle.rows_seen(rec.frame_size[1], rec.frame_size[0], next(iter(rec.fovs)))
+    if rec.frame_size:
+        unc, o = pipeline.engine.bundle.calibration.uncertainty, orientation(*rec.frame_size)
+        thresholds = tuple(dict.fromkeys(unc.describe(o, f) for f in sorted(rec.fovs)))
     return Summary(frames=n, video_s=n / source.fps, wall_s=time.perf_counter() - t0, gates=dict(rec.gates),
                    reasons=dict(rec.reasons), failed=rec.failed, outputs={k: str(v) for k, v in outputs.items()},
                    truth=compare(truth, rec.headings) if truth else None, frame_size=rec.frame_size,
-                   fov_deg=tuple(sorted(rec.fovs)), view_rows=view, warnings=tuple(warnings))
+                   fov_deg=tuple(sorted(rec.fovs)), view_rows=view, thresholds=thresholds, warnings=tuple(warnings))
