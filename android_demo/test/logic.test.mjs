@@ -10,6 +10,7 @@ import { fileURLToPath } from 'node:url';
 
 import { actionHeading, headingToPan, spaceGroups, spaceNames } from '../www/js/actions.js';
 import { BundleError, parseBundleMeta } from '../www/js/bundle.js';
+import { gateKind, gateThreshold } from '../www/js/geometry.js';
 import { cameraElevationDeg, sameFrame, SIDEWAYS, SidewaysHint, TILT, TiltWatch, Watchdog, YawIntegrator, yawRateFromRotation } from '../www/js/live.js';
 import { cueFor, Decider, decisionConfig, observationFromOutputs } from '../www/js/logic.js';
 import { rgbaToRgb } from '../www/js/model.js';
@@ -171,6 +172,19 @@ test('bundle.json validation accepts a good bundle and names the bad field', () 
     mutate(m);
     assert.throws(() => parseBundleMeta(m), (err) => err instanceof BundleError && msg.test(err.message));
   }
+});
+
+test('a narrow portrait camera takes the narrow threshold; wider portrait frames the portrait one', () => {
+  const u = { threshold: 0.007, portrait_threshold: 0.015, narrow_threshold: 0.038, narrow_fov_deg: 42 };
+  const at = (w, h, fov) => [gateKind(u, w, h, fov), gateThreshold(u, w, h, fov)];
+  assert.deepEqual(at(720, 1280, 41), ['narrow', 0.038]);
+  assert.deepEqual(at(720, 1280, 42), ['narrow', 0.038]);
+  assert.deepEqual(at(480, 640, 53), ['portrait', 0.015]);
+  assert.deepEqual(at(480, 640, null), ['portrait', 0.015]);
+  assert.deepEqual(at(1280, 720, 30), ['landscape', 0.007]);
+  const plain = { threshold: 0.007, portrait_threshold: null };
+  assert.deepEqual([gateKind(plain, 720, 1280, 41), gateThreshold(plain, 720, 1280, 41)], ['landscape', 0.007]);
+  assert.equal(parseBundleMeta(Object.assign(validMeta(), {})).calibration.uncertainty.narrow_threshold, null);
 });
 
 test('bundle.json schema 3: view_crop is read for letterbox bundles only, absent = false', () => {

@@ -34,7 +34,7 @@
 
 import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
-import { cameraFov, defaultFovText, FovError, frameView, gateThreshold, orientation, zoomedFov } from './geometry.js';
+import { cameraFov, defaultFovText, FovError, frameView, gateKind, gateThreshold, orientation, zoomedFov } from './geometry.js';
 import { Haptics } from './haptics.js';
 import { isFresh, sameFrame, SidewaysHint, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
 import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN } from './logic.js';
@@ -239,7 +239,9 @@ async function step(frame, captured, dt) {
   // this frame's FOV; the FOV, orientation and threshold above are the whole frame's.
   const seen = frameView(frame, app.meta.geometry, cam.fov, app.meta.input.size);
   const crop = seen.rows < frame.height ? `, rows ${seen.top}–${seen.top + seen.rows} seen` : '';
-  view.camera(`${cam.orientation} ${frame.width}×${frame.height}, field of view ${cam.fov.toFixed(1)}° (${cam.source})${crop}`);
+  const narrow = gateKind(app.meta.calibration.uncertainty, frame.width, frame.height, cam.fov) === 'narrow'
+    ? ', a narrow camera’s gate threshold' : '';
+  view.camera(`${cam.orientation} ${frame.width}×${frame.height}, field of view ${cam.fov.toFixed(1)}° (${cam.source})${crop}${narrow}`);
   let outputs = null;
   let obs;
   const t0 = performance.now();

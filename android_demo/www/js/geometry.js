@@ -109,17 +109,23 @@ export function cameraFov(geometry, width, height, override = null) {
 }
 
 /**
- * The gate threshold for a width x height frame from a camera `fov` degrees across (its
- * cameraFov; Python: runtime/camera.py gate_threshold): `uncertainty` is the bundle's
- * calibration.uncertainty. Portrait frames at most narrow_fov_deg across take narrow_threshold
- * (when the bundle has one), other portrait frames portrait_threshold (when it has one), the
- * rest threshold.
+ * Which gate threshold a width x height frame from a camera `fov` degrees across (its cameraFov)
+ * takes (Python: bundle.py UncertaintySpec.which): 'narrow' (narrow_threshold, for portrait
+ * frames at most narrow_fov_deg across, when the bundle has one), 'portrait'
+ * (portrait_threshold, for other portrait frames, when it has one), else 'landscape' (threshold).
+ * `uncertainty` is the bundle's calibration.uncertainty.
  */
-export function gateThreshold(uncertainty, width, height, fov = null) {
-  if (orientation(width, height) !== 'portrait') return uncertainty.threshold;
+export function gateKind(uncertainty, width, height, fov = null) {
+  if (orientation(width, height) !== 'portrait') return 'landscape';
   const { narrow_threshold: narrow, narrow_fov_deg: narrowFov, portrait_threshold: portrait } = uncertainty;
-  if (narrow != null && narrowFov != null && fov != null && fov <= narrowFov) return narrow;
-  return portrait ?? uncertainty.threshold;
+  if (narrow != null && narrowFov != null && fov != null && fov <= narrowFov) return 'narrow';
+  return portrait != null ? 'portrait' : 'landscape';
+}
+
+/** The gate threshold of that frame (Python: runtime/camera.py gate_threshold). */
+export function gateThreshold(uncertainty, width, height, fov = null) {
+  const kind = gateKind(uncertainty, width, height, fov);
+  return { landscape: uncertainty.threshold, portrait: uncertainty.portrait_threshold, narrow: uncertainty.narrow_threshold }[kind];
 }
 
 /**
