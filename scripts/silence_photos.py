@@ -12,8 +12,10 @@ wheel (read where pip installed them, never copied here; none shows a street cro
     .venv/bin/python scripts/silence_photos.py \
         "$(.venv/bin/python -c 'import os, skimage; print(os.path.dirname(skimage.__file__))')/data"
 
-A missing folder, one without an image or an unusable bundle is one line and exit 1; the figures
-are printed, nothing is written.
+``--fov 41`` plays them as a narrow camera sees them (9:16 video: its portrait frames take the
+bundle's narrow camera threshold, the loosest). A missing folder, one without an image or an
+unusable bundle is one line and exit 1 (a FOV outside 20..170 degrees: every play fails, silent);
+the figures are printed, nothing is written.
 """
 
 from __future__ import annotations
@@ -53,6 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("folders", nargs="+", type=Path, help="folders of photos with no crossing in view")
     ap.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE, help="bundle folder (default: the embedded one)")
+    ap.add_argument("--fov", type=float, metavar="DEG", help="play every image as seen by a camera DEG across (e.g. 41: "
+                    "9:16 video, whose portrait frames take a narrow camera's gate threshold); default: the bundle's")
     a = ap.parse_args(argv)
     try:
         engine = Engine(a.bundle, threads=2)
@@ -67,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"skipped: {exc}")
             continue
         for turn, view in (("as taken", frame), ("turned", np.ascontiguousarray(np.rot90(frame)))):
-            lis.add(view, UNKNOWN)
+            lis.add(view, UNKNOWN, a.fov)
             names.append(f"{path.name} ({turn}, {orientation(view.shape[1], view.shape[0])})")
     if not lis.clips:
         raise SystemExit("error: no image could be read")

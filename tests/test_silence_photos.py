@@ -34,3 +34,17 @@ def test_bad_folders_and_bundles_are_one_line(tmp_path, toy_bundle):  # noqa: F8
                         ([str(tmp_path / "photos"), "--bundle", str(tmp_path / "empty")], "^error: ")):
         with pytest.raises(SystemExit, match=match):
             sp.main([*args, *([] if "--bundle" in args else ["--bundle", str(toy_bundle)])])
+
+
+def test_fov_plays_the_photos_as_a_narrow_camera_sees_them(tmp_path, capsys):
+    """``--fov 41``: a portrait photo takes the bundle's narrow camera threshold (here the only
+    one loose enough to speak on a bright bar) where at the bundle's own FOV it takes the
+    portrait one and stays silent."""
+    from runtime_toy import make_toy_bundle
+
+    bundle = make_toy_bundle(tmp_path / "b", portrait_threshold=1e-6, narrow_threshold=1.0, narrow_fov_deg=42.0)
+    save_rgb(tmp_path / "photos" / "tall.png", bar_frame(bin_center_x(4), h=128, w=96))
+    assert sp.main([str(tmp_path / "photos"), "--bundle", str(bundle)]) == 0
+    assert "| tall.png (as taken, portrait) | off |" in capsys.readouterr().out
+    assert sp.main([str(tmp_path / "photos"), "--bundle", str(bundle), "--fov", "41"]) == 0
+    assert "| tall.png (as taken, portrait) | ON, strip 4 |" in capsys.readouterr().out
