@@ -3,7 +3,7 @@ geometry schema) into its bundle.json and the graph's embedded copy, writing a n
 atomically. The graph itself is left as it is.
 
     .venv/bin/python scripts/stamp_bundle.py SRC OUT --cv runs/default/cv --gate-json gate_mirror.json
-        [--rescale-gate [--narrow-fov 45]] [--view-crop] [--sensor-aspect 4:3]
+        [--rescale-gate [--narrow-fov 42]] [--view-crop] [--sensor-aspect 4:3]
 
 * Always: ``metrics.leave_one_photographer_out`` from ``CV/cv.json`` (the folds' checkpoints),
   ``metrics.leave_one_photographer_out_bundle`` from ``CV/cv_bundles_mirror.json`` (the folds'
