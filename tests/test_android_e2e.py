@@ -735,6 +735,43 @@ def test_view_crop_outputs_and_decisions_match_the_python_engine(portrait_crop: 
     assert "learner" in gates, gates
 
 
+NARROW_CAMERA = (144, 256)  # width x height: 9:16 portrait video (~41 deg with sensor_aspect 4:3)
+
+
+@pytest.fixture(scope="module")
+def narrow_video(tmp_path_factory) -> dict:
+    """A toy bundle whose portrait threshold silences everything and whose narrow camera's
+    threshold (portrait frames at most 42 deg across) does not, filmed as 9:16 portrait video
+    with a bar at strip 4."""
+    clip = _clip_tool()
+    tmp = tmp_path_factory.mktemp("android_e2e_narrow")
+    geometry = Geometry(fit="letterbox", camera_fov_deg=(67.0, 53.0), train_fov_deg=67.0, view_crop=True,
+                        sensor_aspect=4 / 3)
+    bundle = toy_bundle.make_toy_bundle(tmp / "bundle", toy_bundle.APP_TOY, geometry=geometry,
+                                        portrait_threshold=1e-6, narrow_threshold=toy_bundle.APP_TOY.threshold,
+                                        narrow_fov_deg=42.0)
+    w, h = NARROW_CAMERA
+    rng = np.random.default_rng(4)
+    frames = [np.clip(clip.bar_frame(w, h, 4.0).astype(np.int16) + rng.integers(-3, 4, (h, w, 3)), 0, 255)
+              .astype(np.uint8) for _ in range(50)]
+    clip.write_y4m(tmp / "clip.y4m", frames, 10)
+    result = _drive(tmp, _build(tmp, bundle), tmp / "clip.y4m", 4.0, "--phases", "short", "--viewport", "390x844")
+    return {"result": result, "engine": Engine(bundle)}
+
+
+def test_9_16_video_takes_the_narrow_cameras_threshold_and_decides_as_python(narrow_video: dict) -> None:
+    """The app gives 9:16 portrait frames their crop's FOV (~41 deg) and so the narrow camera's
+    gate threshold: the beacon guides where the portrait threshold would keep it silent, and
+    every decision is Python's on the same frames."""
+    engine = narrow_video["engine"]
+    unc = engine.bundle.calibration.uncertainty
+    fovs = [e for e in narrow_video["result"]["trace"] if e["kind"] == "fov"]
+    assert fovs and all(e["fov_deg"] == pytest.approx(41.005, abs=1e-3) for e in fovs), fovs
+    assert {e["threshold"] for e in fovs} == {unc.narrow_threshold} != {unc.portrait_threshold}
+    gates = _assert_same_decisions(engine, _app_steps_in_order(narrow_video, least=15))
+    assert "learner" in gates, gates
+
+
 # ----------------------------------------------------------------------------- the shipped bundle
 
 
