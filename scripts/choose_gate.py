@@ -18,7 +18,9 @@ portrait frames: hence a scale per orientation. Writes ``CV/gate.json`` and
 ``CV/gate_risk_coverage.png`` (``--mirror``: the folds' bundles with mirror test-time
 augmentation, ``CV/gate_mirror.json``); ``scripts/build_default_bundle.sh`` exports with
 ``--gate-scale m*_landscape --gate-scale-portrait m*_portrait``. ``--also CV2`` pools the folds of
-another CV run of the same recipe (another ``--seed``) with CV's before choosing.
+another CV run of the same recipe (another ``--seed``) with CV's before choosing; with more than
+one run, each view also records ``leave_one_run_out``: each run measured at the scale the rule
+picks on the others (how far a threshold chosen this way carries to another model).
 ``--portrait-frames N`` draws the portrait views from N photos a fold instead of ``--frames``: a
 landscape photo is one clip, its portrait views 2 x ``--portrait`` clips, so ``--frames 100000
 --portrait-frames 200`` chooses landscape on every held-out photo without playing every photo's
@@ -258,6 +260,26 @@ def pool(folds: list[dict]) -> list[dict]:
     return out
 
 
+def leave_one_run_out(folds: list[dict], run_of: list[str]) -> dict | None:
+    """How far the rule carries to another model: each CV run's folds (``run_of``: each fold's
+    run) measured at the scale :func:`choose` picks on the other runs' folds; the runs' rates and
+    their pooled beacon-on and confidently-wrong rates. None with a single run."""
+    runs = list(dict.fromkeys(run_of))
+    if len(runs) < 2:
+        return None
+    per_run = []
+    for run in runs:
+        best, met = choose(pool([f for f, r in zip(folds, run_of) if r != run]))
+        point = next(c for c in pool([f for f, r in zip(folds, run_of) if r == run]) if c["scale"] == best["scale"])
+        per_run.append({"run": run, "scale": best["scale"], "targets_met_on_the_others": met,
+                        **{k: point[k] for k in ("beacon_on", "confidently_wrong", "confidently_wrong_frames", "frames")}})
+    frames = sum(r["frames"] for r in per_run)
+    wrong = sum(r["confidently_wrong_frames"] for r in per_run)
+    return {"beacon_on": sum(r["beacon_on"] * r["frames"] for r in per_run) / frames, "confidently_wrong": wrong / frames,
+            "confidently_wrong_frames": wrong, "frames": frames, "confidently_wrong_95": wilson(wrong, frames),
+            "per_run": per_run}
+
+
 def pooled_accuracy(folds: list[dict]) -> dict:
     """The model's own accuracy and bin MAE (argmax of each clip's first frame), weighted by frames."""
     n = sum(f["frames"] for f in folds)
@@ -341,7 +363,7 @@ def main(argv=None) -> int:
 
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}   # same names: neg_half links neg's images
-    folds = []
+    folds, run_of = [], []
     for i, cv in enumerate([a.cv, *a.also]):
         for fold, source in finished_folds(cv):
             print(f"{cv} fold {source}: export + listen", file=sys.stderr, flush=True)
@@ -350,6 +372,7 @@ def main(argv=None) -> int:
             if i:   # one key per fold in the pooled per-fold figures
                 curves = {view: {**c, "source": f"{source} ({cv})"} for view, c in curves.items()}
             folds.append(curves)
+            run_of.append(str(cv))
     if not folds:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
@@ -369,6 +392,13 @@ def main(argv=None) -> int:
                         **model, "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
         if a.also:
             result[view]["pooled_runs"] = [str(cv) for cv in (a.cv, *a.also)]
+            loro = leave_one_run_out([f[view] for f in folds], run_of)
+            if loro:
+                result[view]["leave_one_run_out"] = loro
+                print(f"{view}: chosen on the other runs, measured on each: beacon on {loro['beacon_on']:.3f}, "
+                      f"confidently wrong {100 * loro['confidently_wrong']:.2f} % ({loro['confidently_wrong_frames']} "
+                      f"of {loro['frames']}; per run " + " / ".join(f"{100 * r['confidently_wrong']:.2f} %"
+                                                                   for r in loro["per_run"]) + ")")
         suffix = tag(a.mirror) + ("" if view == "landscape" else f"_{view}") + zoom_tag(a.zoom) + measure_tag(a.measure)
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
                            a.cv / f"gate_risk_coverage{suffix}.png",

@@ -143,6 +143,12 @@ def test_choose_gate_also_pools_another_runs_folds_before_choosing(tmp_path, mon
     assert pooled["at_scale"]["confidently_wrong_95"] == pytest.approx((0.0, 0.0095), abs=1e-4)   # 0 of 400
     assert len(pooled["at_scale"]["per_fold"]) == 4 and len(pooled["folds"]) == 4
     assert pooled["pooled_runs"] == [str(tmp_path / "a"), str(tmp_path / "b")]
+    # each run at the scale the rule picks on the other: a at b's (hi - 1), never wrong; b at a's (hi), 2 % wrong
+    loro = pooled["leave_one_run_out"]
+    assert [(r["run"], r["scale"], r["confidently_wrong"]) for r in loro["per_run"]] == [
+        (str(tmp_path / "a"), scales[hi - 1], 0.0), (str(tmp_path / "b"), scales[hi], 0.02)]
+    assert (loro["confidently_wrong_frames"], loro["frames"]) == (4, 400) and loro["confidently_wrong"] == 0.01
+    assert "leave_one_run_out" not in alone
 
 
 def _toy_fold(tmp_path, monkeypatch, photos: int, no_crossing: int):
