@@ -349,7 +349,7 @@ def main(argv=None) -> int:
                     help="replay the gate with this measure instead of the bundles' own (entropy), from the saved "
                          f"predictions: far_mass, the probability beyond one strip of the argmax, at absolute "
                          f"thresholds ({FAR_MASS_REFERENCE:g} x the scales); results are written apart (gate…_far_mass.json) "
-                         "and scripts/stamp_bundle.py --gate-measure sets them")
+                         "and scripts/stamp_bundle.py --rescale-gate --gate-json gate…_far_mass.json stamps them")
     ap.add_argument("--zoom", type=float, default=1.0, metavar="Z",
                     help="portrait frames (narrower than the training camera) shown magnified up to Z instead of at "
                          "the training scale, as crossing-export --view-zoom Z bundles show them (for models trained "

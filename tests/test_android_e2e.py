@@ -741,13 +741,13 @@ NARROW_CAMERA = (144, 256)  # width x height: 9:16 portrait video (~41 deg with 
 @pytest.fixture(scope="module")
 def narrow_video(tmp_path_factory) -> dict:
     """A toy bundle whose portrait threshold silences everything and whose narrow camera's
-    threshold (portrait frames at most 42 deg across) does not, filmed as 9:16 portrait video
-    with a bar at strip 4."""
+    threshold (portrait frames at most 42 deg across) does not, its landscape one a third value,
+    filmed as 9:16 portrait video with a bar at strip 4."""
     clip = _clip_tool()
     tmp = tmp_path_factory.mktemp("android_e2e_narrow")
     geometry = Geometry(fit="letterbox", camera_fov_deg=(67.0, 53.0), train_fov_deg=67.0, view_crop=True,
                         sensor_aspect=4 / 3)
-    bundle = toy_bundle.make_toy_bundle(tmp / "bundle", toy_bundle.APP_TOY, geometry=geometry,
+    bundle = toy_bundle.make_toy_bundle(tmp / "bundle", toy_bundle.APP_TOY, geometry=geometry, threshold=2.0,
                                         portrait_threshold=1e-6, narrow_threshold=toy_bundle.APP_TOY.threshold,
                                         narrow_fov_deg=42.0)
     w, h = NARROW_CAMERA
@@ -768,6 +768,10 @@ def test_9_16_video_takes_the_narrow_cameras_threshold_and_decides_as_python(nar
     fovs = [e for e in narrow_video["result"]["trace"] if e["kind"] == "fov"]
     assert fovs and all(e["fov_deg"] == pytest.approx(41.005, abs=1e-3) for e in fovs), fovs
     assert {e["threshold"] for e in fovs} == {unc.narrow_threshold} != {unc.portrait_threshold}
+    assert "a narrow camera’s gate threshold" in narrow_video["result"]["camera_text"]
+    # the helper view reads each frame's uncertainty against the threshold that frame took
+    text = narrow_video["result"]["uncertainty_text"]
+    assert f"(threshold {unc.narrow_threshold:.2f})" in text and unc.threshold != unc.narrow_threshold, text
     gates = _assert_same_decisions(engine, _app_steps_in_order(narrow_video, least=15))
     assert "learner" in gates, gates
 

@@ -178,6 +178,7 @@ async function collect(page) {
         isolated: window.crossOriginIsolated },
       speed_text: document.getElementById('speed').textContent, bundle_text: document.getElementById('bundle').textContent,
       camera_text: document.getElementById('camera').textContent,
+      uncertainty_text: document.getElementById('uncertainty').textContent,
     };
   });
 }

@@ -272,7 +272,7 @@ async function step(frame, captured, dt) {
     if (app.frames.length > MAX_FRAMES) app.frames.shift();
   }
   view.decision(d);
-  if (outputs) view.outputs(outputs, app.meta);
+  if (outputs) view.outputs(outputs, app.meta, app.decider.cfg.threshold);
 }
 
 async function runLoop() {

@@ -104,8 +104,12 @@ export class HelperView {
     this.el('offline').textContent = text;
   }
 
-  /** Show one frame's model outputs: probability per strip (an action's mass on each of its bins). */
-  outputs(out, meta) {
+  /**
+   * Show one frame's model outputs: probability per strip (an action's mass on each of its bins),
+   * and its uncertainty against `threshold`, the gate threshold this frame took (its orientation
+   * and camera's: gateThreshold).
+   */
+  outputs(out, meta, threshold) {
     const groups = meta.actions.bins;
     const perBin = new Array(N_BINS + 1).fill(0);
     perBin[0] = out.probs[0];
@@ -120,7 +124,7 @@ export class HelperView {
     this.el('strips').setAttribute('aria-label', `Goal probability per strip: ${label}`);
     const measure = meta.calibration.uncertainty.measure;
     const u = measureValue(measure, out.entropy, out.mutual_info, out.variance, out.probs);
-    this.el('uncertainty').textContent = `${measure} ${fmt(u)} (threshold ${fmt(meta.calibration.uncertainty.threshold)}), `
+    this.el('uncertainty').textContent = `${measure} ${fmt(u)} (threshold ${fmt(threshold)}), `
       + `mutual info ${fmt(out.mutual_info, 3)}, top ${meta.actions.names[best]} ${Math.round(100 * out.probs[best])}%`;
   }
 
