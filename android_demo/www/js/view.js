@@ -1,7 +1,7 @@
 // What the screen shows: a big status line for the user (a polite screen-reader live region
 // that changes only when speech.js announces a change of advice) and the helper view for a
 // sighted companion: the camera with its 12 strips, the probability of each strip, the
-// decision, heading, uncertainty against the bundle's threshold, the audio levels, speed.
+// decision, heading, uncertainty against the gate threshold the frame took, the audio levels, speed.
 
 import { N_BINS } from './actions.js';
 import { measureValue } from './logic.js';
