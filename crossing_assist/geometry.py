@@ -26,6 +26,12 @@ held in portrait (3:4, ~53 deg across) keeps its middle ~3:3 at the training sca
 being shrunk to 3/4 of it with sky and feet added; a 4:3 landscape frame at the training FOV, a
 16:9 video frame, or a narrower camera lose nothing. Columns are never cropped: the 12 strips
 span the whole frame.
+
+*Levelling* (:func:`level`): a phone is rarely held level. Where its orientation sensor says how
+far the camera is rolled about its own axis, the frame is turned back by that roll (at most
+``MAX_LEVEL_DEG``) before anything else, so the model sees the horizon level, as in the training
+photos, and the frame's columns are bearings again; the corners the tilted camera did not see
+are filled with ``pad_rgb``. The phone app does the same on its canvas (``camera.js``).
 """
 
 from __future__ import annotations
@@ -52,6 +58,10 @@ DEFAULT_CANVAS = (168, 224)            # (H, W): 4:3 landscape
 PAD_RGB = (124, 116, 104)              # ImageNet mean in uint8: normalises to ~0
 MAX_ASPECT = 8.0                       # frames more elongated than 8:1 are refused
 VIEW_ZOOM_RANGE = (1.0, 4.0)           # geometry.view_zoom (schema 4): 1 = the training scale
+#: The most a frame is turned back to level (degrees): a phone rolled further is levelled by this
+#: much (the phone's screen turns by a quarter at about 45 deg, so its frames rarely roll more).
+MAX_LEVEL_DEG = 45.0
+MIN_LEVEL_DEG = 0.5   # a smaller roll is left alone
 
 
 def view_rows(height: int, width: int, fov_deg: float, canvas: tuple[int, int],
@@ -273,6 +283,32 @@ def letterbox(image: np.ndarray, canvas: tuple[int, int], pad_rgb: tuple[int, in
     out[:] = np.asarray(pad_rgb, np.uint8)
     out[top:top + nh, left:left + nw] = inner
     return out
+
+
+def level_angle(roll_deg: float | None) -> float:
+    """The roll (degrees) :func:`level` turns a frame back by: ``roll_deg`` clamped to
+    +-``MAX_LEVEL_DEG``; 0 under ``MIN_LEVEL_DEG`` or without a reading (None, not finite)."""
+    if roll_deg is None or not math.isfinite(roll_deg) or abs(roll_deg) < MIN_LEVEL_DEG:
+        return 0.0
+    return max(-MAX_LEVEL_DEG, min(MAX_LEVEL_DEG, float(roll_deg)))
+
+
+def level(image: np.ndarray, roll_deg: float, pad_rgb: tuple[int, int, int] = PAD_RGB) -> np.ndarray:
+    """``image`` (H x W x 3 uint8) as a level camera would have framed it: turned about its
+    centre by ``-roll_deg`` (the scene's counter-clockwise roll in the frame, degrees; a phone
+    turned clockwise rolls it counter-clockwise) as far as :func:`level_angle` says; the corners
+    the camera did not see are ``pad_rgb``. Same size; bilinear. ``level(augment.roll(img, r), r)``
+    is ``img`` inside the rolled camera's view. No turn (a small roll, no reading) returns
+    ``image`` itself. The phone app's ``FrameGrabber.level`` (``camera.js``) draws the same."""
+    import cv2
+
+    angle = level_angle(roll_deg)
+    if angle == 0:
+        return image
+    h, w = image.shape[:2]
+    m = cv2.getRotationMatrix2D((w / 2 - 0.5, h / 2 - 0.5), -angle, 1.0)
+    return cv2.warpAffine(np.ascontiguousarray(image), m, (w, h), flags=cv2.INTER_LINEAR,
+                          borderMode=cv2.BORDER_CONSTANT, borderValue=tuple(int(v) for v in pad_rgb))
 
 
 def window_x(far_x: float, x0: float, width: float) -> float:

@@ -59,6 +59,7 @@ CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 FPS = 10
 FLIP_S = 6
 SIDEWAYS_AFTER_S = 1.0  # the portrait run's wait for the hold-it-sideways advice (the app's: 5 s)
+ROLL_DEG = 12.0  # the portrait run turns the phone this far clockwise about the camera axis
 RUN_S = 18.0  # longer than the 17 s clip: every segment, the frozen one included, is seen
 WATCHDOG_S = 0.5
 BAR_PX = 80  # the helper bar under the control (4rem of 20 px)
@@ -158,9 +159,9 @@ def portrait(tmp_path_factory) -> dict:
         frames.append(cv2.cvtColor(bgr[: h // 2 * 2, x0:x0 + pw], cv2.COLOR_BGR2RGB))
     clip.write_y4m(tmp / "clip.y4m", frames, 10)
     result = _drive(tmp, www, tmp / "clip.y4m", 8.0, "--phases", "short", "--viewport", "390x844", "--tilt", "1",
-                    "--sideways-after", str(SIDEWAYS_AFTER_S))
+                    "--sideways-after", str(SIDEWAYS_AFTER_S), "--roll", str(ROLL_DEG))
     meta = json.loads((det / "bundle.json").read_text())
-    return {"result": result, "engine": Engine(det), "geometry": meta["geometry"]}
+    return {"result": result, "engine": Engine(det), "geometry": meta["geometry"], "clip": np.stack(frames)}
 
 
 def _app_steps(run: dict, least: int = 60) -> list[tuple[dict, np.ndarray]]:
@@ -595,7 +596,7 @@ def test_screen_reader_sees_one_control_and_the_helper_only_when_opened(run: dic
     assert '- button "Helper view"' in lines, aria
     opened = run["result"]["aria_helper_open"]
     assert 'region "View for a sighted helper"' in opened, opened
-    assert 'checkbox "Use the gyroscope for turns' in opened and '- button "Check the decision logic"' in opened
+    assert 'checkbox "Use the motion sensors: turns' in opened and '- button "Check the decision logic"' in opened
 
 
 def test_app_is_installable(run: dict) -> None:
@@ -662,6 +663,32 @@ def test_portrait_uses_the_portrait_fov_and_decides_as_python(portrait: dict) ->
         same_side = d["stop"] or a["stop"] or math.copysign(1, d["heading_deg"]) == math.copysign(1, a["heading_deg"])
         agree += (d["stop"] == a["stop"]) and same_side
     assert agree >= 0.9 * len(steps), f"{agree}/{len(steps)} decisions agree"
+
+
+def test_a_rolled_phone_s_frames_are_levelled_as_python_levels_them(portrait: dict) -> None:
+    """The portrait run, turned ROLL_DEG clockwise about the camera's axis (synthetic
+    deviceorientation events): the app levels the frames it gives the model, and each is the
+    Python runtime's ``level`` of a clip frame by that roll, to within the fake camera's colour
+    loss; the clip frame un-levelled, or levelled the other way, is far from it. Before the roll,
+    and during the tilt phase (level camera), nothing is turned."""
+    from crossing_assist.geometry import level
+
+    pad = tuple(portrait["geometry"]["pad_rgb"])
+    clip = portrait["clip"].astype(np.int16)
+    rolled = [(e, rgb) for e, rgb in _app_steps(portrait, least=10) if e["roll_deg"] != 0]
+    assert len(rolled) >= 8 and all(abs(e["roll_deg"] - ROLL_DEG) < 0.01 for e, _ in rolled), \
+        [e["roll_deg"] for e, _ in rolled]
+    assert all(e["roll_deg"] == 0 for e, _ in _app_steps(portrait, least=10) if e["t"] < portrait["result"]["roll"]["t_start"])
+
+    def nearest(frames, rgb):
+        return float(np.abs(frames - rgb.astype(np.int16)[None]).mean(axis=(1, 2, 3)).min())
+
+    levelled = np.stack([level(f, ROLL_DEG, pad) for f in portrait["clip"]]).astype(np.int16)
+    wrong_way = np.stack([level(f, -ROLL_DEG, pad) for f in portrait["clip"]]).astype(np.int16)
+    for entry, rgb in rolled:
+        same, raw, other = nearest(levelled, rgb), nearest(clip, rgb), nearest(wrong_way, rgb)
+        assert same <= 2.0 and raw >= 5 * same and other >= 5 * same, (entry["t"], same, raw, other)
+    assert "to level" in portrait["result"]["roll"]["camera_text"], portrait["result"]["roll"]["camera_text"]
 
 
 def test_portrait_screen_control_fills_the_screen(portrait: dict) -> None:

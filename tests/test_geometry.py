@@ -17,6 +17,8 @@ from crossing_assist.geometry import (
     content_window,
     letterbox,
     letterbox_box,
+    level,
+    level_angle,
     orientation,
     parse_size,
     window_x,
@@ -331,3 +333,57 @@ def test_photo_clip_refuses_a_bad_aspect_in_one_line(tmp_path, capsys, bad):
     assert main(["photo-clip", str(tmp_path), "--out", str(tmp_path / "c.mp4"), f"--aspect={bad}"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "expected W:H" in err[0] and not (tmp_path / "c.mp4").exists()
+
+
+# ----------------------------------------------------------------------------- levelling a rolled camera
+
+
+def test_level_undoes_a_roll_inside_the_cameras_view_and_pads_the_rest():
+    """A phone turned by r rolls the scene by r in its frame (augment.roll); levelling by the
+    sensor's r gives the level frame back wherever the rolled camera saw it, pad_rgb elsewhere;
+    levelling the wrong way does not."""
+    from crossing_assist.data_tools.augment import roll
+
+    yy, xx = np.mgrid[0:90, 0:120]
+    img = np.stack([xx * 2, yy * 2, (xx + yy)], axis=-1).clip(0, 255).astype(np.uint8)   # smooth ramps
+    img[40:44] = 250                                                                        # a horizon line
+    rolled, _, _ = roll(img, 0.5, 0.5, 6, 12.0)
+    back = level(rolled, 12.0, (1, 2, 3))
+    inner = np.zeros(img.shape[:2], bool)
+    inner[25:65, 30:90] = True                   # well inside what the rolled camera saw
+    err = np.abs(back.astype(int) - img.astype(int)).max(axis=-1)
+    assert np.median(err[inner]) <= 2 and np.abs(level(rolled, -12.0).astype(int) - img.astype(int))[inner].mean() > 20
+    assert (back[0, 0] == (1, 2, 3)).all() and (back[-1, -1] == (1, 2, 3)).all()   # corners the camera missed
+    rows = back[:, 30:90].mean(axis=(1, 2))
+    assert 39 <= int(np.argmax(rows)) <= 44                                          # the horizon is level again
+
+
+def test_level_angle_clamps_and_leaves_small_or_missing_rolls_alone():
+    assert level_angle(12.0) == 12.0 and level_angle(-30.5) == -30.5
+    assert level_angle(60.0) == 45.0 and level_angle(-90.0) == -45.0
+    assert level_angle(0.3) == 0.0 and level_angle(None) == 0.0 and level_angle(float("nan")) == 0.0
+    img = np.zeros((10, 12, 3), np.uint8)
+    assert level(img, 0.2) is img and level(img, float("nan")) is img
+
+
+def test_engine_levels_a_frame_by_the_sensors_roll(tmp_path):
+    """The toy reads the brightest strip. A blob above the middle of a level frame lies in strip
+    6 or 7; the camera turned 30 deg clockwise carries it to the left; given the sensor's roll the
+    engine sees it in the middle again, and Pipeline.step passes the roll on."""
+    from crossing_assist.data_tools.augment import roll
+    from crossing_assist.runtime.engine import Engine
+    from crossing_assist.runtime.pipeline import Pipeline
+    from crossing_assist.testing.toy_bundle import Toy
+
+    folder = make_toy_bundle(tmp_path / "b", Toy(samples=1, drop_p=0.0))
+    frame = np.empty((72, 96, 3), np.uint8)
+    frame[:] = read_bundle(folder).geometry.pad_rgb   # so the levelled corners read as background
+    frame[4:22, 44:52] = 255                          # centred, above the middle
+    rolled, _, _ = roll(frame, 0.5, 0.2, 6, 30.0)
+    engine = Engine(folder)
+    assert engine.predict(frame).action in (6, 7)
+    assert engine.predict(rolled).action <= 5
+    assert engine.predict(rolled, roll_deg=30.0).action in (6, 7)
+    assert engine.predict(rolled, roll_deg=-30.0).action <= engine.predict(rolled).action   # the wrong way: further off
+    step = Pipeline(engine).step(rolled, 0.0, roll_deg=30.0)
+    assert step.prediction.action in (6, 7)

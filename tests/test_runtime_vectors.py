@@ -116,7 +116,7 @@ def test_narrow_camera_vectors_speak_only_at_the_narrow_threshold(stored):
 
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == 8
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == 9
     assert "decision steps" in capsys.readouterr().out
 
 

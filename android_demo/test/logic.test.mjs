@@ -10,8 +10,8 @@ import { fileURLToPath } from 'node:url';
 
 import { actionHeading, headingToPan, spaceGroups, spaceNames } from '../www/js/actions.js';
 import { BundleError, parseBundleMeta } from '../www/js/bundle.js';
-import { gateKind, gateThreshold } from '../www/js/geometry.js';
-import { cameraElevationDeg, sameFrame, SIDEWAYS, SidewaysHint, TILT, TiltWatch, Watchdog, YawIntegrator, yawRateFromRotation } from '../www/js/live.js';
+import { gateKind, gateThreshold, LEVEL, levelAngle } from '../www/js/geometry.js';
+import { cameraElevationDeg, cameraRollDeg, sameFrame, SIDEWAYS, SidewaysHint, TILT, TiltWatch, Watchdog, YawIntegrator, yawRateFromRotation } from '../www/js/live.js';
 import { cueFor, Decider, decisionConfig, observationFromOutputs } from '../www/js/logic.js';
 import { rgbaToRgb } from '../www/js/model.js';
 import { replayVectors } from '../www/js/vectors.js';
@@ -451,6 +451,38 @@ test('the back camera elevation follows beta and gamma in every screen orientati
   near(cameraElevationDeg(0, -60), -30); // landscape, tilted back
   assert.equal(cameraElevationDeg(null, 0), null);
   assert.equal(cameraElevationDeg(90, undefined), null);
+});
+
+test('the camera roll follows beta, gamma and the screen angle; pitch alone never rolls', () => {
+  const near = (a, b) => assert.ok(Math.abs(a - b) < 1e-9, `${a} vs ${b}`);
+  near(cameraRollDeg(90, 0, 0), 0); // upright portrait, level
+  near(cameraRollDeg(70, 0, 0), 0); // pitched down 20 deg
+  near(cameraRollDeg(110, 0, 0), 0); // pitched up 20 deg
+  near(cameraRollDeg(90 + 12, -90, 0), 12); // turned 12 deg clockwise: the scene rolls 12 deg counter-clockwise
+  near(cameraRollDeg(90 - 12, -90, 0), -12); // counter-clockwise
+  near(cameraRollDeg(0, -90, 90), 0); // landscape, the phone's top to the left, level
+  near(cameraRollDeg(180, -90, 270), 0); // landscape the other way round, level
+  near(cameraRollDeg(20, -90, 90), 20); // landscape (top left) turned 20 deg clockwise
+  near(cameraRollDeg(90, 0, 90), 90); // the screen says landscape (top left), the phone is upright: a quarter clockwise
+  assert.equal(cameraRollDeg(0, 0, 0), null); // flat: no horizon to level
+  assert.equal(cameraRollDeg(null, 0, 0), null);
+});
+
+test('levelling turns a roll back by at most LEVEL.max_deg and leaves small ones alone', () => {
+  assert.equal(levelAngle(12), 12);
+  assert.equal(levelAngle(-7.25), -7.25);
+  assert.equal(levelAngle(60), LEVEL.max_deg);
+  assert.equal(levelAngle(-90), -LEVEL.max_deg);
+  assert.equal(levelAngle(LEVEL.min_deg / 2), 0);
+  assert.equal(levelAngle(null), 0);
+  assert.equal(levelAngle(Number.NaN), 0);
+  const w = new TiltWatch();
+  assert.equal(w.rollDeg(0), null); // no sample yet
+  w.add(90 + 12, -90, 0, 0);
+  assert.ok(Math.abs(w.rollDeg(0.5) - 12) < 1e-9);
+  assert.equal(w.rollDeg(TILT.fresh_s + 0.01), null); // the sensor stopped: no levelling on an old reading
+  w.add(0, 0, 2, 0); // flat
+  assert.equal(w.rollDeg(2), null);
 });
 
 test('a phone pointed far down or up names its stop reason, with hysteresis and only while fresh', () => {

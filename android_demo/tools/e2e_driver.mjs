@@ -23,7 +23,8 @@
 // Phases "short": load with the tutorial marked done and the direction vibration on, start,
 // run, (--sideways-after S: the hold-it-sideways advice after S s of a "not sure" stop, waited
 // for), (--tilt 1: the gyroscope on, then the phone tilted down until a "not sure" stop says to
-// raise it), collect, double tap.
+// raise it; --roll DEG before it: the phone held level but turned DEG clockwise about the
+// camera's axis until 8 frames were levelled), collect, double tap.
 // The driver asserts nothing; it exits non-zero only when it could not run.
 
 import { spawn } from 'node:child_process';
@@ -51,6 +52,7 @@ function parseArgs(argv) {
     else if (k === '--phases') args.phases = v;
     else if (k === '--viewport') args.viewport = v;
     else if (k === '--tilt') args.tilt = v === '1';
+    else if (k === '--roll') args.roll = Number(v);
     else if (k === '--sideways-after') args.sidewaysAfter = Number(v);
     else throw new Error(`unknown argument ${k}`);
   }
@@ -330,6 +332,23 @@ async function tiltPhase(page, result) {
   result.tilt = { t_tilt: tTilt, t_spoken: tSpoken };
 }
 
+/**
+ * The phone upright, camera level, turned `deg` clockwise about the camera's axis (the W3C angles
+ * beta = 90 + deg, gamma = -90 give that rotation) until 8 frames were levelled.
+ */
+async function rollPhase(page, result, deg) {
+  const t0 = await page.evaluate((d) => {
+    window.__roll = setInterval(() => window.dispatchEvent(new DeviceOrientationEvent('deviceorientation',
+      { alpha: 0, beta: 90 + d, gamma: -90 })), 50);
+    return (performance.now() - window.crossingAssist.t0) / 1000;
+  }, deg);
+  await waitFor(page, () => window.crossingAssist.trace.filter((e) => e.kind === 'frame' && e.roll_deg !== 0).length >= 8,
+    null, 60000, 'levelled frames');
+  await page.evaluate(() => clearInterval(window.__roll));
+  result.roll = { deg, t_start: t0, screen_angle: await page.evaluate(() => screen.orientation?.angle ?? null),
+    camera_text: await page.textContent('#camera') };
+}
+
 /** Waits until a "not sure" stop held upright says to hold the phone sideways. */
 async function sidewaysPhase(page, result) {
   const tSpoken = await waitFor(page, () => window.crossingAssist.trace.find((e) => e.kind === 'speech' && e.text.includes('sideways'))?.t ?? null,
@@ -351,6 +370,7 @@ async function shortPhases(page, server, args, result) {
   result.samples = samples;
   result.states.running = await page.evaluate(screenState);
   if (args.sidewaysAfter) await sidewaysPhase(page, result);
+  if (args.roll !== undefined) await rollPhase(page, result, args.roll);
   if (args.tilt) await tiltPhase(page, result);
   Object.assign(result, await collect(page));
   await control(page).dblclick();

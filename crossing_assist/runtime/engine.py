@@ -18,7 +18,7 @@ import numpy as np
 
 from crossing_assist import inference
 from crossing_assist.bundle import UNCERTAINTY_MEASURES, Bundle, BundleError
-from crossing_assist.geometry import ORIENTATIONS, GeometryError, check_fov, check_frame_shape, orientation
+from crossing_assist.geometry import ORIENTATIONS, GeometryError, check_fov, check_frame_shape, level, orientation
 from crossing_assist.runtime import belief as bf
 from crossing_assist.runtime.decide import DecisionConfig, Observation
 
@@ -118,14 +118,18 @@ class Engine:
         check_frame_shape(frame.shape[0], frame.shape[1])   # e.g. 1 x N or 1:10: never a heading
         return frame
 
-    def predict(self, frame_rgb: np.ndarray, fov_deg: float | None = None) -> Prediction:
-        """Run one H x W x 3 uint8 RGB frame (its rows cropped to the training camera's view
-        first when the bundle says so, :meth:`Bundle.view`); failures come back as
-        ``Prediction(ok=False)``. ``fov_deg``: this frame's camera FOV (:meth:`camera_fov`)."""
+    def predict(self, frame_rgb: np.ndarray, fov_deg: float | None = None, roll_deg: float | None = None) -> Prediction:
+        """Run one H x W x 3 uint8 RGB frame (turned level first when ``roll_deg`` says how far the
+        camera is rolled, :func:`~crossing_assist.geometry.level`, e.g. from a board's or phone's
+        orientation sensor; then its rows cropped to the training camera's view when the bundle
+        says so, :meth:`Bundle.view`); failures come back as ``Prediction(ok=False)``.
+        ``fov_deg``: this frame's camera FOV (:meth:`camera_fov`)."""
         t0 = self._clock()
         try:
             x = self._check_frame(frame_rgb)
             fov = self.camera_fov(frame_rgb.shape[1], frame_rgb.shape[0], fov_deg)
+            if roll_deg is not None:
+                x = level(x, roll_deg, self.bundle.geometry.pad_rgb)
             outs = inference.run(self.session, self.bundle.view(x, fov)[None])
             probs, ent, mi, var, votes = (np.asarray(outs[k], dtype=np.float64)[0] for k in
                                           ("probs", "entropy", "mutual_info", "variance", "votes"))

@@ -47,10 +47,10 @@ class Heard:
 
 
 def play_still(engine: Engine, frame: np.ndarray, seconds: float = 1.0, fps: float = 10.0,
-               fov_deg: float | None = None) -> list[Prediction]:
-    """The engine's predictions for ``frame`` (camera FOV ``fov_deg``, None = the engine's) held
-    still for ``seconds`` at ``fps``."""
-    return [engine.predict(frame, fov_deg) for _ in range(max(1, int(round(seconds * fps))))]
+               fov_deg: float | None = None, roll_deg: float | None = None) -> list[Prediction]:
+    """The engine's predictions for ``frame`` (camera FOV ``fov_deg``, None = the engine's; the
+    sensor's camera roll ``roll_deg``, None = none) held still for ``seconds`` at ``fps``."""
+    return [engine.predict(frame, fov_deg, roll_deg) for _ in range(max(1, int(round(seconds * fps))))]
 
 
 def decide_still(preds: Sequence[Prediction], cfg: DecisionConfig, fps: float = 10.0) -> Heard | None:
@@ -121,8 +121,8 @@ class Listener:
         self.clips: list[list[Prediction]] = []
         self.labels: list[int] = []
 
-    def add(self, frame: np.ndarray, label: int, fov_deg: float | None = None) -> None:
-        self.clips.append(play_still(self.engine, frame, self.seconds, self.fps, fov_deg))
+    def add(self, frame: np.ndarray, label: int, fov_deg: float | None = None, roll_deg: float | None = None) -> None:
+        self.clips.append(play_still(self.engine, frame, self.seconds, self.fps, fov_deg, roll_deg))
         self.labels.append(int(label))
 
     def save(self, path: str | os.PathLike, **extra: np.ndarray) -> None:

@@ -53,9 +53,13 @@ class Pipeline:
         self.decider = Decider(decision_cfg or engine.decision_config())
         self.beacon_cfg = beacon_cfg or BeaconConfig()
 
-    def step(self, frame_rgb: np.ndarray | None, t: float, yaw_rate_dps: float = 0.0) -> Step:
-        """Process a frame taken at ``t`` seconds (None = no new frame, a watchdog tick)."""
-        pred = self.engine.predict(frame_rgb) if frame_rgb is not None else Prediction(ok=False, error="no frame")
+    def step(self, frame_rgb: np.ndarray | None, t: float, yaw_rate_dps: float = 0.0,
+             roll_deg: float | None = None) -> Step:
+        """Process a frame taken at ``t`` seconds (None = no new frame, a watchdog tick); ``roll_deg``:
+        the camera's roll when it was taken, from an orientation sensor (None: none; the frame is
+        used as it is, :meth:`Engine.predict`)."""
+        pred = (self.engine.predict(frame_rgb, roll_deg=roll_deg) if frame_rgb is not None
+                else Prediction(ok=False, error="no frame"))
         obs = pred.observation() if frame_rgb is not None else None
         if pred.ok and pred.fov_deg is not None:
             threshold = self.engine.bundle.calibration.uncertainty.threshold_for(pred.orientation, pred.fov_deg)

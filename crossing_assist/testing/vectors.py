@@ -69,6 +69,11 @@ portrait frames at most ``narrow_fov_deg`` across; each step's threshold is
 upright (~41 deg: the narrow threshold), then 3:4 (53 deg: the portrait one), landscape, and
 9:16 again, with frames whose doubt lies between the two portrait thresholds. The scenarios
 before it are those of version 7.
+
+Version 9: ``geometry.level``, levelling a rolled camera's frame
+(:func:`crossing_assist.geometry.level_angle`: how far a roll is turned back, clamped, small ones
+left alone) and ``pad_rgb``, what fills the corners the camera did not see. The scenarios are
+those of version 8.
 """
 
 from __future__ import annotations
@@ -85,7 +90,7 @@ import numpy as np
 
 from crossing_assist.actions import DEFAULT_FOV_DEG, get_space, heading_to_pan
 from crossing_assist.fileio import atomic_write_text
-from crossing_assist.geometry import FOV_RANGE_DEG, orientation, view_rows
+from crossing_assist.geometry import FOV_RANGE_DEG, PAD_RGB, level_angle, orientation, view_rows
 from crossing_assist.runtime.beacon import BeaconConfig, itd_seconds, pan_gains
 from crossing_assist.runtime.belief import entropy
 from crossing_assist.runtime.camera import camera_fov, gate_threshold, geometry_of
@@ -96,7 +101,7 @@ from crossing_assist.runtime.status import STATUS_STOP, status_message
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 8
+VERSION = 9
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -438,7 +443,10 @@ def build_vectors(seed: int = 20240601) -> dict:
         "geometry": {"fov_range_deg": list(FOV_RANGE_DEG), "fov_choice": _fov_choices(),
                      "view_rows": {"geometry": GEOMETRY_V3, "cases": _view_rows()},
                      "view_rows_sensor": {"geometry": GEOMETRY_V3_SENSOR, "cases": _view_rows_sensor()},
-                     "view_rows_zoom": {"geometry": GEOMETRY_V4, "cases": _view_rows_zoom()}},
+                     "view_rows_zoom": {"geometry": GEOMETRY_V4, "cases": _view_rows_zoom()},
+                     # how far a rolled camera's frame is turned back (geometry.level_angle), and the fill
+                     "level": {"pad_rgb": list(PAD_RGB), "cases": [{"roll_deg": r, "angle_deg": level_angle(r)} for r in
+                                                                    (None, 0.0, 0.3, -0.49, 0.5, 7.25, -12.0, 44.9, 45.0, 60.0, -90.0)]}},
     }
 
 

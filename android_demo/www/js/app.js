@@ -17,7 +17,9 @@
 //   sensor, e.g. 9:16 video, gets its own with geometry.sensor_aspect); a new FOV starts a fresh Decider,
 //   and an invalid one stops;
 // * a bundle with geometry.view_crop (schema 3) sees only the frame's middle rows at the training
-//   camera's angular scale (geometry.js viewRows, from the whole frame's FOV), as Engine.predict.
+//   camera's angular scale (geometry.js viewRows, from the whole frame's FOV), as Engine.predict;
+// * with the motion sensors on, a frame from a camera rolled about its axis is turned level
+//   first (camera.js FrameGrabber.level, the roll from TiltWatch), as Engine.predict(roll_deg).
 //
 // Advice on a "not sure" stop (the decision is unchanged, only the sentence and the vibration):
 // with the gyroscope on, a phone pointed far down or up is told which way to tilt (TiltWatch);
@@ -26,15 +28,15 @@
 // The whole screen above the helper bar is one control: tap to start; while guiding, a double
 // tap or a long press ends guidance (a single tap only says how), and a tap resumes lost audio.
 //
-// URL flags: ?test=1 keeps a trace of every step (and copies of the camera frames, before any
-// view crop) in window.crossingAssist for the end-to-end test; ?bundle=URL loads another bundle
+// URL flags: ?test=1 keeps a trace of every step (and copies of the camera frames, levelled,
+// before any view crop) in window.crossingAssist for the end-to-end test; ?bundle=URL loads another bundle
 // folder; ?gyro=1 ticks "Use the gyroscope"; ?threads=N sets the WASM threads;
 // ?tutorial_speed=K plays the tutorial K times faster; ?sideways_after_s=S gives the hold-it-sideways
 // advice after S s instead of 5.
 
 import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
-import { cameraFov, defaultFovText, FovError, frameView, gateKind, gateThreshold, orientation, zoomedFov } from './geometry.js';
+import { cameraFov, defaultFovText, FovError, frameView, gateKind, gateThreshold, orientation, PAD_RGB, zoomedFov } from './geometry.js';
 import { Haptics } from './haptics.js';
 import { isFresh, sameFrame, SidewaysHint, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
 import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN } from './logic.js';
@@ -241,7 +243,8 @@ async function step(frame, captured, dt) {
   const crop = seen.rows < frame.height ? `, rows ${seen.top}–${seen.top + seen.rows} seen` : '';
   const narrow = gateKind(app.meta.calibration.uncertainty, frame.width, frame.height, cam.fov) === 'narrow'
     ? ', a narrow camera’s gate threshold' : '';
-  view.camera(`${cam.orientation} ${frame.width}×${frame.height}, field of view ${cam.fov.toFixed(1)}° (${cam.source})${crop}${narrow}`);
+  const levelled = frame.roll_deg ? `, turned ${Math.abs(frame.roll_deg).toFixed(0)}° ${frame.roll_deg > 0 ? 'clockwise' : 'counter-clockwise'} to level` : '';
+  view.camera(`${cam.orientation} ${frame.width}×${frame.height}, field of view ${cam.fov.toFixed(1)}° (${cam.source})${crop}${narrow}${levelled}`);
   let outputs = null;
   let obs;
   const t0 = performance.now();
@@ -265,7 +268,7 @@ async function step(frame, captured, dt) {
   }
   app.frameId = (app.frameId || 0) + 1; // unique over restarts (seq restarts with the camera)
   record({ kind: 'frame', id: app.frameId, t: captured, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, obs, decision: d,
-    fov_deg: cam.fov, width: frame.width, height: frame.height, view_rows: [seen.top, seen.rows],
+    fov_deg: cam.fov, width: frame.width, height: frame.height, view_rows: [seen.top, seen.rows], roll_deg: frame.roll_deg ?? 0,
     outputs: outputs && plain(outputs) });
   if (TEST) {
     app.frames.push({ id: app.frameId, seq: frame.seq, width: frame.width, height: frame.height, rgb: frame.rgb.slice() });
@@ -303,7 +306,10 @@ async function runLoop() {
     prev = { ...frame, rgb: frame.rgb.slice() };
     lastRun = captured;
     const t0 = performance.now();
-    await step(frame, captured, prevCaptured === null ? 0 : captured - prevCaptured);
+    // With the motion sensors on, the frame is turned level first (the frozen check above reads
+    // the camera's own pixels, which a moving phone's levelling would otherwise keep changing).
+    const levelled = app.grabber.level(frame, app.tilt?.rollDeg(captured) ?? null, app.meta.geometry.pad_rgb ?? PAD_RGB);
+    await step(levelled, captured, prevCaptured === null ? 0 : captured - prevCaptured);
     prevCaptured = captured;
     p.busyS += (performance.now() - t0) / 1000;
     p.frames += 1;
@@ -364,7 +370,7 @@ function onAudioState(state) {
 }
 
 function onOrientation(e) {
-  app.tilt?.add(e.beta, e.gamma, now());
+  app.tilt?.add(e.beta, e.gamma, now(), screen.orientation?.angle ?? 0);
 }
 
 function onMotion(e) {

@@ -2,6 +2,7 @@
 // frame once as RGB bytes. A camera that stops delivering frames (frozen, unplugged, taken by
 // another app) yields nothing, so no fresh decision arrives and the watchdog stops the beacon.
 
+import { levelAngle } from './geometry.js';
 import { rgbaToRgb } from './model.js';
 
 export const MAX_WIDTH = 640; // frames wider than this are downscaled (aspect kept), as the Python runtime does
@@ -105,6 +106,35 @@ export class FrameGrabber {
     const rgba = this.ctx.getImageData(0, 0, width, height).data;
     this.taken = this.presented;
     return { rgb: rgbaToRgb(rgba, this.rgb), width, height, seq: this.taken };
+  }
+
+  /**
+   * The last grabbed frame turned level (geometry.js levelAngle of rollDeg, the camera's roll from
+   * the orientation sensor), the corners the camera did not see filled with padRgb (the bundle's
+   * geometry.pad_rgb), as crossing_assist/geometry.py level: {rgb, width, height, seq, roll_deg}.
+   * The frame itself (same object) when there is nothing to turn. Call right after grab(): it
+   * draws from the grab's canvas.
+   */
+  level(frame, rollDeg, padRgb) {
+    const angle = levelAngle(rollDeg);
+    if (angle === 0) return frame;
+    const { width, height } = frame;
+    if (!this.levelCtx) this.levelCtx = document.createElement('canvas').getContext('2d', { willReadFrequently: true });
+    const ctx = this.levelCtx;
+    if (ctx.canvas.width !== width || ctx.canvas.height !== height) {
+      ctx.canvas.width = width;
+      ctx.canvas.height = height;
+    }
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    ctx.fillStyle = `rgb(${padRgb[0]}, ${padRgb[1]}, ${padRgb[2]})`;
+    ctx.fillRect(0, 0, width, height);
+    // canvas y points down, so a positive angle turns the picture clockwise: back by the roll
+    ctx.setTransform(1, 0, 0, 1, width / 2, height / 2);
+    ctx.rotate((angle * Math.PI) / 180);
+    ctx.drawImage(this.canvas, -width / 2, -height / 2);
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    const rgba = ctx.getImageData(0, 0, width, height).data;
+    return { rgb: rgbaToRgb(rgba, new Uint8Array(width * height * 3)), width, height, seq: frame.seq, roll_deg: angle };
   }
 
   close() {

@@ -21,9 +21,24 @@
 // one exception. The view crop (schema 3, geometry.view_crop, letterbox only): the app first
 // keeps only the middle rows the canvas can show at the training camera's angular scale
 // (viewRows), never columns. The FOV, orientation and gate threshold stay the whole frame's.
+// And levelling: with the motion sensors on, a frame whose camera is rolled about its own axis is
+// first turned back by that roll (levelAngle; camera.js FrameGrabber.level draws it), as
+// crossing_assist/geometry.py level does for Engine.predict(..., roll_deg).
 
 export const ORIENTATIONS = ['landscape', 'portrait'];
 export const FOV_RANGE_DEG = [20, 170];
+/** Levelling (geometry.MAX_LEVEL_DEG and level in Python): a roll is turned back by at most
+ * max_deg; one under min_deg is left alone. */
+export const LEVEL = Object.freeze({ max_deg: 45, min_deg: 0.5 });
+/** What fills what a camera did not see when the bundle names nothing (schema 1): geometry.PAD_RGB. */
+export const PAD_RGB = Object.freeze([124, 116, 104]);
+
+/** The roll (degrees, the scene's counter-clockwise roll in the frame) a frame is turned back
+ * by: clamped to +-LEVEL.max_deg; 0 under LEVEL.min_deg or without a reading (null, NaN). */
+export function levelAngle(rollDeg) {
+  if (!Number.isFinite(rollDeg) || Math.abs(rollDeg) < LEVEL.min_deg) return 0;
+  return Math.max(-LEVEL.max_deg, Math.min(LEVEL.max_deg, rollDeg));
+}
 
 export class FovError extends RangeError {
   constructor(message) {

@@ -140,6 +140,28 @@ export function cameraElevationDeg(beta, gamma) {
 }
 
 /**
+ * How far the scene is rolled counter-clockwise in the camera's frame (degrees; the phone turned
+ * clockwise about the camera's axis, as its user sees the screen), from DeviceOrientationEvent's
+ * beta and gamma and the screen's angle (screen.orientation.angle: the frame is upright for the
+ * screen). Gravity in device axes is (sin g cos b, -sin b, -cos g cos b) for the W3C Z-X'-Y''
+ * angles (alpha turns about the vertical and so never rolls the frame); the frame's right and
+ * down are the device's x and -y turned by the screen angle. Null without both angles, or when
+ * the camera points within 30 deg of straight down or up (gravity nearly along its axis: no
+ * horizon to level; TiltWatch asks to raise or lower the phone long before).
+ */
+export function cameraRollDeg(beta, gamma, screenAngleDeg = 0) {
+  if (!Number.isFinite(beta) || !Number.isFinite(gamma)) return null;
+  const r = Math.PI / 180;
+  const gx = Math.sin(gamma * r) * Math.cos(beta * r);
+  const gy = -Math.sin(beta * r);
+  const a = (Number.isFinite(screenAngleDeg) ? screenAngleDeg : 0) * r;
+  const right = gx * Math.cos(a) - gy * Math.sin(a);
+  const down = -(gx * Math.sin(a) + gy * Math.cos(a));
+  if (Math.hypot(right, down) < 0.5) return null;
+  return Math.atan2(right, down) / r + 0; // + 0: no -0
+}
+
+/**
  * Follows the phone's tilt (DeviceOrientationEvent samples) and names the stop reason it gives:
  * 'tilt_down' below cfg.down_deg of camera elevation, 'tilt_up' above cfg.up_deg, kept until
  * the camera comes back cfg.margin_deg inside the limit (a phone hovering at a limit does not
@@ -151,12 +173,14 @@ export class TiltWatch {
     this.cfg = { ...TILT, ...cfg };
     this.state = null;
     this.lastT = null;
+    this.roll = null; // the camera's roll at the last sample (cameraRollDeg), for levelling
   }
 
-  /** A sample at time t (s); samples without both angles are ignored. */
-  add(beta, gamma, t) {
+  /** A sample at time t (s) with the screen at screenAngleDeg; samples without both angles are ignored. */
+  add(beta, gamma, t, screenAngleDeg = 0) {
     const e = cameraElevationDeg(beta, gamma);
     if (e === null) return;
+    this.roll = cameraRollDeg(beta, gamma, screenAngleDeg);
     const { down_deg: down, up_deg: up, margin_deg: margin } = this.cfg;
     if (e < (this.state === 'tilt_down' ? down + margin : down)) this.state = 'tilt_down';
     else if (e > (this.state === 'tilt_up' ? up - margin : up)) this.state = 'tilt_up';
@@ -166,7 +190,16 @@ export class TiltWatch {
 
   /** The reason at time `now` (s): 'tilt_down', 'tilt_up' or null. */
   reason(now) {
-    return this.lastT !== null && now - this.lastT <= this.cfg.fresh_s ? this.state : null;
+    return this.fresh(now) ? this.state : null;
+  }
+
+  /** The camera's roll at time `now` (s), degrees (cameraRollDeg), or null: none, or no sample fresher than cfg.fresh_s. */
+  rollDeg(now) {
+    return this.fresh(now) ? this.roll : null;
+  }
+
+  fresh(now) {
+    return this.lastT !== null && now - this.lastT <= this.cfg.fresh_s;
   }
 }
 

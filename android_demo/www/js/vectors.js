@@ -7,12 +7,12 @@
 // max(1, |expected|); the belief element by element.
 
 import { headingToPan, spaceGroups } from './actions.js';
-import { cameraFov, FovError, gateThreshold, orientation, viewRows } from './geometry.js';
+import { cameraFov, FovError, gateThreshold, levelAngle, orientation, PAD_RGB, viewRows } from './geometry.js';
 import { isFresh, sameFrame, Watchdog } from './live.js';
 import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains } from './logic.js';
 import { statusMessage } from './view.js';
 
-const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8];
+const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8, 9];
 
 function close(a, b, tol) {
   return Math.abs(a - b) <= tol * Math.max(1, Math.abs(b));
@@ -184,6 +184,17 @@ export function replayVectors(vectors) {
           got: [fov, ...got], expected: [v.fov_deg, v.top, v.rows] });
       }
     }
+  }
+  // version 9: levelling a rolled camera's frame (geometry.level_angle) and what fills its corners.
+  const lev = vectors.geometry?.level;
+  if (lev) {
+    checks += 1;
+    if (PAD_RGB.join() !== lev.pad_rgb.join()) fail({ scenario: 'geometry.level', field: 'pad_rgb', got: PAD_RGB, expected: lev.pad_rgb });
+  }
+  for (const v of lev?.cases || []) {
+    checks += 1;
+    const got = levelAngle(v.roll_deg);
+    if (!close(got, v.angle_deg, tol)) fail({ scenario: 'geometry.level', field: `roll ${v.roll_deg}`, got, expected: v.angle_deg });
   }
   return { version: vectors.version, scenarios: vectors.scenarios.length, steps, checks, failures, nFailures, maxRelDiff };
 }

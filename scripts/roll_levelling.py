@@ -1,0 +1,182 @@
+"""What a rolled phone hears, with and without levelling its frames from the orientation sensor.
+
+Draws photos from one split of a crossing-data manifest (default: PTL val in ``runs/data/ptl``,
+which ``scripts/prepare_default_data.sh`` writes; the default bundle never trained on those
+photos, though it did on their photographers) and plays each as a 1 s still clip at 10 fps
+through the runtime (``runtime/listen.py``: engine + filter + gate, the bundle's thresholds):
+
+- ``level``: the photo as taken (a level phone);
+- per roll range ``LO:HI`` (degrees, either way at random; :func:`~crossing_assist.data_tools.augment.roll`,
+  the scene beyond the photo's edges reflected in): ``rolled``, the rolled camera's frame as it
+  is (no sensor); ``levelled``, the same frame with the sensor's roll given to the engine
+  (``Engine.predict(…, roll_deg=…)``, :func:`~crossing_assist.geometry.level`, what the phone app
+  does); ``levelled±E``, the sensor off by up to ``E`` degrees (``--sensor-error``).
+
+Every play is judged against the strip where the goal lies for a *level* camera, the bearing
+the user has to walk (``rolled`` also against the rolled frame's own strip: ``rolled, own strip``).
+Prints a markdown table (beacon on, confidently wrong, right strip while on) with, per range,
+how many photos the beacon starts or stops playing for when levelled; ``--out`` writes the
+figures as JSON and ``--plot`` a bar chart.
+
+    .venv/bin/python scripts/roll_levelling.py [--photos 864] [--rolls 5:10,10:20,20:35] \\
+        [--out /tmp/roll.json] [--plot docs/img/roll_levelling.png]
+
+A missing manifest, an empty split or an unusable bundle is one line and exit 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from crossing_assist.bundle import BundleError
+from crossing_assist.data_tools.augment import roll
+from crossing_assist.data_tools.images import flag_value, load_frame
+from crossing_assist.data_tools.manifest import read_manifest
+from crossing_assist.fileio import atomic_write_text
+from crossing_assist.runtime.demo import DEFAULT_BUNDLE
+from crossing_assist.runtime.engine import Engine
+from crossing_assist.runtime.listen import Listener, summarise
+
+
+def parse_rolls(text: str) -> list[tuple[float, float]]:
+    """``"5:10,10:20"`` -> [(5, 10), (10, 20)]; one line (SystemExit) for anything else."""
+    out = []
+    for part in text.split(","):
+        try:
+            lo, hi = (float(v) for v in part.split(":"))
+        except ValueError:
+            raise SystemExit(f"error: --rolls: {part!r} is not LO:HI (degrees)") from None
+        if not 0 <= lo <= hi <= 90:
+            raise SystemExit(f"error: --rolls: {part!r}: need 0 <= LO <= HI <= 90")
+        out.append((lo, hi))
+    return out
+
+
+def rates(lis: Listener) -> dict:
+    s = summarise(lis.heard())
+    return {k: s[k] for k in ("beacon_on", "confidently_wrong", "accuracy_heard", "frames_with_crossing")}
+
+
+def flips(a: Listener, b: Listener) -> tuple[int, int]:
+    """Photos the beacon plays for under ``b`` but not ``a``, and the other way."""
+    on_a = [h.on for h in a.heard()]
+    on_b = [h.on for h in b.heard()]
+    return sum(y and not x for x, y in zip(on_a, on_b)), sum(x and not y for x, y in zip(on_a, on_b))
+
+
+def measure(engine: Engine, rows, images, rolls, sensor_error: float, seed: int) -> dict:
+    level = Listener(engine)
+    for r, img in zip(rows, images):
+        level.add(img, r.label)
+    out = {"level": rates(level), "ranges": {}}
+    print(f"level: {out['level']}", file=sys.stderr, flush=True)
+    for k, (lo, hi) in enumerate(rolls):
+        rng = np.random.default_rng([seed, k])
+        plays = {name: Listener(engine) for name in ("rolled", "rolled_own", "levelled", "levelled_noisy")}
+        for r, img in zip(rows, images):
+            deg = float(rng.choice([-1, 1]) * rng.uniform(lo, hi))
+            view, _, own = roll(img, r.far_x, float(flag_value(r.flags, "far_y") or 0.5), r.label, deg)
+            plays["rolled"].add(view, r.label)
+            plays["rolled_own"].clips.append(plays["rolled"].clips[-1])   # the same play, its own strip
+            plays["rolled_own"].labels.append(own)
+            plays["levelled"].add(view, r.label, roll_deg=deg)
+            plays["levelled_noisy"].add(view, r.label, roll_deg=deg + float(rng.uniform(-sensor_error, sensor_error)))
+        on, off = flips(plays["rolled"], plays["levelled"])
+        row = {name: rates(lis) for name, lis in plays.items()}
+        row["levelled_vs_rolled"] = {"beacon_starts": on, "beacon_stops": off}
+        out["ranges"][f"{lo:g}:{hi:g}"] = row
+        print(f"roll {lo:g}..{hi:g}: {row}", file=sys.stderr, flush=True)
+    return out
+
+
+def markdown(res: dict, sensor_error: float) -> str:
+    names = {"rolled": "rolled, no sensor", "rolled_own": "rolled, own strip", "levelled": "levelled",
+             "levelled_noisy": f"levelled, sensor ±{sensor_error:g}°"}
+    lines = ["| roll | frames | beacon on | confidently wrong | right strip |", "|---|---|---|---|---|"]
+
+    def line(label, r):
+        lines.append(f"| {label} | {r['frames_with_crossing']} | {100 * r['beacon_on']:.1f} % | "
+                     f"{100 * r['confidently_wrong']:.2f} % | {100 * r['accuracy_heard']:.1f} % |")
+
+    line("0° (level phone)", res["level"])
+    for rng_, row in res["ranges"].items():
+        lo, hi = rng_.split(":")
+        for name, label in names.items():
+            line(f"{lo}–{hi}°, {label}", row[name])
+    flips_ = "; ".join(f"{k}°: +{v['levelled_vs_rolled']['beacon_starts']} / -{v['levelled_vs_rolled']['beacon_stops']}"
+                       for k, v in res["ranges"].items())
+    return "\n".join(lines) + f"\n\nlevelled against rolled, photos the beacon starts / stops playing for: {flips_}"
+
+
+def plot(res: dict, path: Path, sensor_error: float) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ranges = list(res["ranges"])
+    names = [("rolled", "rolled, no sensor"), ("levelled", "levelled"), ("levelled_noisy", f"levelled, sensor ±{sensor_error:g}°")]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    x = np.arange(len(ranges))
+    for ax, key, title in ((axes[0], "beacon_on", "beacon on (%)"), (axes[1], "confidently_wrong", "confidently wrong (%)")):
+        for j, (name, label) in enumerate(names):
+            ax.bar(x + (j - 1) * 0.27, [100 * res["ranges"][r][name][key] for r in ranges], 0.27, label=label)
+        ax.axhline(100 * res["level"][key], color="k", ls="--", lw=1, label="level phone")
+        ax.set_xticks(x, [f"roll {r.replace(':', '–')}°" for r in ranges])
+        ax.set_title(title)
+    axes[0].legend(fontsize=8, loc="lower left")
+    fig.suptitle(f"{res['photos']} photos ({res['split']}), {Path(res['bundle']).name}; judged against a level camera's strip")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE, help="bundle folder (default: the embedded one)")
+    ap.add_argument("--data", type=Path, default=Path("runs/data/ptl"), help="crossing-data manifest folder")
+    ap.add_argument("--split", default="val", help="which split's photos (default val)")
+    ap.add_argument("--photos", type=int, default=864, help="photos drawn from the split (default 864, all of PTL val)")
+    ap.add_argument("--rolls", default="5:10,10:20,20:35", help="roll ranges LO:HI in degrees, comma-separated")
+    ap.add_argument("--sensor-error", type=float, default=3.0, help="the noisy sensor's error bound, degrees (default 3)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, help="write the figures as JSON here")
+    ap.add_argument("--plot", type=Path, help="write a bar chart (PNG) here")
+    a = ap.parse_args(argv)
+    rolls = parse_rolls(a.rolls)
+    if not (a.data / "manifest.csv").is_file():
+        print(f"error: no manifest at {a.data / 'manifest.csv'} (scripts/prepare_default_data.sh writes runs/data/ptl)",
+              file=sys.stderr)
+        return 1
+    ds = read_manifest(a.data)
+    rows = [r for r in ds.rows if r.split == a.split and r.far_x is not None]
+    if not rows:
+        print(f"error: no photo with a crossing in split {a.split!r} of {a.data}", file=sys.stderr)
+        return 1
+    try:
+        engine = Engine(a.bundle, threads=1)
+    except BundleError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    rng = np.random.default_rng(a.seed)
+    rows = [rows[i] for i in sorted(rng.choice(len(rows), min(a.photos, len(rows)), replace=False))]
+    images = [load_frame(ds.image_path(r), r.flags) for r in rows]
+    res = {"bundle": str(a.bundle), "data": str(a.data), "split": a.split, "photos": len(rows),
+           "sensor_error_deg": a.sensor_error, "seed": a.seed,
+           **measure(engine, rows, images, rolls, a.sensor_error, a.seed)}
+    print(markdown(res, a.sensor_error))
+    if a.out:
+        atomic_write_text(a.out, json.dumps(res, indent=1))
+    if a.plot:
+        plot(res, a.plot, a.sensor_error)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
