@@ -52,3 +52,13 @@ def test_bundle_speed_times_bundles_side_by_side_and_refuses_bad_arguments(toy_b
     assert bundle_speed.main([f"a={toy_bundle.parent / 'missing'}"]) == 2     # not a bundle
     err = capsys.readouterr().err
     assert err.count("error:") == 2 and "NAME=BUNDLE_DIR" in err
+
+
+def test_level_cost_times_predict_with_and_without_levelling(toy_bundle, tmp_path, capsys):  # noqa: F811
+    import level_cost
+
+    assert level_cost.main(["--bundle", str(toy_bundle), "--rounds", "2", "--block", "1", "--frame", "64x48"]) == 0
+    out = capsys.readouterr().out
+    assert "predict, levelled" in out and "level alone" in out and "levelled / plain predict:" in out
+    assert level_cost.main(["--bundle", str(tmp_path)]) == 1
+    assert capsys.readouterr().err.startswith("error: ")
