@@ -3,7 +3,9 @@
 Draws photos from one split of a crossing-data manifest (default: PTL val in ``runs/data/ptl``,
 which ``scripts/prepare_default_data.sh`` writes; the default bundle never trained on those
 photos, though it did on their photographers) and plays each as a 1 s still clip at 10 fps
-through the runtime (``runtime/listen.py``: engine + filter + gate, the bundle's thresholds):
+through the runtime (``runtime/listen.py``: engine + filter + gate, the bundle's thresholds;
+``--source ptl:X --split train`` with a leave-one-photographer-out fold's bundle measures it on
+the photographer that fold never saw):
 
 - ``level``: the photo as taken (a level phone);
 - per roll range ``LO:HI`` (degrees, either way at random; :func:`~crossing_assist.data_tools.augment.roll`,
@@ -121,9 +123,10 @@ def plot(res: dict, path: Path, sensor_error: float) -> None:
 
     ranges = list(res["ranges"])
     names = [("rolled", "rolled, no sensor"), ("levelled", "levelled"), ("levelled_noisy", f"levelled, sensor ±{sensor_error:g}°")]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig, axes = plt.subplots(1, 3, figsize=(14, 3.8))
     x = np.arange(len(ranges))
-    for ax, key, title in ((axes[0], "beacon_on", "beacon on (%)"), (axes[1], "confidently_wrong", "confidently wrong (%)")):
+    for ax, key, title in ((axes[0], "beacon_on", "beacon on (%)"), (axes[1], "accuracy_heard", "on and the right strip (%)"),
+                           (axes[2], "confidently_wrong", "confidently wrong (%)")):
         for j, (name, label) in enumerate(names):
             ax.bar(x + (j - 1) * 0.27, [100 * res["ranges"][r][name][key] for r in ranges], 0.27, label=label)
         ax.axhline(100 * res["level"][key], color="k", ls="--", lw=1, label="level phone")
@@ -142,6 +145,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE, help="bundle folder (default: the embedded one)")
     ap.add_argument("--data", type=Path, default=Path("runs/data/ptl"), help="crossing-data manifest folder")
     ap.add_argument("--split", default="val", help="which split's photos (default val)")
+    ap.add_argument("--source", help="only this photographer's photos (e.g. ptl:heon, with --split train: a "
+                    "leave-one-photographer-out fold's bundle on the photographer it never saw)")
     ap.add_argument("--photos", type=int, default=864, help="photos drawn from the split (default 864, all of PTL val)")
     ap.add_argument("--rolls", default="5:10,10:20,20:35", help="roll ranges LO:HI in degrees, comma-separated")
     ap.add_argument("--sensor-error", type=float, default=3.0, help="the noisy sensor's error bound, degrees (default 3)")
@@ -155,9 +160,10 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 1
     ds = read_manifest(a.data)
-    rows = [r for r in ds.rows if r.split == a.split and r.far_x is not None]
+    rows = [r for r in ds.rows if r.split == a.split and r.far_x is not None and a.source in (None, r.source)]
     if not rows:
-        print(f"error: no photo with a crossing in split {a.split!r} of {a.data}", file=sys.stderr)
+        print(f"error: no photo with a crossing in split {a.split!r}{'' if a.source is None else f' from {a.source}'} "
+              f"of {a.data}", file=sys.stderr)
         return 1
     try:
         engine = Engine(a.bundle, threads=1)
@@ -167,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng(a.seed)
     rows = [rows[i] for i in sorted(rng.choice(len(rows), min(a.photos, len(rows)), replace=False))]
     images = [load_frame(ds.image_path(r), r.flags) for r in rows]
-    res = {"bundle": str(a.bundle), "data": str(a.data), "split": a.split, "photos": len(rows),
+    res = {"bundle": str(a.bundle), "data": str(a.data), "split": a.split, "source": a.source, "photos": len(rows),
            "sensor_error_deg": a.sensor_error, "seed": a.seed,
            **measure(engine, rows, images, rolls, a.sensor_error, a.seed)}
     print(markdown(res, a.sensor_error))

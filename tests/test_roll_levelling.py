@@ -14,14 +14,14 @@ import roll_levelling as rl  # noqa: E402
 def test_levelling_gives_back_what_a_level_phone_hears(tmp_path, toy_bundle, capsys):  # noqa: F811
     """The toy places vertical bars. Rolled 25-35 deg, a bar leans across strips and the toy
     places fewer of them; levelled by the sensor's roll it places them as on the level photo."""
-    data = bar_dataset(tmp_path / "data", n=8)
+    data = bar_dataset(tmp_path / "data", n=16)
     out = tmp_path / "roll.json"
-    assert rl.main(["--bundle", str(toy_bundle), "--data", str(data), "--rolls", "25:35", "--photos", "8",
+    assert rl.main(["--bundle", str(toy_bundle), "--data", str(data), "--rolls", "25:35", "--source", "src:1",
                     "--out", str(out), "--plot", str(tmp_path / "roll.png")]) == 0
     res = json.loads(out.read_text())
     row = res["ranges"]["25:35"]
     level, rolled, levelled = res["level"], row["rolled"], row["levelled"]
-    assert res["photos"] == 8 and level["accuracy_heard"] >= 0.75
+    assert res["photos"] == 8 and res["source"] == "src:1" and level["accuracy_heard"] >= 0.75
     assert rolled["accuracy_heard"] < level["accuracy_heard"]
     assert levelled["accuracy_heard"] == level["accuracy_heard"]
     assert (tmp_path / "roll.png").stat().st_size > 1000
@@ -35,6 +35,8 @@ def test_bad_input_is_one_line(tmp_path, toy_bundle, capsys):  # noqa: F811
     data = bar_dataset(tmp_path / "data", n=2, split="train")
     assert rl.main(["--bundle", str(toy_bundle), "--data", str(data)]) == 1
     assert "no photo with a crossing in split 'val'" in capsys.readouterr().err
+    assert rl.main(["--bundle", str(toy_bundle), "--data", str(data), "--split", "train", "--source", "src:7"]) == 1
+    assert "from src:7" in capsys.readouterr().err
     assert rl.main(["--bundle", str(tmp_path), "--data", str(bar_dataset(tmp_path / "d2", n=2))]) == 1
     assert capsys.readouterr().err.startswith("error: ")
     for bad in ("10-20", "20:10", "5:100"):
