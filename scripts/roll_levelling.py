@@ -23,7 +23,12 @@ figures as JSON and ``--plot`` a bar chart.
     .venv/bin/python scripts/roll_levelling.py [--photos 864] [--rolls 5:10,10:20,20:35] \\
         [--out /tmp/roll.json] [--plot docs/img/roll_levelling.png]
 
-A missing manifest, an empty split or an unusable bundle is one line and exit 1.
+``--pool A.json B.json …`` pools earlier ``--out`` files instead (each rate weighted by its
+photos; e.g. the four folds of a leave-one-photographer-out run, each on its unseen photographer)
+and prints, writes and plots the pooled figures the same way.
+
+A missing manifest, an empty split, an unusable bundle or an unreadable ``--pool`` file is one
+line and exit 1.
 """
 
 from __future__ import annotations
@@ -96,6 +101,28 @@ def measure(engine: Engine, rows, images, rolls, sensor_error: float, seed: int)
     return out
 
 
+def pool(results: list[dict]) -> dict:
+    """Several runs' figures as one: each rate weighted by its run's photos, flips summed."""
+    n = sum(r["photos"] for r in results)
+
+    def mean(rows: list[dict]) -> dict:
+        out = {k: sum(r[k] * res["photos"] for r, res in zip(rows, results)) / n
+               for k in ("beacon_on", "confidently_wrong", "accuracy_heard")}
+        return {**out, "frames_with_crossing": sum(r["frames_with_crossing"] for r in rows)}
+
+    ranges = {}
+    for key in results[0]["ranges"]:
+        rows = [r["ranges"][key] for r in results]
+        ranges[key] = {name: mean([row[name] for row in rows]) for name in rows[0] if name != "levelled_vs_rolled"}
+        ranges[key]["levelled_vs_rolled"] = {k: sum(row["levelled_vs_rolled"][k] for row in rows)
+                                             for k in ("beacon_starts", "beacon_stops")}
+    first = results[0]
+    return {"bundle": "pooled: " + ", ".join(r["bundle"] for r in results), "data": first["data"],
+            "split": ", ".join(sorted({f"{r['split']} {r.get('source') or ''}".strip() for r in results})),
+            "source": None, "photos": n, "sensor_error_deg": first["sensor_error_deg"], "seed": first["seed"],
+            "level": mean([r["level"] for r in results]), "ranges": ranges}
+
+
 def markdown(res: dict, sensor_error: float) -> str:
     names = {"rolled": "rolled, no sensor", "rolled_own": "rolled, own strip", "levelled": "levelled",
              "levelled_noisy": f"levelled, sensor ±{sensor_error:g}°"}
@@ -133,7 +160,8 @@ def plot(res: dict, path: Path, sensor_error: float) -> None:
         ax.set_xticks(x, [f"roll {r.replace(':', '–')}°" for r in ranges])
         ax.set_title(title)
     axes[0].legend(fontsize=8, loc="lower left")
-    fig.suptitle(f"{res['photos']} photos ({res['split']}), {Path(res['bundle']).name}; judged against a level camera's strip")
+    name = res["bundle"] if res["bundle"].startswith("pooled") else Path(res["bundle"]).name
+    fig.suptitle(f"{res['photos']} photos ({res['split']}), {name[:80]}; judged against a level camera's strip")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
@@ -153,7 +181,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, help="write the figures as JSON here")
     ap.add_argument("--plot", type=Path, help="write a bar chart (PNG) here")
+    ap.add_argument("--pool", type=Path, nargs="+", metavar="JSON", help="pool earlier --out files instead of playing")
     a = ap.parse_args(argv)
+    if a.pool:
+        try:
+            results = [json.loads(p.read_text()) for p in a.pool]
+            res = pool(results)
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            print(f"error: --pool: {exc}", file=sys.stderr)
+            return 1
+        return report(res, a.out, a.plot)
     rolls = parse_rolls(a.rolls)
     if not (a.data / "manifest.csv").is_file():
         print(f"error: no manifest at {a.data / 'manifest.csv'} (scripts/prepare_default_data.sh writes runs/data/ptl)",
@@ -176,11 +213,15 @@ def main(argv: list[str] | None = None) -> int:
     res = {"bundle": str(a.bundle), "data": str(a.data), "split": a.split, "source": a.source, "photos": len(rows),
            "sensor_error_deg": a.sensor_error, "seed": a.seed,
            **measure(engine, rows, images, rolls, a.sensor_error, a.seed)}
-    print(markdown(res, a.sensor_error))
-    if a.out:
-        atomic_write_text(a.out, json.dumps(res, indent=1))
-    if a.plot:
-        plot(res, a.plot, a.sensor_error)
+    return report(res, a.out, a.plot)
+
+
+def report(res: dict, out: Path | None, plot_path: Path | None) -> int:
+    print(markdown(res, res["sensor_error_deg"]))
+    if out:
+        atomic_write_text(out, json.dumps(res, indent=1))
+    if plot_path:
+        plot(res, plot_path, res["sensor_error_deg"])
     return 0
 
 

@@ -27,6 +27,18 @@ def test_levelling_gives_back_what_a_level_phone_hears(tmp_path, toy_bundle, cap
     assert (tmp_path / "roll.png").stat().st_size > 1000
     table = capsys.readouterr().out
     assert "| 0° (level phone) | 8 |" in table and "| 25–35°, levelled, sensor ±3° | 8 |" in table
+    # pooled with the other source's photos: rates weighted by photos, counts and flips summed
+    other = tmp_path / "other.json"
+    assert rl.main(["--bundle", str(toy_bundle), "--data", str(data), "--rolls", "25:35", "--source", "src:0",
+                    "--split", "val", "--out", str(other)]) == 0
+    pooled = tmp_path / "pooled.json"
+    assert rl.main(["--pool", str(out), str(other), "--out", str(pooled), "--plot", str(tmp_path / "p.png")]) == 0
+    p, o = json.loads(pooled.read_text()), json.loads(other.read_text())
+    assert p["photos"] == 16 and p["level"]["frames_with_crossing"] == 16
+    assert p["level"]["beacon_on"] == pytest.approx((level["beacon_on"] + o["level"]["beacon_on"]) / 2)
+    assert p["ranges"]["25:35"]["levelled_vs_rolled"]["beacon_starts"] == \
+        row["levelled_vs_rolled"]["beacon_starts"] + o["ranges"]["25:35"]["levelled_vs_rolled"]["beacon_starts"]
+    assert "| 0° (level phone) | 16 |" in capsys.readouterr().out
 
 
 def test_bad_input_is_one_line(tmp_path, toy_bundle, capsys):  # noqa: F811
@@ -39,6 +51,8 @@ def test_bad_input_is_one_line(tmp_path, toy_bundle, capsys):  # noqa: F811
     assert "from src:7" in capsys.readouterr().err
     assert rl.main(["--bundle", str(tmp_path), "--data", str(bar_dataset(tmp_path / "d2", n=2))]) == 1
     assert capsys.readouterr().err.startswith("error: ")
+    assert rl.main(["--pool", str(tmp_path / "missing.json")]) == 1
+    assert capsys.readouterr().err.startswith("error: --pool: ")
     for bad in ("10-20", "20:10", "5:100"):
         with pytest.raises(SystemExit, match="error: --rolls"):
             rl.main(["--rolls", bad])
