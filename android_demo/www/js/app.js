@@ -22,7 +22,7 @@
 //   first (camera.js FrameGrabber.level, the roll from TiltWatch), as Engine.predict(roll_deg).
 //
 // Advice on a "not sure" stop (the decision is unchanged, only the sentence and the vibration):
-// with the gyroscope on, a phone pointed far down or up is told which way to tilt (TiltWatch);
+// with the motion sensors on, a phone pointed far down or up is told which way to tilt (TiltWatch);
 // a phone held upright and unsure for 5 s is told to hold it sideways (SidewaysHint).
 //
 // The whole screen above the helper bar is one control: tap to start; while guiding, a double
@@ -30,7 +30,7 @@
 //
 // URL flags: ?test=1 keeps a trace of every step (and copies of the camera frames, levelled,
 // before any view crop) in window.crossingAssist for the end-to-end test; ?bundle=URL loads another bundle
-// folder; ?gyro=1 ticks "Use the gyroscope"; ?threads=N sets the WASM threads;
+// folder; ?gyro=1 ticks "Use the motion sensors"; ?threads=N sets the WASM threads;
 // ?tutorial_speed=K plays the tutorial K times faster; ?sideways_after_s=S gives the hold-it-sideways
 // advice after S s instead of 5.
 
