@@ -21,7 +21,7 @@ how many photos the beacon starts or stops playing for when levelled; ``--out`` 
 figures as JSON and ``--plot`` a bar chart.
 
     .venv/bin/python scripts/roll_levelling.py [--photos 864] [--rolls 5:10,10:20,20:35] \\
-        [--out /tmp/roll.json] [--plot docs/img/roll_levelling.png]
+        [--out /tmp/roll.json] [--plot docs/img/roll_levelling.png] [--gate crossing_assist/assets/default_bundle]
 
 ``--pool A.json B.json …`` pools earlier ``--out`` files instead (each rate weighted by its
 photos; e.g. the four folds of a leave-one-photographer-out run, each on its unseen photographer)
@@ -36,11 +36,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from crossing_assist.bundle import BundleError
+from crossing_assist.bundle import BundleError, UncertaintySpec, read_bundle
 from crossing_assist.data_tools.augment import roll
 from crossing_assist.data_tools.images import flag_value, load_frame
 from crossing_assist.data_tools.manifest import read_manifest
@@ -48,6 +49,13 @@ from crossing_assist.fileio import atomic_write_text
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
 from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.listen import Listener, summarise
+
+
+def use_gate(engine: Engine, gate: UncertaintySpec) -> None:
+    """``engine`` measures and decides with ``gate`` (its measure and its thresholds per
+    orientation and camera FOV) from now on, instead of its bundle's own."""
+    engine.bundle = replace(engine.bundle, calibration=replace(engine.bundle.calibration, uncertainty=gate))
+    engine.measure = gate.measure
 
 
 def parse_rolls(text: str) -> list[tuple[float, float]]:
@@ -117,7 +125,7 @@ def pool(results: list[dict]) -> dict:
         ranges[key]["levelled_vs_rolled"] = {k: sum(row["levelled_vs_rolled"][k] for row in rows)
                                              for k in ("beacon_starts", "beacon_stops")}
     first = results[0]
-    return {"bundle": "pooled: " + ", ".join(r["bundle"] for r in results), "data": first["data"],
+    return {"bundle": "pooled: " + ", ".join(r["bundle"] for r in results), "gate": first.get("gate"), "data": first["data"],
             "split": ", ".join(sorted({f"{r['split']} {r.get('source') or ''}".strip() for r in results})),
             "source": None, "photos": n, "sensor_error_deg": first["sensor_error_deg"], "seed": first["seed"],
             "level": mean([r["level"] for r in results]), "ranges": ranges}
@@ -181,6 +189,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, help="write the figures as JSON here")
     ap.add_argument("--plot", type=Path, help="write a bar chart (PNG) here")
+    ap.add_argument("--gate", type=Path, metavar="BUNDLE", help="decide with this bundle's gate (measure and thresholds, "
+                    "e.g. the shipped default's) instead of --bundle's own; for a fold's bundle judged at the shipped rule")
     ap.add_argument("--pool", type=Path, nargs="+", metavar="JSON", help="pool earlier --out files instead of playing")
     a = ap.parse_args(argv)
     if a.pool:
@@ -204,13 +214,16 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     try:
         engine = Engine(a.bundle, threads=1)
+        if a.gate is not None:
+            use_gate(engine, read_bundle(a.gate).calibration.uncertainty)
     except BundleError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     rng = np.random.default_rng(a.seed)
     rows = [rows[i] for i in sorted(rng.choice(len(rows), min(a.photos, len(rows)), replace=False))]
     images = [load_frame(ds.image_path(r), r.flags) for r in rows]
-    res = {"bundle": str(a.bundle), "data": str(a.data), "split": a.split, "source": a.source, "photos": len(rows),
+    res = {"bundle": str(a.bundle), "gate": None if a.gate is None else str(a.gate),
+           "data": str(a.data), "split": a.split, "source": a.source, "photos": len(rows),
            "sensor_error_deg": a.sensor_error, "seed": a.seed,
            **measure(engine, rows, images, rolls, a.sensor_error, a.seed)}
     return report(res, a.out, a.plot)

@@ -41,6 +41,30 @@ def test_levelling_gives_back_what_a_level_phone_hears(tmp_path, toy_bundle, cap
     assert "| 0° (level phone) | 16 |" in capsys.readouterr().out
 
 
+def test_gate_decides_with_another_bundles_measure_and_thresholds(tmp_path, toy_bundle):  # noqa: F811
+    """``--gate``: the plays are decided at the other bundle's gate; one that never opens keeps
+    the beacon off on every play, where the bundle's own gate speaks."""
+    import shutil
+
+    shut = tmp_path / "shut"
+    shutil.copytree(toy_bundle, shut)
+    meta = json.loads((shut / "bundle.json").read_text())
+    unc = meta["calibration"]["uncertainty"]
+    for key in ("threshold", "portrait_threshold"):
+        if key in unc:
+            unc[key] = 1e-9
+    (shut / "bundle.json").write_text(json.dumps(meta))
+    data = bar_dataset(tmp_path / "data", n=4)
+    own, gated = tmp_path / "own.json", tmp_path / "gated.json"
+    args = ["--bundle", str(toy_bundle), "--data", str(data), "--rolls", "10:20"]
+    assert rl.main([*args, "--out", str(own)]) == 0
+    assert rl.main([*args, "--gate", str(shut), "--out", str(gated)]) == 0
+    assert json.loads(own.read_text())["level"]["beacon_on"] > 0
+    res = json.loads(gated.read_text())
+    assert res["gate"] == str(shut) and res["level"]["beacon_on"] == 0
+    assert all(r["beacon_on"] == 0 for name, r in res["ranges"]["10:20"].items() if name != "levelled_vs_rolled")
+
+
 def test_bad_input_is_one_line(tmp_path, toy_bundle, capsys):  # noqa: F811
     assert rl.main(["--bundle", str(toy_bundle), "--data", str(tmp_path / "nowhere")]) == 1
     assert "error: no manifest at" in capsys.readouterr().err
@@ -50,6 +74,8 @@ def test_bad_input_is_one_line(tmp_path, toy_bundle, capsys):  # noqa: F811
     assert rl.main(["--bundle", str(toy_bundle), "--data", str(data), "--split", "train", "--source", "src:7"]) == 1
     assert "from src:7" in capsys.readouterr().err
     assert rl.main(["--bundle", str(tmp_path), "--data", str(bar_dataset(tmp_path / "d2", n=2))]) == 1
+    assert capsys.readouterr().err.startswith("error: ")
+    assert rl.main(["--bundle", str(toy_bundle), "--data", str(data), "--split", "train", "--gate", str(tmp_path)]) == 1
     assert capsys.readouterr().err.startswith("error: ")
     assert rl.main(["--pool", str(tmp_path / "missing.json")]) == 1
     assert capsys.readouterr().err.startswith("error: --pool: ")
