@@ -300,11 +300,11 @@ def level(image: np.ndarray, roll_deg: float, pad_rgb: tuple[int, int, int] = PA
     the camera did not see are ``pad_rgb``. Same size; bilinear. ``level(augment.roll(img, r), r)``
     is ``img`` inside the rolled camera's view. No turn (a small roll, no reading) returns
     ``image`` itself. The phone app's ``FrameGrabber.level`` (``camera.js``) draws the same."""
-    import cv2
-
     angle = level_angle(roll_deg)
     if angle == 0:
         return image
+    import cv2
+
     h, w = image.shape[:2]
     m = cv2.getRotationMatrix2D((w / 2 - 0.5, h / 2 - 0.5), -angle, 1.0)
     return cv2.warpAffine(np.ascontiguousarray(image), m, (w, h), flags=cv2.INTER_LINEAR,

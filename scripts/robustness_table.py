@@ -68,12 +68,13 @@ def render(condition: str, img: np.ndarray, far_x: float | None, far_y: float, l
 
 
 def gated(engine, gate: UncertaintySpec | None):
-    """``engine`` deciding with ``gate``'s measure and thresholds (None: its bundle's own); a copy,
-    the engine itself is untouched."""
+    """``engine`` measuring and deciding with ``gate``'s measure and thresholds (None: its bundle's
+    own); a copy, the engine itself is untouched."""
     if gate is None:
         return engine
     out = copy.copy(engine)
     out.bundle = replace(engine.bundle, calibration=replace(engine.bundle.calibration, uncertainty=gate))
+    out.measure = gate.measure
     return out
 
 

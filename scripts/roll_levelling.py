@@ -36,12 +36,14 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from crossing_assist.bundle import BundleError, UncertaintySpec, read_bundle
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from robustness_table import gated  # noqa: E402  (a sibling script: one way to decide at another bundle's gate)
+
+from crossing_assist.bundle import BundleError, read_bundle
 from crossing_assist.data_tools.augment import roll
 from crossing_assist.data_tools.images import flag_value, load_frame
 from crossing_assist.data_tools.manifest import read_manifest
@@ -49,13 +51,6 @@ from crossing_assist.fileio import atomic_write_text
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
 from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.listen import Listener, summarise
-
-
-def use_gate(engine: Engine, gate: UncertaintySpec) -> None:
-    """``engine`` measures and decides with ``gate`` (its measure and its thresholds per
-    orientation and camera FOV) from now on, instead of its bundle's own."""
-    engine.bundle = replace(engine.bundle, calibration=replace(engine.bundle.calibration, uncertainty=gate))
-    engine.measure = gate.measure
 
 
 def parse_rolls(text: str) -> list[tuple[float, float]]:
@@ -72,23 +67,21 @@ def parse_rolls(text: str) -> list[tuple[float, float]]:
     return out
 
 
-def rates(lis: Listener) -> dict:
-    s = summarise(lis.heard())
+def rates(heard: list) -> dict:
+    s = summarise(heard)
     return {k: s[k] for k in ("beacon_on", "confidently_wrong", "accuracy_heard", "frames_with_crossing")}
 
 
-def flips(a: Listener, b: Listener) -> tuple[int, int]:
-    """Photos the beacon plays for under ``b`` but not ``a``, and the other way."""
-    on_a = [h.on for h in a.heard()]
-    on_b = [h.on for h in b.heard()]
-    return sum(y and not x for x, y in zip(on_a, on_b)), sum(x and not y for x, y in zip(on_a, on_b))
+def flips(a: list, b: list) -> tuple[int, int]:
+    """Photos the beacon plays for in ``b`` (heard) but not in ``a``, and the other way."""
+    return sum(y.on and not x.on for x, y in zip(a, b)), sum(x.on and not y.on for x, y in zip(a, b))
 
 
 def measure(engine: Engine, rows, images, rolls, sensor_error: float, seed: int) -> dict:
     level = Listener(engine)
     for r, img in zip(rows, images):
         level.add(img, r.label)
-    out = {"level": rates(level), "ranges": {}}
+    out = {"level": rates(level.heard()), "ranges": {}}
     print(f"level: {out['level']}", file=sys.stderr, flush=True)
     for k, (lo, hi) in enumerate(rolls):
         rng = np.random.default_rng([seed, k])
@@ -101,8 +94,9 @@ def measure(engine: Engine, rows, images, rolls, sensor_error: float, seed: int)
             plays["rolled_own"].labels.append(own)
             plays["levelled"].add(view, r.label, roll_deg=deg)
             plays["levelled_noisy"].add(view, r.label, roll_deg=deg + float(rng.uniform(-sensor_error, sensor_error)))
-        on, off = flips(plays["rolled"], plays["levelled"])
-        row = {name: rates(lis) for name, lis in plays.items()}
+        heard = {name: lis.heard() for name, lis in plays.items()}
+        on, off = flips(heard["rolled"], heard["levelled"])
+        row = {name: rates(h) for name, h in heard.items()}
         row["levelled_vs_rolled"] = {"beacon_starts": on, "beacon_stops": off}
         out["ranges"][f"{lo:g}:{hi:g}"] = row
         print(f"roll {lo:g}..{hi:g}: {row}", file=sys.stderr, flush=True)
@@ -215,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         engine = Engine(a.bundle, threads=1)
         if a.gate is not None:
-            use_gate(engine, read_bundle(a.gate).calibration.uncertainty)
+            engine = gated(engine, read_bundle(a.gate).calibration.uncertainty)
     except BundleError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

@@ -675,10 +675,11 @@ def test_a_rolled_phone_s_frames_are_levelled_as_python_levels_them(portrait: di
 
     pad = tuple(portrait["geometry"]["pad_rgb"])
     clip = portrait["clip"].astype(np.int16)
-    rolled = [(e, rgb) for e, rgb in _app_steps(portrait, least=10) if e["roll_deg"] != 0]
+    steps = _app_steps(portrait, least=10)
+    rolled = [(e, rgb) for e, rgb in steps if e["roll_deg"] != 0]
     assert len(rolled) >= 8 and all(abs(e["roll_deg"] - ROLL_DEG) < 0.01 for e, _ in rolled), \
         [e["roll_deg"] for e, _ in rolled]
-    assert all(e["roll_deg"] == 0 for e, _ in _app_steps(portrait, least=10) if e["t"] < portrait["result"]["roll"]["t_start"])
+    assert all(e["roll_deg"] == 0 for e, _ in steps if e["t"] < portrait["result"]["roll"]["t_start"])
 
     def nearest(frames, rgb):
         return float(np.abs(frames - rgb.astype(np.int16)[None]).mean(axis=(1, 2, 3)).min())

@@ -80,11 +80,11 @@ def test_failing_inference_stops_the_beacon_for_those_frames(tmp_path, toy_bundl
     real = engine.predict
     calls = {"n": 0}
 
-    def flaky(frame):
+    def flaky(frame, fov_deg=None, roll_deg=None):   # Engine.predict's signature
         calls["n"] += 1
         if 40 <= calls["n"] <= 60:
             return Prediction(ok=False, error="RuntimeError: simulated")
-        return real(frame)
+        return real(frame, fov_deg, roll_deg)
 
     monkeypatch.setattr(engine, "predict", flaky)
     summary, audio, _, trace = run(tmp_path, toy_bundle, [0.8] * 90, "flaky", engine=engine)

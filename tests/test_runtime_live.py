@@ -111,8 +111,8 @@ def test_failing_inference_queues_the_stop_cue(toy_bundle, monkeypatch):  # noqa
     engine, clock = Engine(toy_bundle), FakeClock()
     real, seen = engine.predict, {}
 
-    def flaky(frame):
-        return Prediction(ok=False, error="RuntimeError: boom") if seen.get("fail") else real(frame)
+    def flaky(frame, fov_deg=None, roll_deg=None):   # Engine.predict's signature
+        return Prediction(ok=False, error="RuntimeError: boom") if seen.get("fail") else real(frame, fov_deg, roll_deg)
 
     monkeypatch.setattr(engine, "predict", flaky)
     gate = threading.Event()

@@ -58,10 +58,8 @@ class Pipeline:
         """Process a frame taken at ``t`` seconds (None = no new frame, a watchdog tick); ``roll_deg``:
         the camera's roll when it was taken, from an orientation sensor (None: none; the frame is
         used as it is, :meth:`Engine.predict`)."""
-        if frame_rgb is None:
-            pred = Prediction(ok=False, error="no frame")
-        else:   # an engine without a sensor's roll is called as before (a stand-in may take the frame only)
-            pred = self.engine.predict(frame_rgb) if roll_deg is None else self.engine.predict(frame_rgb, roll_deg=roll_deg)
+        pred = (self.engine.predict(frame_rgb, roll_deg=roll_deg) if frame_rgb is not None
+                else Prediction(ok=False, error="no frame"))
         obs = pred.observation() if frame_rgb is not None else None
         if pred.ok and pred.fov_deg is not None:
             threshold = self.engine.bundle.calibration.uncertainty.threshold_for(pred.orientation, pred.fov_deg)

@@ -121,9 +121,10 @@ export class FrameGrabber {
     const { width, height } = frame;
     if (!this.levelCtx) this.levelCtx = document.createElement('canvas').getContext('2d', { willReadFrequently: true });
     const ctx = this.levelCtx;
-    if (ctx.canvas.width !== width || ctx.canvas.height !== height) {
+    if (!this.levelRgb || ctx.canvas.width !== width || ctx.canvas.height !== height) {
       ctx.canvas.width = width;
       ctx.canvas.height = height;
+      this.levelRgb = new Uint8Array(width * height * 3);
     }
     ctx.setTransform(1, 0, 0, 1, 0, 0);
     ctx.fillStyle = `rgb(${padRgb[0]}, ${padRgb[1]}, ${padRgb[2]})`;
@@ -134,7 +135,7 @@ export class FrameGrabber {
     ctx.drawImage(this.canvas, -width / 2, -height / 2);
     ctx.setTransform(1, 0, 0, 1, 0, 0);
     const rgba = ctx.getImageData(0, 0, width, height).data;
-    return { rgb: rgbaToRgb(rgba, new Uint8Array(width * height * 3)), width, height, seq: frame.seq, roll_deg: angle };
+    return { rgb: rgbaToRgb(rgba, this.levelRgb), width, height, seq: frame.seq, roll_deg: angle };
   }
 
   close() {
