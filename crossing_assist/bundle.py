@@ -114,14 +114,19 @@ class McSpec:
     """MC dropout: ``samples`` (T) head samples per frame with drop probability ``p``;
     ``mirror``: the graph also runs the frame mirrored left-right (actions mapped back) and
     summarises the 2T samples of both (mirror test-time augmentation, twice the backbone's cost).
-    Absent in bundle.json = False (bundles from before it)."""
+    Absent in bundle.json = False (bundles from before it). ``members`` > 1: the graph is an
+    ensemble of that many models trained alike, each with these settings, their samples pooled
+    (:mod:`crossing_assist.export.ensemble`; the members' summed cost a frame). Absent = 1; the
+    graph's inputs and outputs are a single model's, so readers that predate it run it unchanged."""
 
     samples: int
     p: float
     mirror: bool = False
+    members: int = 1
 
     def to_json(self) -> dict:
-        return {"samples": self.samples, "p": self.p, **({"mirror": True} if self.mirror else {})}
+        return {"samples": self.samples, "p": self.p, **({"mirror": True} if self.mirror else {}),
+                **({"members": self.members} if self.members > 1 else {})}
 
 
 @dataclass(frozen=True)
@@ -455,7 +460,8 @@ def parse_meta(meta: Mapping[str, Any], bundle_dir: Path | str = ".", *, need_by
         input=_parse_input(_get(meta, "input", "")),
         mc=McSpec(samples=_int(_get(mc, "samples", "mc"), "mc.samples", 1, 1024),
                   p=_num(_get(mc, "p", "mc"), "mc.p", 0.0, 1.0, hi_open=True),
-                  mirror=_bool(mc.get("mirror", False), "mc.mirror")),
+                  mirror=_bool(mc.get("mirror", False), "mc.mirror"),
+                  members=_int(mc.get("members", 1), "mc.members", 1, 64)),
         calibration=_parse_calibration(_get(meta, "calibration", "")),
         precision=_choice(_get(meta, "precision", ""), "precision", PRECISIONS),
         training=_obj(_get(meta, "training", ""), "training"),

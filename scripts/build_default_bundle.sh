@@ -3,6 +3,12 @@
 #
 #   scripts/build_default_bundle.sh                 # runs/default -> the embedded bundle
 #   RUN=runs/x OUT=/tmp/b scripts/build_default_bundle.sh
+#   MEMBERS="runs/default_s1 runs/default_s2" scripts/build_default_bundle.sh   # an ensemble of three seeds
+#
+# MEMBERS: more runs of the same recipe (other seeds; a folder holding a bundle is taken as it is),
+# each exported as RUN is; the bundle is their ensemble with RUN (crossing-export ensemble: the graphs
+# side by side, their samples pooled, K times one model's cost a frame), its gate thresholds those
+# scripts/choose_gate.py --ensemble chose for the ensemble of the CV runs (CV_DIR/gate…_ensembleK.json).
 #
 # The run is built by scripts/build_default_model.sh (weights/best.pt). Calibration (temperature,
 # conformal threshold, gate threshold) is fitted on PTL's val split; its held-out coverage is
@@ -76,13 +82,15 @@ trap 'rm -rf "$TMP"' EXIT
 
 # Keep the first candidate within MAX_INT8_DROP of fp32's accuracy and not slower than
 # MAX_INT8_SLOWDOWN x fp32 (the demo must stay real time): static int8 (weights and
-# activations), then int8 weights only (fp32 compute), else fp32.
-SRC=""
-for MODE in static weights; do
-    "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/$MODE" --samples "$SAMPLES" "${MIRROR_ARGS[@]}" \
-        --calib-data "$DATA" --calib-split val --int8 --int8-mode "$MODE" --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" \
-        "${ZOOM_ARGS[@]}" --quiet
-    KEEP=$("$PY" - "$TMP/$MODE/bundle.json" "$MAX_INT8_DROP" "$MAX_INT8_SLOWDOWN" <<'PYEOF'
+# activations), then int8 weights only (fp32 compute), else fp32. export_run RUN DEST sets SRC.
+export_run() {
+    local run=$1 dest=$2 mode keep
+    SRC=""
+    for mode in static weights; do
+        "$PY" -m crossing_assist.export --run "$run" --out "$dest/$mode" --samples "$SAMPLES" "${MIRROR_ARGS[@]}" \
+            --calib-data "$DATA" --calib-split val --int8 --int8-mode "$mode" --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" \
+            "${ZOOM_ARGS[@]}" --quiet
+        keep=$("$PY" - "$dest/$mode/bundle.json" "$MAX_INT8_DROP" "$MAX_INT8_SLOWDOWN" <<'PYEOF'
 import json, sys
 m = json.load(open(sys.argv[1]))["metrics"]["int8_vs_fp32"]
 drop, slow = m["accuracy_fp32"] - m["accuracy_int8"], m["ms_int8"] / m["ms_fp32"]
@@ -92,14 +100,33 @@ print(f"int8 ({m['mode']}) {m['accuracy_int8']:.3f} vs fp32 {m['accuracy_fp32']:
       f"size {m['size_int8'] / 1e6:.1f} / {m['size_fp32'] / 1e6:.1f} MB", file=sys.stderr)
 PYEOF
 )
-    if [ "$KEEP" = "yes" ]; then SRC="$TMP/$MODE"; break; fi
-    echo "int8 ($MODE) loses more than $MAX_INT8_DROP accuracy or is slower than $MAX_INT8_SLOWDOWN x fp32" >&2
-done
-if [ -z "$SRC" ]; then
+        if [ "$keep" = "yes" ]; then SRC="$dest/$mode"; return; fi
+        echo "int8 ($mode) loses more than $MAX_INT8_DROP accuracy or is slower than $MAX_INT8_SLOWDOWN x fp32" >&2
+    done
     echo "shipping fp32" >&2
-    "$PY" -m crossing_assist.export --run "$RUN" --out "$TMP/fp32" --samples "$SAMPLES" "${MIRROR_ARGS[@]}" \
+    "$PY" -m crossing_assist.export --run "$run" --out "$dest/fp32" --samples "$SAMPLES" "${MIRROR_ARGS[@]}" \
         --calib-data "$DATA" --calib-split val --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" "${ZOOM_ARGS[@]}" --quiet
-    SRC="$TMP/fp32"
+    SRC="$dest/fp32"
+}
+export_run "$RUN" "$TMP/m0"
+
+MEMBERS=${MEMBERS:-}
+if [ -n "$MEMBERS" ]; then
+    PARTS=("$SRC")
+    i=1
+    for M in $MEMBERS; do
+        if [ -f "$M/bundle.json" ]; then PARTS+=("$M"); else export_run "$M" "$TMP/m$i"; PARTS+=("$SRC"); fi
+        i=$((i + 1))
+    done
+    "$PY" -m crossing_assist.export ensemble "${PARTS[@]}" --out "$TMP/ensemble" --calib-data "$DATA" --calib-split val \
+        --measure "$GATE_MEASURE" --quiet
+    SRC="$TMP/ensemble"
+    STAMP_JSON="${STAMP_JSON%.json}_ensemble${#PARTS[@]}.json"
+    if [ -f "$CV_DIR/$STAMP_JSON" ]; then
+        echo "an ensemble of ${#PARTS[@]}: gate thresholds from $CV_DIR/$STAMP_JSON" >&2
+    else
+        echo "no $CV_DIR/$STAMP_JSON (scripts/choose_gate.py $CV_DIR --also ... --ensemble ${MIRROR_ARGS[*]} --measure $GATE_MEASURE): the ensemble's gate as fitted on val" >&2
+    fi
 fi
 
 # Replace the embedded bundle in one rename (write_bundle validates and swaps atomically).

@@ -215,15 +215,49 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
         if lis is None or measure:   # listened before, or another measure: recomputed from the saved probabilities
             lis, extra = Listener.load(engine, heard, measure)
             in_view = extra["in_view"].tolist()
-        t0 = reference_threshold(engine, measure)
-        labels = np.asarray(lis.labels)
-        result = {"source": source, "view": view, "measure": measure or engine.measure, "threshold": t0,
-                  "frames": int((labels != 0).sum()),
-                  "no_crossing_frames": int((labels == 0).sum()), "goal_in_view_frames": len(in_view),
-                  **model_accuracy(lis, in_view),
-                  "curve": [{"scale": m, **sweep_point(lis.heard(m * t0), in_view)} for m in gate_scales(grid)]}
-        atomic_write_text(done, json.dumps(result, indent=1))
-        out[view] = result
+        out[view] = curve_result(lis, in_view, engine, source, view, measure, grid)
+        atomic_write_text(done, json.dumps(out[view], indent=1))
+    return out
+
+
+def curve_result(lis: Listener, in_view: list[int], engine, source: str, view: str, measure: str | None,
+                 grid: int) -> dict:
+    """A fold's record of one view: its counts, the model's own accuracy and the curve swept over
+    :func:`gate_scales` ``(grid)`` times :func:`reference_threshold`."""
+    t0 = reference_threshold(engine, measure)
+    labels = np.asarray(lis.labels)
+    return {"source": source, "view": view, "measure": measure or engine.measure, "threshold": t0,
+            "frames": int((labels != 0).sum()),
+            "no_crossing_frames": int((labels == 0).sum()), "goal_in_view_frames": len(in_view),
+            **model_accuracy(lis, in_view),
+            "curve": [{"scale": m, **sweep_point(lis.heard(m * t0), in_view)} for m in gate_scales(grid)]}
+
+
+def ensemble_curves(run_folds: list[tuple[Path, str]], n_frames: int, seed: int, portrait: int, mirror: bool,
+                    portrait_frames: int | None, grid: int, zoom: float, measure: str | None) -> dict:
+    """One held-out photographer's curves for the ensemble of the runs' folds that held it out
+    (``run_folds``: (fold folder, source), one a run, each listened to already by :func:`fold_curve`):
+    their saved plays averaged frame by frame (:meth:`Listener.average`), as an ensemble bundle of
+    the folds' bundles would play them (``crossing-export ensemble``); no model runs. Cached in the
+    first run's fold folder (``gate_curve…_ensembleK.json``)."""
+    from crossing_assist.runtime.engine import Engine
+
+    fold, source = run_folds[0]
+    engine, out = None, {}
+    for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
+        n = n_frames if view == "landscape" or portrait_frames is None else portrait_frames
+        draw = view_tag(mirror, n, seed, view, portrait, zoom)
+        done = fold / (f"gate_curve{draw}{'' if grid == GRID else f'_grid{grid}'}{measure_tag(measure)}"
+                       f"_ensemble{len(run_folds)}.json")
+        if done.is_file():
+            out[view] = json.loads(done.read_text())
+            continue
+        if engine is None:
+            engine = Engine(fold / f"bundle{tag(mirror)}", threads=1)
+            magnify_view_crop(engine, zoom)
+        lis, extra = Listener.average(engine, [f / f"listened{draw}.npz" for f, _ in run_folds], measure)
+        out[view] = curve_result(lis, extra["in_view"].tolist(), engine, source, view, measure, grid)
+        atomic_write_text(done, json.dumps(out[view], indent=1))
     return out
 
 
@@ -350,6 +384,10 @@ def main(argv=None) -> int:
                          f"predictions: far_mass, the probability beyond one strip of the argmax, at absolute "
                          f"thresholds ({FAR_MASS_REFERENCE:g} x the scales); results are written apart (gate…_far_mass.json) "
                          "and scripts/stamp_bundle.py --rescale-gate --gate-json gate…_far_mass.json stamps them")
+    ap.add_argument("--ensemble", action="store_true",
+                    help="also choose for the ensemble of the runs (CV and each --also): each photographer's folds' "
+                         "plays averaged frame by frame, as crossing-export ensemble of the folds' bundles would "
+                         "play them (no model runs); written apart (gate…_ensembleK.json)")
     ap.add_argument("--zoom", type=float, default=1.0, metavar="Z",
                     help="portrait frames (narrower than the training camera) shown magnified up to Z instead of at "
                          "the training scale, as crossing-export --view-zoom Z bundles show them (for models trained "
@@ -359,11 +397,11 @@ def main(argv=None) -> int:
         ap.error(f"--grid {a.grid}: at least 1 scale a doubling")
     if not VIEW_ZOOM_RANGE[0] <= a.zoom <= VIEW_ZOOM_RANGE[1]:
         ap.error(f"--zoom {a.zoom}: valid {VIEW_ZOOM_RANGE[0]:g}..{VIEW_ZOOM_RANGE[1]:g}")
-    from crossing_assist.models.plots import plot_risk_coverage
-
+    if a.ensemble and not a.also:
+        ap.error("--ensemble: pass the other runs of the recipe with --also")
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}   # same names: neg_half links neg's images
-    folds, run_of = [], []
+    folds, run_of, by_source = [], [], {}
     for i, cv in enumerate([a.cv, *a.also]):
         for fold, source in finished_folds(cv):
             print(f"{cv} fold {source}: export + listen", file=sys.stderr, flush=True)
@@ -373,9 +411,30 @@ def main(argv=None) -> int:
                 curves = {view: {**c, "source": f"{source} ({cv})"} for view, c in curves.items()}
             folds.append(curves)
             run_of.append(str(cv))
+            by_source.setdefault(source, []).append((fold, source))
     if not folds:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
+    report(a, folds, run_of)
+    if a.ensemble:
+        runs = 1 + len(a.also)
+        members = [f for f in by_source.values() if len(f) == runs]
+        for source in sorted(set(by_source) - {f[0][1] for f in members}):
+            print(f"ensemble: {source} was not held out by every run's finished folds, left out", file=sys.stderr)
+        if not members:
+            print("error: no photographer held out by every run", file=sys.stderr)
+            return 2
+        print(f"the ensemble of the {runs} runs:")
+        report(a, [ensemble_curves(f, a.frames, a.seed, a.portrait, a.mirror, a.portrait_frames, a.grid, a.zoom,
+                                   a.measure) for f in members], [str(a.cv)] * len(members), f"_ensemble{runs}")
+    return 0
+
+
+def report(a: argparse.Namespace, folds: list[dict], run_of: list[str], suffix_extra: str = "") -> None:
+    """Pool the folds' curves per view, choose each view's scale, print it and write
+    ``CV/gate….json`` and its risk-coverage plots (``suffix_extra`` in their names)."""
+    from crossing_assist.models.plots import plot_risk_coverage
+
     fmt = lambda c: (f"beacon on {c['beacon_on']:.3f} (goal in view {c.get('beacon_on_goal_in_view') or float('nan'):.3f}), "  # noqa: E731
                      f"confidently wrong {100 * c['confidently_wrong']:.2f} % ({c['confidently_wrong_frames']} of {c['frames']}; "
                      f"95 % interval {100 * c['confidently_wrong_95'][0]:.2f}-{100 * c['confidently_wrong_95'][1]:.2f} %), "
@@ -391,7 +450,7 @@ def main(argv=None) -> int:
                         **({"threshold": best["scale"] * FAR_MASS_REFERENCE} if a.measure else {}),
                         **model, "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
         if a.also:
-            result[view]["pooled_runs"] = [str(cv) for cv in (a.cv, *a.also)]
+            result[view]["pooled_runs" if not suffix_extra else "ensemble_of_runs"] = [str(cv) for cv in (a.cv, *a.also)]
             loro = leave_one_run_out([f[view] for f in folds], run_of)
             if loro:
                 result[view]["leave_one_run_out"] = loro
@@ -399,7 +458,7 @@ def main(argv=None) -> int:
                       f"confidently wrong {100 * loro['confidently_wrong']:.2f} % ({loro['confidently_wrong_frames']} "
                       f"of {loro['frames']}; per run " + " / ".join(f"{100 * r['confidently_wrong']:.2f} %"
                                                                    for r in loro["per_run"]) + ")")
-        suffix = tag(a.mirror) + ("" if view == "landscape" else f"_{view}") + zoom_tag(a.zoom) + measure_tag(a.measure)
+        suffix = tag(a.mirror) + ("" if view == "landscape" else f"_{view}") + zoom_tag(a.zoom) + measure_tag(a.measure) + suffix_extra
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
                            a.cv / f"gate_risk_coverage{suffix}.png",
                            f"held out, {view}: " + (f"far mass threshold / {FAR_MASS_REFERENCE:g}" if a.measure
@@ -413,8 +472,8 @@ def main(argv=None) -> int:
               + f" ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
     # landscape stays at the top level (what build_default_bundle.sh and older readers take)
     portrait = {k: result[k] for k in PORTRAIT_SETS if k in result}   # "portrait" sets the portrait threshold
-    (a.cv / f"gate{tag(a.mirror)}{zoom_tag(a.zoom)}{measure_tag(a.measure)}.json").write_text(json.dumps({**result["landscape"], **portrait}, indent=1))
-    return 0
+    (a.cv / f"gate{tag(a.mirror)}{zoom_tag(a.zoom)}{measure_tag(a.measure)}{suffix_extra}.json").write_text(
+        json.dumps({**result["landscape"], **portrait}, indent=1))
 
 
 if __name__ == "__main__":

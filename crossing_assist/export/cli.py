@@ -1,6 +1,8 @@
-"""``crossing-export --run RUN_DIR --out BUNDLE_DIR [--samples 16] [--p 0.5] [--calib-data DIR] [--int8]``.
+"""``crossing-export --run RUN_DIR --out BUNDLE_DIR [--samples 16] [--p 0.5] [--calib-data DIR] [--int8]``;
+``crossing-export ensemble BUNDLE BUNDLE [...] --out BUNDLE_DIR --calib-data DIR``: several bundles'
+graphs as one (:mod:`crossing_assist.export.ensemble`).
 
-The parser is generated from :class:`~crossing_assist.export.exporter.ExportConfig`'s
+The export parser is generated from :class:`~crossing_assist.export.exporter.ExportConfig`'s
 defaults; user errors print one ``error: ...`` line to stderr and exit 2.
 """
 
@@ -71,7 +73,43 @@ def main(argv: Sequence[str] | None = None) -> int:
     return run_cli(_main, argv)
 
 
+def ensemble_parser() -> argparse.ArgumentParser:
+    from crossing_assist.export.ensemble import EnsembleConfig
+
+    d = {f.name: f.default for f in fields(EnsembleConfig)}
+    p = argparse.ArgumentParser(prog="crossing-export ensemble",
+                                description="Merge bundles exported alike (e.g. one recipe, several seeds) into one "
+                                            "ensemble bundle: their graphs side by side, their MC samples pooled, the "
+                                            "thresholds fitted again on labelled frames through the merged graph.")
+    p.add_argument("members", nargs="+", help="the member bundles' folders (at least 2)")
+    p.add_argument("--out", required=True, help=HELP["out"])
+    p.add_argument("--calib-data", required=True, help=HELP["calib_data"])
+    for name in ("calib_split", "coverage", "measure", "gate_scale", "gate_scale_portrait", "batch", "seed"):
+        kind = {"calib_split": str, "measure": str, "batch": int, "seed": int}.get(name, float)
+        p.add_argument("--" + name.replace("_", "-"), type=kind, default=d[name], help=f"{HELP[name]} (default: {d[name]})")
+    p.add_argument("--quiet", dest="progress", action="store_false", help="no progress bars")
+    p.add_argument("--force", action="store_true", help=HELP["force"])
+    p.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
+    return p
+
+
+def _ensemble(argv: list[str]) -> int:
+    from crossing_assist.export.ensemble import EnsembleConfig, ensemble_bundle
+    from crossing_assist.bundle import read_bundle
+
+    args = vars(ensemble_parser().parse_args(argv))
+    args.pop("debug")
+    cfg = EnsembleConfig(**{**args, "members": tuple(args["members"])})
+    out = read_bundle(ensemble_bundle(cfg, log=lambda m: print(m, file=sys.stderr)))
+    u, full = out.calibration.uncertainty, out.metrics["full_split"]
+    print(f"ensemble bundle written: {out.dir} ({out.mc.members} members, {out.model_size / 1e6:.1f} MB); "
+          f"{cfg.calib_split} accuracy {full['accuracy']:.3f} on {full['n']} frames, {u.measure} threshold {u.threshold:.4g}")
+    return 0
+
+
 def _main(argv: list[str]) -> int:
+    if argv[:1] == ["ensemble"]:
+        return _ensemble(argv[1:])
     args = build_parser().parse_args(argv)
     from crossing_assist.export.exporter import ExportConfig, export_bundle
 

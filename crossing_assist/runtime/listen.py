@@ -158,11 +158,39 @@ class Listener:
         ``measure``: replay the gate with this measure instead of the bundle's, recomputed from
         the saved probabilities (``entropy`` or ``far_mass``: the measures a probability vector
         gives; MC-dropout spreads are not saved)."""
-        if measure is not None and measure not in PROBS_MEASURES:
-            raise ValueError(f"cannot replay measure {measure!r} from saved probabilities; valid: {', '.join(PROBS_MEASURES)}")
+        _check_replayable(measure)
         with np.load(path) as z:
-            lis = cls(engine, float(z["seconds"]), float(z["fps"]), measure)
             d = {k: z[k] for k in z.files}
+        return cls._replay(engine, d, measure)
+
+    @classmethod
+    def average(cls, engine: Engine, paths: Sequence[str | os.PathLike],
+                measure: str | None = None) -> tuple["Listener", dict[str, np.ndarray]]:
+        """What an ensemble of the bundles that saved ``paths`` would have heard: their predictions
+        of one draw, played alike, averaged frame by frame as an ensemble bundle pools its members
+        (:mod:`crossing_assist.export.ensemble`); the argmax and the gate's measure (``measure``,
+        default the engine's bundle's: one a probability vector gives) recomputed from the averaged
+        probabilities; a frame that failed in any member failed. The first file's ``extra`` arrays."""
+        measure = measure or engine.measure
+        _check_replayable(measure)
+        ds = []
+        for path in paths:
+            with np.load(path) as z:
+                ds.append({k: z[k] for k in z.files})
+        first = ds[0]
+        for path, d in zip(paths[1:], ds[1:]):
+            same = all(np.array_equal(d[k], first[k]) for k in ("labels", "orientation", "seconds", "fps")) and \
+                np.array_equal(d["fov_deg"], first["fov_deg"], equal_nan=True)
+            if not same or d["probs"].shape != first["probs"].shape:
+                raise ValueError(f"{path} did not play the clips {paths[0]} played; average plays of one draw")
+        d = dict(first, probs=np.mean([d["probs"] for d in ds], axis=0), ok=np.logical_and.reduce([d["ok"] for d in ds]))
+        d["action"] = np.where(d["ok"], np.nan_to_num(d["probs"], nan=-1.0).argmax(2), 0)
+        return cls._replay(engine, d, measure)
+
+    @classmethod
+    def _replay(cls, engine: Engine, d: dict[str, np.ndarray],
+                measure: str | None) -> tuple["Listener", dict[str, np.ndarray]]:
+        lis = cls(engine, float(d["seconds"]), float(d["fps"]), measure)
         if measure is not None:
             of = PROBS_MEASURES[measure]
             d["uncertainty"] = np.apply_along_axis(lambda p: of(p) if np.all(np.isfinite(p)) else math.inf, 2, d["probs"])
@@ -194,6 +222,11 @@ class Listener:
     def risk_coverage(self, thresholds: Sequence[float], idx: Sequence[int] | None = None) -> list[dict]:
         """For each gate threshold: beacon-on rate, confidently-wrong rate, silence off-crossing."""
         return [{"threshold": float(t), **summarise(self.heard(t, idx))} for t in thresholds]
+
+
+def _check_replayable(measure: str | None) -> None:
+    if measure is not None and measure not in PROBS_MEASURES:
+        raise ValueError(f"cannot replay measure {measure!r} from saved probabilities; valid: {', '.join(PROBS_MEASURES)}")
 
 
 def choose_threshold(curve: Sequence[dict], max_wrong: float = 0.005, min_silence: float = 0.98) -> dict | None:

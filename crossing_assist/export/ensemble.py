@@ -1,0 +1,190 @@
+"""Several bundles' graphs as one: an ensemble bundle (``crossing-export ensemble``).
+
+Models trained alike but from different seeds are wrong on different frames; averaged, their
+probabilities are right more often and, above all, less often confidently wrong on scenes none
+of them trained on (docs/models.md, "An ensemble of three seeds"). :func:`merge_graphs` puts the
+members' graphs side by side behind the one ``frames`` input and pools their MC samples: each
+member's T (or 2T with mirror) samples count alike, so the five outputs are exactly those of one
+graph summarising all of the members' samples (:func:`crossing_assist.models.mc.mc_summaries`):
+
+    probs       = mean_m probs_m
+    entropy     = H(probs)
+    mutual_info = max(0, H(probs) - mean_m (entropy_m - mutual_info_m))
+    variance    = max(0, mean_m (variance_m + probs_m^2) - probs^2)
+    votes       = mean_m votes_m
+
+The consumer sees the same inputs and outputs as a one-model bundle (docs/contracts.md section 3):
+the runtime and the phone app run it unchanged, at the members' summed cost a frame. The
+thresholds do not carry over from the members (the averaged probabilities are smoother than any
+member's), so :func:`ensemble_bundle` fits the conformal and gate thresholds again on labelled
+frames, through the merged graph, as ``crossing-export`` does for one model.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from crossing_assist.bundle import (
+    INPUT_NAME,
+    OUTPUT_NAMES,
+    Bundle,
+    BundleError,
+    check_replaceable,
+    read_bundle,
+    write_bundle,
+)
+from crossing_assist.export import calibrate as cal
+from crossing_assist.export.exporter import EXPORT_MEASURES, ExportError, _fit_and_measure, load_labelled
+from crossing_assist.export.graph import model_bytes, set_metadata
+
+#: The bundle.json fields the members must share: the graph's input, what its outputs mean, and
+#: how a consumer fits a frame to it.
+SHARED = ("actions", "fov_deg", "input", "geometry")
+
+
+@dataclass(frozen=True)
+class EnsembleConfig:
+    """Options of ``crossing-export ensemble`` (the calibration fields as :class:`ExportConfig`'s)."""
+
+    members: tuple[str, ...]
+    out: str
+    calib_data: str
+    calib_split: str = "val"
+    coverage: float = 0.9
+    measure: str = "far_mass"
+    gate_scale: float = 1.0
+    gate_scale_portrait: float | None = None
+    batch: int = 32
+    seed: int = 0
+    progress: bool = True
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        if len(self.members) < 2:
+            raise ExportError(f"Invalid members: {len(self.members)} bundle(s); an ensemble needs at least 2")
+        if self.measure not in EXPORT_MEASURES:
+            raise ExportError(f"Invalid --measure {self.measure!r}; valid: {', '.join(EXPORT_MEASURES)}")
+        if not 0.0 < self.coverage < 1.0:
+            raise ExportError(f"Invalid --coverage {self.coverage}; valid: 0 < coverage < 1")
+        for name in ("gate_scale", "gate_scale_portrait"):
+            v = getattr(self, name)
+            if v is not None and not 0.05 <= v <= 20:
+                raise ExportError(f"Invalid --{name.replace('_', '-')} {v}; valid: 0.05..20")
+
+
+def merge_graphs(models: Sequence[Any]) -> Any:
+    """One ``onnx.ModelProto`` running every model of ``models`` on the shared ``frames`` input
+    and pooling their summaries (module docstring). The models must share their opsets."""
+    import onnx
+    from onnx import TensorProto, compose, helper, numpy_helper
+
+    if len(models) < 2:
+        raise ValueError(f"an ensemble needs at least 2 models, got {len(models)}")
+    opsets = {(o.domain, o.version) for o in models[0].opset_import}
+    for i, m in enumerate(models[1:], 1):
+        if {(o.domain, o.version) for o in m.opset_import} != opsets:
+            raise ExportError(f"member {i + 1}'s graph uses other opsets than member 1's "
+                              f"({sorted(o.version for o in m.opset_import)} vs {sorted(v for _, v in opsets)}); "
+                              "export them with one crossing_assist version")
+    graphs = [compose.add_prefix(m, f"m{i}/", rename_inputs=False).graph for i, m in enumerate(models)]
+    k = len(models)
+    n = helper.make_node
+    out = lambda i, name: f"m{i}/{name}"  # noqa: E731
+    const = lambda name, value, dtype=np.float32: n(  # noqa: E731
+        "Constant", [], [name], value=numpy_helper.from_array(np.asarray(value, dtype), name + "_v"))
+    tail = [
+        n("Mean", [out(i, "probs") for i in range(k)], ["probs"]),
+        n("Mean", [out(i, "votes") for i in range(k)], ["votes"]),
+        const("ens/tiny", 1e-30), const("ens/zero", 0.0), const("ens/last", [-1], np.int64),
+        n("Max", ["probs", "ens/tiny"], ["ens/probs_floor"]),
+        n("Log", ["ens/probs_floor"], ["ens/log_probs"]),
+        n("Mul", ["probs", "ens/log_probs"], ["ens/plogp"]),
+        n("ReduceSum", ["ens/plogp", "ens/last"], ["ens/neg_entropy"], keepdims=0),
+        n("Neg", ["ens/neg_entropy"], ["entropy"]),
+    ]
+    for i in range(k):   # each member's mean per-sample entropy, and its samples' second moment
+        tail += [n("Sub", [out(i, "entropy"), out(i, "mutual_info")], [f"ens/expected{i}"]),
+                 n("Mul", [out(i, "probs"), out(i, "probs")], [f"ens/p2_{i}"]),
+                 n("Add", [out(i, "variance"), f"ens/p2_{i}"], [f"ens/moment{i}"])]
+    tail += [
+        n("Mean", [f"ens/expected{i}" for i in range(k)], ["ens/expected"]),
+        n("Sub", ["entropy", "ens/expected"], ["ens/mi_raw"]),
+        n("Max", ["ens/mi_raw", "ens/zero"], ["mutual_info"]),
+        n("Mean", [f"ens/moment{i}" for i in range(k)], ["ens/moment"]),
+        n("Mul", ["probs", "probs"], ["ens/probs2"]),
+        n("Sub", ["ens/moment", "ens/probs2"], ["ens/var_raw"]),
+        n("Max", ["ens/var_raw", "ens/zero"], ["variance"]),
+    ]
+    first = graphs[0]
+    a = next(d.dim_value for d in first.output[0].type.tensor_type.shape.dim[1:2]) or "A"
+    f = TensorProto.FLOAT
+    outputs = {"probs": ["N", a], "entropy": ["N"], "mutual_info": ["N"], "variance": ["N", a], "votes": ["N", a]}
+    graph = helper.make_graph(
+        [node for g in graphs for node in g.node] + tail, f"ensemble_of_{k}",
+        [next(i for i in first.input if i.name == INPUT_NAME)],
+        [helper.make_tensor_value_info(name, f, outputs[name]) for name in OUTPUT_NAMES],
+        initializer=[t for g in graphs for t in g.initializer],
+        value_info=[v for g in graphs for v in g.value_info])
+    model = helper.make_model(graph, opset_imports=list(models[0].opset_import),
+                              producer_name="crossing_assist.export.ensemble")
+    model.ir_version = max(m.ir_version for m in models)
+    onnx.checker.check_model(model)
+    return model
+
+
+def _members(paths: Sequence[str]) -> tuple[list[Bundle], list[dict]]:
+    """The member bundles, read and checked to agree on :data:`SHARED` and the MC settings."""
+    bundles = [read_bundle(p) for p in paths]
+    metas = [json.loads((Path(p) / "bundle.json").read_text()) for p in paths]
+    if nested := [p for p, b in zip(paths, bundles) if b.mc.members > 1]:
+        raise ExportError(f"member {nested[0]} is an ensemble already; pass its own members instead")
+    for i, meta in enumerate(metas[1:], 1):
+        for key in (*SHARED, "mc", "precision"):
+            if meta.get(key) != metas[0].get(key):
+                raise ExportError(f"member {paths[i]} differs from {paths[0]} in {key!r} "
+                                  f"({json.dumps(meta.get(key))[:80]} vs {json.dumps(metas[0].get(key))[:80]}); "
+                                  "an ensemble's members must be exported alike")
+    return bundles, metas
+
+
+def ensemble_bundle(cfg: EnsembleConfig, log: Callable[[str], None] = print) -> Path:
+    """Merge ``cfg.members`` into one bundle at ``cfg.out``, its thresholds fitted on
+    ``cfg.calib_data`` through the merged graph; returns the bundle's folder."""
+    import onnx
+
+    check_replaceable(cfg.out, force=cfg.force)
+    try:
+        bundles, metas = _members(cfg.members)
+    except BundleError as exc:
+        raise ExportError(str(exc)) from None
+    model = merge_graphs([onnx.load(str(b.model_path)) for b in bundles])
+    log(f"merged {len(bundles)} graphs: {len(model.graph.node)} nodes, {model.ByteSize() / 1e6:.1f} MB")
+    first = metas[0]
+    meta = {k: v for k, v in first.items() if k not in ("model_sha256", "model_size")}
+    meta["mc"] = {**first["mc"], "members": len(bundles)}
+    meta["training"] = {"ensemble": [
+        {**m["training"], "temperature": m["calibration"]["temperature"], "bundle": str(p),
+         "checkpoint_metrics": m.get("metrics", {}).get("checkpoint", {})}
+        for p, m in zip(cfg.members, metas)]}
+    meta["provenance"] = {"command": " ".join(shlex.quote(a) for a in sys.argv) if sys.argv else "",
+                          "created": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+                          "calib_data": cfg.calib_data, "calib_split": cfg.calib_split,
+                          "members": [m.get("provenance", {}) for m in metas]}
+    n = bundles[0].actions.n
+    data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress)
+    meta["calibration"] = cal.CalibrationResult(1.0, cfg.coverage, 0.0, 0, cfg.measure, 1.0).spec().to_json()
+    calib, metrics = _fit_and_measure(model, meta, data, cfg, 1.0, None, log)
+    meta["calibration"] = calib.spec().to_json()
+    meta["metrics"] = {**metrics, "members": [m.get("metrics", {}).get("full_split", {}) for m in metas]}
+    set_metadata(model, meta)
+    out = write_bundle(cfg.out, model_bytes(model), meta, force=cfg.force)
+    read_bundle(out)
+    return out

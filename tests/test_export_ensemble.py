@@ -1,0 +1,129 @@
+"""crossing-export ensemble: several bundles' graphs as one, their MC samples pooled; the merged
+bundle's plays are the members' plays averaged (what choose_gate.py --ensemble replays)."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import onnx
+import pytest
+from runtime_toy import bar_dataset, bar_frame, make_toy_bundle
+
+from crossing_assist.actions import UNKNOWN, bin_center_x
+from crossing_assist.bundle import read_bundle
+from crossing_assist.export.ensemble import merge_graphs
+from crossing_assist.inference import predict_bundle
+from crossing_assist.runtime.engine import Engine
+from crossing_assist.runtime.listen import Listener
+
+#: Deterministic toys (no dropout, no noise) that see the same bar with different sharpness, and
+#: one that puts its unknown logit high: members that disagree on how sure to be.
+SHARP, SOFT, DOUBTFUL = dict(gain=12.0), dict(gain=3.0), dict(gain=6.0, unknown_logit=2.0)
+
+
+def _det(folder, **kw):
+    return make_toy_bundle(folder, drop_p=0.0, noise=0.0, samples=2, **kw)
+
+
+def _entropy(p):
+    return -(p * np.log(np.maximum(p, 1e-30))).sum(-1)
+
+
+def _run(bundle, frames):
+    return predict_bundle(bundle, list(frames), batch=8)
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "crossing_assist.export", "ensemble", *map(str, args), "--quiet"],
+                          capture_output=True, text=True)
+
+
+def test_merged_graph_pools_the_members_samples_exactly(tmp_path):
+    """Each output of the merged graph is what one graph summarising all members' samples gives:
+    the mean probabilities, their entropy, the disagreement between (and within) members as mutual
+    information and variance, the mean votes."""
+    members = [_det(tmp_path / name, **kw) for name, kw in (("a", SHARP), ("b", SOFT), ("c", DOUBTFUL))]
+    frames = [bar_frame(bin_center_x(s)) for s in (1, 5, 12)] + [bar_frame(None, noise=0.4)]
+    outs = [_run(m, frames) for m in members]
+    merged = merge_graphs([onnx.load(str(read_bundle(m).model_path)) for m in members])
+    import onnxruntime as ort
+
+    got = dict(zip(("probs", "entropy", "mutual_info", "variance", "votes"),
+                   ort.InferenceSession(merged.SerializeToString()).run(None, {"frames": np.stack(frames)})))
+    probs = np.stack([o["probs"] for o in outs])          # [members, N, A]; each member's samples agree
+    mean = probs.mean(0)
+    np.testing.assert_allclose(got["probs"], mean, atol=1e-6)
+    np.testing.assert_allclose(got["entropy"], _entropy(mean), atol=1e-5)
+    np.testing.assert_allclose(got["mutual_info"], _entropy(mean) - _entropy(probs).mean(0), atol=1e-5)
+    np.testing.assert_allclose(got["variance"], (probs ** 2).mean(0) - mean ** 2, atol=1e-6)
+    np.testing.assert_allclose(got["votes"], np.mean([o["votes"] for o in outs], 0), atol=1e-6)
+    assert got["mutual_info"].min() > 1e-5      # each member alone is sure (0); together they disagree
+    assert (got["probs"].argmax(1)[:3] == [1, 5, 12]).all()
+
+
+def test_ensemble_bundle_refits_its_thresholds_and_runs_in_the_runtime(tmp_path):
+    """``crossing-export ensemble``: a bundle whose mc.members says how many, its members' training
+    facts kept, its gate threshold fitted again through the merged graph; the runtime runs it as
+    any bundle, and its plays are the members' plays averaged frame by frame."""
+    a, b = _det(tmp_path / "a", **SHARP), _det(tmp_path / "b", **SOFT)
+    data = bar_dataset(tmp_path / "data", n=12)
+    r = _cli(a, b, "--out", tmp_path / "ens", "--calib-data", data)
+    assert r.returncode == 0, r.stderr
+    assert "ensemble bundle written" in r.stdout and "2 members" in r.stdout
+    ens = read_bundle(tmp_path / "ens")
+    assert ens.mc.members == 2 and ens.mc.samples == 2
+    assert [m["bundle"] for m in ens.training["ensemble"]] == [str(a), str(b)]
+    u = ens.calibration.uncertainty
+    assert u.measure == "far_mass" and u.threshold == ens.calibration.uncertainty.fitted_threshold > 0
+    assert ens.metrics["full_split"]["n"] == 12 and len(ens.metrics["members"]) == 2
+    embedded = json.loads(dict((p.key, p.value) for p in onnx.load(str(ens.model_path)).metadata_props)["bundle_json"])
+    assert embedded["mc"]["members"] == 2                     # the graph carries the same facts
+
+    plays = []
+    for bundle in (a, b, tmp_path / "ens"):
+        lis = Listener(Engine(bundle), seconds=0.3)
+        for strip in (2, 7, 11):
+            lis.add(bar_frame(bin_center_x(strip)), strip)
+        lis.add(bar_frame(None, noise=0.4), UNKNOWN)
+        lis.save(tmp_path / f"{bundle.name}.npz")
+        plays.append(lis)
+    averaged, _ = Listener.average(Engine(tmp_path / "ens"), [tmp_path / "a.npz", tmp_path / "b.npz"])
+    for clip, merged in zip(averaged.clips, plays[2].clips):
+        for p, q in zip(clip, merged):
+            np.testing.assert_allclose(p.probs, q.probs, atol=1e-6)
+            assert p.uncertainty == pytest.approx(q.uncertainty, abs=1e-6) and p.action == q.action
+    for t in (None, 0.01, 0.2):
+        for h, g in zip(averaged.heard(t), plays[2].heard(t)):
+            assert (h.on, h.strip, h.label) == (g.on, g.strip, g.label)
+            assert h.heading_deg == pytest.approx(g.heading_deg, abs=1e-6)
+    assert [h.on for h in averaged.heard(0.2)] == [True, True, True, False]
+
+
+def test_ensemble_refuses_members_exported_differently_or_alone(tmp_path):
+    a, data = _det(tmp_path / "a", **SHARP), bar_dataset(tmp_path / "data", n=6)
+    other = make_toy_bundle(tmp_path / "other", drop_p=0.0, noise=0.0, samples=4)
+    wide = make_toy_bundle(tmp_path / "wide", drop_p=0.0, noise=0.0, samples=2, size=(24, 60))
+    cases = [((a,), "an ensemble needs at least 2"),
+             ((a, other), "differs from .* in 'mc'"),
+             ((a, wide), "differs from .* in 'input'"),
+             ((a, tmp_path / "missing"), "is not a folder")]
+    for members, message in cases:
+        r = _cli(*members, "--out", tmp_path / "ens", "--calib-data", data)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert r.stderr.startswith("error:") and __import__("re").search(message, r.stderr), r.stderr
+        assert not (tmp_path / "ens").exists()
+    assert _cli(a, _det(tmp_path / "b", **SOFT), "--out", tmp_path / "ens", "--calib-data", data).returncode == 0
+    r = _cli(a, tmp_path / "ens", "--out", tmp_path / "ens2", "--calib-data", data)
+    assert r.returncode == 2 and "is an ensemble already" in r.stderr
+
+
+def test_average_refuses_plays_of_other_clips(tmp_path):
+    a = _det(tmp_path / "a", **SHARP)
+    for name, strips in (("one", (2, 7)), ("two", (2, 8))):
+        lis = Listener(Engine(a), seconds=0.2)
+        for s in strips:
+            lis.add(bar_frame(bin_center_x(s)), s)
+        lis.save(tmp_path / f"{name}.npz")
+    with pytest.raises(ValueError, match="did not play the clips"):
+        Listener.average(Engine(a), [tmp_path / "one.npz", tmp_path / "two.npz"])
