@@ -4,6 +4,7 @@ bundle's plays are the members' plays averaged (what choose_gate.py --ensemble r
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import onnx
@@ -127,3 +128,34 @@ def test_average_refuses_plays_of_other_clips(tmp_path):
         lis.save(tmp_path / f"{name}.npz")
     with pytest.raises(ValueError, match="did not play the clips"):
         Listener.average(Engine(a), [tmp_path / "one.npz", tmp_path / "two.npz"])
+
+
+def test_choose_gate_ensemble_curves_are_the_averaged_plays_swept(tmp_path):
+    """choose_gate.py --ensemble: one photographer's curve for the ensemble of two runs' folds is the
+    sweep of their saved plays averaged (no model runs), cached beside the first run's fold."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    import choose_gate as cg
+
+    folds = []
+    for run, kw in (("run0", SOFT), ("run1", dict(gain=2.0))):
+        fold = tmp_path / run / "fold-src_x"
+        _det(fold / "bundle", **kw)
+        lis = Listener(Engine(fold / "bundle"), seconds=0.3)
+        for strip in (1, 4, 9, 12):
+            lis.add(bar_frame(bin_center_x(strip)), strip)
+        lis.add(bar_frame(None, noise=0.4), UNKNOWN)
+        lis.save(fold / "listened_5.npz", in_view=np.arange(4))
+        folds.append((fold, "src:x"))
+
+    curves = cg.ensemble_curves(folds, 5, 0, 0, False, None, cg.GRID, 1.0, "far_mass")
+    averaged, _ = Listener.average(Engine(folds[0][0] / "bundle"), [f / "listened_5.npz" for f, _ in folds], "far_mass")
+    land = curves["landscape"]
+    assert (land["frames"], land["no_crossing_frames"], land["goal_in_view_frames"]) == (4, 1, 4)
+    for point in land["curve"]:
+        assert point["beacon_on"] == cg.sweep_point(averaged.heard(point["scale"] * cg.FAR_MASS_REFERENCE),
+                                                    list(range(4)))["beacon_on"]
+    assert len({p["beacon_on"] for p in land["curve"]}) > 1          # the sweep moves the beacon
+    cached = folds[0][0] / f"gate_curve_5{'' if cg.GRID == 8 else '_grid8'}_far_mass_ensemble2.json"
+    assert json.loads(cached.read_text()) == json.loads(json.dumps(land))
+    (folds[1][0] / "listened_5.npz").unlink()                        # read from the cache now
+    assert cg.ensemble_curves(folds, 5, 0, 0, False, None, cg.GRID, 1.0, "far_mass")["landscape"] == json.loads(cached.read_text())
