@@ -65,3 +65,31 @@ def test_build_default_bundle_exports_the_zoomed_view_with_the_held_out_gate(tmp
     else:
         assert q["accuracy_fp32"] - q["accuracy_int8"] <= 0.01 and q["ms_int8"] <= 1.10 * q["ms_fp32"]
     assert not list(tmp_path.glob("default_bundle.*"))   # its scratch folder is removed
+
+
+@pytest.mark.slow
+def test_build_default_bundle_with_members_ships_their_ensemble_at_its_held_out_gate(tmp_path):
+    """MEMBERS: each run exported as RUN is, a folder holding a bundle taken as it is, the bundle
+    their ensemble (mc.members), stamped with the thresholds choose_gate.py --ensemble chose
+    (gate…_ensembleK.json), not the one model's."""
+    data = make_tiny_dataset(tmp_path / "data", n_train=8, n_val=8)
+    run = train(TrainConfig(data=str(data), out=str(tmp_path / "run"), backbone="mobilenet_v3_small", weights="none",
+                            head="spatial", epochs=1, batch_size=4, input_size=(48, 64), fit="letterbox",
+                            cache_dir=str(tmp_path / "cache"), progress=False))
+    cv = tmp_path / "cv"
+    cv.mkdir()
+    fm = _far_mass_gate
+    (cv / "gate_mirror_far_mass.json").write_text(json.dumps(fm(0.007) | {"portrait": fm(0.015)}))
+    (cv / "gate_mirror_far_mass_ensemble3.json").write_text(json.dumps(fm(0.02) | {"portrait": fm(0.03)}))
+    env = dict(RUN=str(run), DATA=str(data), CV_DIR=str(cv), SAMPLES="2", MAX_INT8_DROP="1", MAX_INT8_SLOWDOWN="100")
+    one = tmp_path / "one"
+    assert _build(tmp_path, OUT=str(one), **env).returncode == 0
+    r = _build(tmp_path, OUT=str(tmp_path / "ens"), MEMBERS=f"{run} {one}", **env)
+    assert r.returncode == 0, r.stderr
+    assert "an ensemble of 3: gate thresholds from" in r.stderr
+    b = read_bundle(tmp_path / "ens")
+    assert b.mc.members == 3 and b.precision == read_bundle(one).precision
+    assert len(b.training["ensemble"]) == 3 and b.training["ensemble"][2]["bundle"] == str(one)
+    unc = b.calibration.uncertainty
+    assert (unc.measure, unc.threshold, unc.portrait_threshold) == ("far_mass", 0.02, 0.03)
+    assert b.metrics["gate_held_out"]["threshold"] == 0.02
