@@ -108,6 +108,12 @@ def view_tag(mirror: bool, frames: int, seed: int, view: str, portrait: int, zoo
     return draw_tag(mirror, frames, seed) + ("" if view == "landscape" else f"_{view}{portrait}{zoom_tag(zoom)}")
 
 
+def curve_cache(fold: Path, draw: str, grid: int, measure: str | None, extra: str = "") -> Path:
+    """Where a fold's swept curve of one draw (:func:`view_tag`) is cached: another grid, measure
+    or ``extra`` (an ensemble's ``_ensembleK``) is a file of its own."""
+    return fold / f"gate_curve{draw}{'' if grid == GRID else f'_grid{grid}'}{measure_tag(measure)}{extra}.json"
+
+
 def fold_bundle(fold: Path, source: str, ptl, mirror: bool = False) -> Path:
     """The fold's model exported as a bundle (once), calibrated on PTL val without ``source``;
     ``mirror``: with mirror test-time augmentation (folder ``bundle_mirror``)."""
@@ -199,7 +205,7 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
         n = n_frames if view == "landscape" or portrait_frames is None else portrait_frames
         draw = view_tag(mirror, n, seed, view, portrait, zoom)
-        done = fold / f"gate_curve{draw}{'' if grid == GRID else f'_grid{grid}'}{measure_tag(measure)}.json"
+        done = curve_cache(fold, draw, grid, measure)
         if done.is_file():   # listened to already (the fold does not change once finished)
             out[view] = json.loads(done.read_text())
             continue
@@ -247,8 +253,7 @@ def ensemble_curves(run_folds: list[tuple[Path, str]], n_frames: int, seed: int,
     for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
         n = n_frames if view == "landscape" or portrait_frames is None else portrait_frames
         draw = view_tag(mirror, n, seed, view, portrait, zoom)
-        done = fold / (f"gate_curve{draw}{'' if grid == GRID else f'_grid{grid}'}{measure_tag(measure)}"
-                       f"_ensemble{len(run_folds)}.json")
+        done = curve_cache(fold, draw, grid, measure, f"_ensemble{len(run_folds)}")
         if done.is_file():
             out[view] = json.loads(done.read_text())
             continue
