@@ -15,7 +15,7 @@ import { cameraElevationDeg, cameraRollDeg, sameFrame, SIDEWAYS, SidewaysHint, T
 import { cueFor, Decider, decisionConfig, observationFromOutputs } from '../www/js/logic.js';
 import { rgbaToRgb } from '../www/js/model.js';
 import { replayVectors } from '../www/js/vectors.js';
-import { statusMessage } from '../www/js/view.js';
+import { modelName, statusMessage } from '../www/js/view.js';
 
 const HERE = dirname(fileURLToPath(import.meta.url));
 const VECTORS = join(HERE, '..', 'test_vectors.json');
@@ -524,4 +524,11 @@ test('an upright phone unsure for a while is told to hold it sideways, once in a
   quick.update(0, true, true);
   assert.equal(quick.update(1, true, true), 'sideways');
   assert.match(statusMessage({ stop: true, reason: 'sideways' })[0], /sideways/);
+});
+
+test('the helper view names an ensemble bundle by its members', () => {
+  assert.equal(modelName({ backbone: 'efficientnet_lite0' }), 'efficientnet_lite0');
+  assert.equal(modelName({ ensemble: [{ backbone: 'efficientnet_lite0' }, { backbone: 'efficientnet_lite0' }] }),
+    'ensemble of 2 × efficientnet_lite0');
+  assert.equal(modelName(undefined), 'unknown backbone');
 });

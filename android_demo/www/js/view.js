@@ -35,13 +35,19 @@ export function statusMessage(d) {
   return [`Turn ${side}.`, 'go'];
 }
 
+/** The bundle's model: its backbone, or "ensemble of K × backbone" for an ensemble bundle (training.ensemble). */
+export function modelName(training) {
+  const t = training || {};
+  if (Array.isArray(t.ensemble)) return `ensemble of ${t.ensemble.length} × ${t.ensemble[0]?.backbone || 'unknown backbone'}`;
+  return t.backbone || 'unknown backbone';
+}
+
 /** One line naming the bundle: its model's SHA-256 (first 12 hex digits) and date, and its facts. */
 export function bundleSummary(meta) {
-  const t = meta.raw.training || {};
   const created = meta.raw.provenance?.created || 'date unknown';
   return `model ${meta.model_sha256.slice(0, 12)}, ${created}; schema ${meta.schema_version}, ${meta.actions.n} actions, `
     + `${meta.input.size.join('×')} canvas (${meta.geometry.fit}), T=${meta.mc.samples}, ${meta.precision}, `
-    + `${t.backbone || 'unknown backbone'}; gate: ${meta.calibration.uncertainty.measure} ≤ `
+    + `${modelName(meta.raw.training)}; gate: ${meta.calibration.uncertainty.measure} ≤ `
     + `${fmt(meta.calibration.uncertainty.threshold)}`;
 }
 
