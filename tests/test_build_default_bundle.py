@@ -24,6 +24,17 @@ def _build(tmp_path: Path, **env) -> subprocess.CompletedProcess:
                           env={**os.environ, "PY": sys.executable, "TMPDIR": str(tmp_path), **env})
 
 
+def _tiny_run(tmp_path: Path) -> tuple[Path, Path, Path]:
+    """A tiny dataset, a one-epoch letterbox run on it and an empty CV folder."""
+    data = make_tiny_dataset(tmp_path / "data", n_train=8, n_val=8)
+    run = train(TrainConfig(data=str(data), out=str(tmp_path / "run"), backbone="mobilenet_v3_small", weights="none",
+                            head="spatial", epochs=1, batch_size=4, input_size=(48, 64), fit="letterbox",
+                            cache_dir=str(tmp_path / "cache"), progress=False))
+    cv = tmp_path / "cv"
+    cv.mkdir()
+    return data, run, cv
+
+
 def test_build_default_bundle_without_a_run_says_so_in_one_line(tmp_path):
     r = _build(tmp_path, RUN=str(tmp_path / "nope"), OUT=str(tmp_path / "out"))
     assert r.returncode == 2 and r.stderr.strip().count("\n") == 0
@@ -33,12 +44,7 @@ def test_build_default_bundle_without_a_run_says_so_in_one_line(tmp_path):
 
 @pytest.mark.slow
 def test_build_default_bundle_exports_the_zoomed_view_with_the_held_out_gate(tmp_path):
-    data = make_tiny_dataset(tmp_path / "data", n_train=8, n_val=8)
-    run = train(TrainConfig(data=str(data), out=str(tmp_path / "run"), backbone="mobilenet_v3_small", weights="none",
-                            head="spatial", epochs=1, batch_size=4, input_size=(48, 64), fit="letterbox",
-                            cache_dir=str(tmp_path / "cache"), progress=False))
-    cv = tmp_path / "cv"
-    cv.mkdir()
+    data, run, cv = _tiny_run(tmp_path)
     (cv / "cv.json").write_text(json.dumps({"config": {"epochs": 1}, "folds": [], "accuracy": {"mean": 0.6, "sd": 0.01},
                                             "bin_mae": {"mean": 0.4, "sd": 0.02},
                                             "far_x_error": {"mean": 0.03, "sd": 0.001}, "majority_accuracy": 0.3}))
@@ -72,12 +78,7 @@ def test_build_default_bundle_with_members_ships_their_ensemble_at_its_held_out_
     """MEMBERS: each run exported as RUN is, a folder holding a bundle taken as it is, the bundle
     their ensemble (mc.members), stamped with the thresholds choose_gate.py --ensemble chose
     (gate…_ensembleK.json), not the one model's."""
-    data = make_tiny_dataset(tmp_path / "data", n_train=8, n_val=8)
-    run = train(TrainConfig(data=str(data), out=str(tmp_path / "run"), backbone="mobilenet_v3_small", weights="none",
-                            head="spatial", epochs=1, batch_size=4, input_size=(48, 64), fit="letterbox",
-                            cache_dir=str(tmp_path / "cache"), progress=False))
-    cv = tmp_path / "cv"
-    cv.mkdir()
+    data, run, cv = _tiny_run(tmp_path)
     fm = _far_mass_gate
     (cv / "gate_mirror_far_mass.json").write_text(json.dumps(fm(0.007) | {"portrait": fm(0.015)}))
     (cv / "gate_mirror_far_mass_ensemble3.json").write_text(json.dumps(fm(0.02) | {"portrait": fm(0.03)}))
