@@ -1,8 +1,8 @@
 """Several bundles' graphs as one: an ensemble bundle (``crossing-export ensemble``).
 
 Models trained alike but from different seeds are wrong on different frames; averaged, their
-probabilities are right more often and, above all, less often confidently wrong on scenes none
-of them trained on (docs/models.md, "An ensemble of three seeds"). :func:`merge_graphs` puts the
+probabilities are less often confidently wrong on photographers none of them trained on
+(docs/models.md, "The default is an ensemble of two seeds"). :func:`merge_graphs` puts the
 members' graphs side by side behind the one ``frames`` input and pools their MC samples: each
 member's T (or 2T with mirror) samples count alike, so the five outputs are exactly those of one
 graph summarising all of the members' samples (:func:`crossing_assist.models.mc.mc_summaries`):
