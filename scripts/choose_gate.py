@@ -108,6 +108,15 @@ def view_tag(mirror: bool, frames: int, seed: int, view: str, portrait: int, zoo
     return draw_tag(mirror, frames, seed) + ("" if view == "landscape" else f"_{view}{portrait}{zoom_tag(zoom)}")
 
 
+def view_draws(n_frames: int, portrait_frames: int | None, seed: int, portrait: int, mirror: bool, zoom: float):
+    """``(view, photos drawn, draw tag)`` of each view a fold is listened to as: landscape on
+    ``n_frames`` photos, the portrait kinds (with ``portrait`` views a photo) on ``portrait_frames``
+    (default ``n_frames``)."""
+    for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
+        n = n_frames if view == "landscape" or portrait_frames is None else portrait_frames
+        yield view, n, view_tag(mirror, n, seed, view, portrait, zoom)
+
+
 def curve_cache(fold: Path, draw: str, grid: int, measure: str | None, extra: str = "") -> Path:
     """Where a fold's swept curve of one draw (:func:`view_tag`) is cached: another grid, measure
     or ``extra`` (an ensemble's ``_ensembleK``) is a file of its own."""
@@ -202,9 +211,7 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     bundle = fold_bundle(fold, source, ptl, mirror)
     engine = geometry = None
     out = {}
-    for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
-        n = n_frames if view == "landscape" or portrait_frames is None else portrait_frames
-        draw = view_tag(mirror, n, seed, view, portrait, zoom)
+    for view, n, draw in view_draws(n_frames, portrait_frames, seed, portrait, mirror, zoom):
         done = curve_cache(fold, draw, grid, measure)
         if done.is_file():   # listened to already (the fold does not change once finished)
             out[view] = json.loads(done.read_text())
@@ -250,9 +257,7 @@ def ensemble_curves(run_folds: list[tuple[Path, str]], n_frames: int, seed: int,
 
     fold, source = run_folds[0]
     engine, out = None, {}
-    for view in ("landscape", *(PORTRAIT_SETS if portrait else ())):
-        n = n_frames if view == "landscape" or portrait_frames is None else portrait_frames
-        draw = view_tag(mirror, n, seed, view, portrait, zoom)
+    for view, _, draw in view_draws(n_frames, portrait_frames, seed, portrait, mirror, zoom):
         done = curve_cache(fold, draw, grid, measure, f"_ensemble{len(run_folds)}")
         if done.is_file():
             out[view] = json.loads(done.read_text())

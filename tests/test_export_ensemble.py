@@ -2,6 +2,7 @@
 bundle's plays are the members' plays averaged (what choose_gate.py --ensemble replays)."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -112,7 +113,7 @@ def test_ensemble_refuses_members_exported_differently_or_alone(tmp_path):
     for members, message in cases:
         r = _cli(*members, "--out", tmp_path / "ens", "--calib-data", data)
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
-        assert r.stderr.startswith("error:") and __import__("re").search(message, r.stderr), r.stderr
+        assert r.stderr.startswith("error:") and re.search(message, r.stderr), r.stderr
         assert not (tmp_path / "ens").exists()
     assert _cli(a, _det(tmp_path / "b", **SOFT), "--out", tmp_path / "ens", "--calib-data", data).returncode == 0
     r = _cli(a, tmp_path / "ens", "--out", tmp_path / "ens2", "--calib-data", data)

@@ -82,9 +82,8 @@ async function main() {
         ms.push(performance.now() - t0);
       }
       ms.sort((x, y) => x - y);
-      const t = app.meta.raw.training || {};
-      const model = Array.isArray(t.ensemble) ? `${t.ensemble.length} x ${t.ensemble[0]?.backbone}` : t.backbone || '?';
-      return { bundle: `${model} ${app.meta.input.size.join('x')} T=${app.meta.mc.samples} ${app.meta.precision}`,
+      const { modelName } = await import('./js/view.js');   // the helper view's name for the bundle's model
+      return { bundle: `${modelName(app.meta.raw.training)} ${app.meta.input.size.join('x')} T=${app.meta.mc.samples} ${app.meta.precision}`,
         backend: app.model.backend, threads: app.model.threads, isolated: crossOriginIsolated,
         size: hw, runs, median_ms: ms[Math.floor(runs / 2)], p90_ms: ms[Math.floor(0.9 * (runs - 1))], cache_bytes: cacheBytes };
     }, { hw: a.hw, runs: a.runs, warmup: a.warmup });

@@ -124,7 +124,7 @@ def merge_graphs(models: Sequence[Any]) -> Any:
         n("Max", ["ens/var_raw", "ens/zero"], ["variance"]),
     ]
     first = graphs[0]
-    a = next(d.dim_value for d in first.output[0].type.tensor_type.shape.dim[1:2]) or "A"
+    a = next(o for o in first.output if o.name == out(0, "probs")).type.tensor_type.shape.dim[1].dim_value or "A"
     f = TensorProto.FLOAT
     outputs = {"probs": ["N", a], "entropy": ["N"], "mutual_info": ["N"], "variance": ["N", a], "votes": ["N", a]}
     graph = helper.make_graph(
@@ -143,7 +143,7 @@ def merge_graphs(models: Sequence[Any]) -> Any:
 def _members(paths: Sequence[str]) -> tuple[list[Bundle], list[dict]]:
     """The member bundles, read and checked to agree on :data:`SHARED` and the MC settings."""
     bundles = [read_bundle(p) for p in paths]
-    metas = [json.loads((Path(p) / "bundle.json").read_text()) for p in paths]
+    metas = [b.raw for b in bundles]
     if nested := [p for p, b in zip(paths, bundles) if b.mc.members > 1]:
         raise ExportError(f"member {nested[0]} is an ensemble already; pass its own members instead")
     for i, meta in enumerate(metas[1:], 1):
@@ -185,6 +185,4 @@ def ensemble_bundle(cfg: EnsembleConfig, log: Callable[[str], None] = print) -> 
     meta["calibration"] = calib.spec().to_json()
     meta["metrics"] = {**metrics, "members": [m.get("metrics", {}).get("full_split", {}) for m in metas]}
     set_metadata(model, meta)
-    out = write_bundle(cfg.out, model_bytes(model), meta, force=cfg.force)
-    read_bundle(out)
-    return out
+    return write_bundle(cfg.out, model_bytes(model), meta, force=cfg.force)   # validated as it is written
