@@ -139,12 +139,19 @@ def fold_bundle(fold: Path, source: str, ptl, mirror: bool = False) -> Path:
 def held_out_rows(ptl, neg, source: str, used: set[str], n_frames: int, seed: int) -> tuple[list, list]:
     """``n_frames`` photos of ``source`` that its fold never trained on (its train-split photos)
     and half as many no-crossing views no model trained on; the same draw for every script."""
-    rng = np.random.default_rng(seed)
     pos = [r for r in ptl.rows if r.split == "train" and r.source == source]
     negs = [r for r in neg.rows if r.source == source and r.image not in used]
-    pos = [pos[i] for i in sorted(rng.choice(len(pos), min(n_frames, len(pos)), replace=False))]
-    negs = [negs[i] for i in sorted(rng.choice(len(negs), min(n_frames // 2, len(negs)), replace=False))]
-    return pos, negs
+    pick_pos, pick_neg = draw_indices(len(pos), len(negs), n_frames, seed)
+    return [pos[i] for i in pick_pos], [negs[i] for i in pick_neg]
+
+
+def draw_indices(n_pos: int, n_neg: int, n_frames: int, seed: int) -> tuple[list[int], list[int]]:
+    """The draw of :func:`held_out_rows`, as indices (sorted) into a photographer's ``n_pos``
+    unseen photos and ``n_neg`` unseen no-crossing views: ``n_frames`` photos and half as many views."""
+    rng = np.random.default_rng(seed)
+    pos = sorted(rng.choice(n_pos, min(n_frames, n_pos), replace=False))
+    neg = sorted(rng.choice(n_neg, min(n_frames // 2, n_neg), replace=False))
+    return [int(i) for i in pos], [int(i) for i in neg]
 
 
 def model_accuracy(lis: Listener, in_view: list[int] | None = None) -> dict:

@@ -17,7 +17,7 @@ from crossing_assist.bundle import read_bundle
 from crossing_assist.export.ensemble import merge_graphs
 from crossing_assist.inference import predict_bundle
 from crossing_assist.runtime.engine import Engine
-from crossing_assist.runtime.listen import Listener
+from crossing_assist.runtime.listen import Listener, summarise
 
 #: Deterministic toys (no dropout, no noise) that see the same bar with different sharpness, and
 #: one that puts its unknown logit high: members that disagree on how sure to be.
@@ -160,3 +160,45 @@ def test_choose_gate_ensemble_curves_are_the_averaged_plays_swept(tmp_path):
     assert json.loads(cached.read_text()) == json.loads(json.dumps(land))
     (folds[1][0] / "listened_5.npz").unlink()                        # read from the cache now
     assert cg.ensemble_curves(folds, 5, 0, 0, False, None, cg.GRID, 1.0, "far_mass")["landscape"] == json.loads(cached.read_text())
+
+
+def test_fresh_check_chooses_on_the_draw_and_measures_the_other_photos(tmp_path):
+    """scripts/fresh_check.py: the threshold is chosen on choose_gate.py's draw of N photos a
+    photographer (the same indices) and measured on every other saved play, the runs' plays averaged."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    import choose_gate as cg
+    import fresh_check as fc
+
+    strips, n_neg = (1, 2, 4, 6, 7, 9, 11, 12), 3
+    folds = []
+    for run, kw in (("run0", SOFT), ("run1", dict(gain=2.0))):
+        fold = tmp_path / run / "fold-src_x"
+        _det(fold / "bundle", **kw)
+        lis = Listener(Engine(fold / "bundle"), seconds=0.3)
+        for strip in strips:
+            lis.add(bar_frame(bin_center_x(strip)), strip)
+        for k in range(n_neg):
+            lis.add(bar_frame(None, noise=0.3 + 0.1 * k), UNKNOWN)
+        lis.save(fold / "listened_100.npz", in_view=np.arange(len(strips)))
+        folds.append((fold, "src:x"))
+
+    out = fc.fresh_check([folds], mirror=False, frames=100, choose_frames=4, seed=0, grid=cg.GRID, measure="far_mass")
+    pos, neg = cg.draw_indices(len(strips), n_neg, 4, 0)
+    drawn = pos + [len(strips) + j for j in neg]
+    rest = [i for i in range(len(strips) + n_neg) if i not in drawn]
+    assert (out["chosen_on"]["point"]["frames"], out["fresh"]["frames"], out["fresh"]["no_crossing_frames"]) == (4, 4, 1)
+    averaged, _ = Listener.average(Engine(folds[0][0] / "bundle"), [f / "listened_100.npz" for f, _ in folds], "far_mass")
+    threshold = out["chosen_on"]["scale"] * cg.FAR_MASS_REFERENCE
+    assert out["chosen_on"]["threshold"] == pytest.approx(threshold)
+    assert out["chosen_on"]["point"]["beacon_on"] == summarise(averaged.heard(threshold, drawn))["beacon_on"]
+    fresh = summarise(averaged.heard(threshold, rest))
+    assert out["fresh"]["beacon_on"] == pytest.approx(fresh["beacon_on"])
+    assert out["fresh"]["confidently_wrong"] == pytest.approx(fresh["confidently_wrong"])
+    assert out["fresh"]["silence_no_crossing"] == pytest.approx(fresh["silence_no_crossing"])
+
+    with pytest.raises(ValueError, match="choose_gate.py .* --frames 100000"):   # no such draw saved
+        fc.fresh_check([folds], mirror=False, frames=100000, choose_frames=4, seed=0, grid=cg.GRID, measure="far_mass")
+    for f, _ in folds:   # a draw of 8 photos may have left photos out: its clips are not the rows' order
+        (f / "listened_100.npz").rename(f / "listened_8.npz")
+    with pytest.raises(ValueError, match="not every unseen photo"):
+        fc.fresh_check([folds], mirror=False, frames=8, choose_frames=4, seed=0, grid=cg.GRID, measure="far_mass")
