@@ -68,27 +68,21 @@ def fresh_check(run_folds: list[list[tuple[Path, str]]], *, mirror: bool, frames
                                 for m in cg.gate_scales(grid)]})
         rest.append((source, lis, [i for i in range(len(lis.labels)) if i not in seen], t0))
     best, met = cg.choose(cg.pool(drawn))
-    counts = {"frames": 0, "on": 0, "wrong": 0, "no_crossing_frames": 0, "silent": 0}
-    per_source = {}
+    heard, per_source = [], {}
     for source, lis, idx, t0 in rest:
-        r = summarise(lis.heard(best["scale"] * t0, idx))
-        n, k = r["frames_with_crossing"], r["frames_without_crossing"]
-        per_source[source] = r
-        counts["frames"] += n
-        counts["no_crossing_frames"] += k
-        counts["on"] += round((r["beacon_on"] or 0) * n)
-        counts["wrong"] += round((r["confidently_wrong"] or 0) * n)
-        counts["silent"] += round((r["silence_no_crossing"] or 0) * k)
-    rate = lambda a, b: a / b if b else None  # noqa: E731
+        h = lis.heard(best["scale"] * t0, idx)
+        per_source[source] = summarise(h)
+        heard += h
+    fresh = summarise(heard)
+    wrong = round((fresh["confidently_wrong"] or 0) * fresh["frames_with_crossing"])
     return {"chosen_on": {"frames_per_photographer": choose_frames, "scale": best["scale"], "targets_met": met,
-                          "threshold": best["scale"] * rest[0][3] if measure else None, "point": best},
-            "fresh": {"frames": counts["frames"], "no_crossing_frames": counts["no_crossing_frames"],
-                      "beacon_on": rate(counts["on"], counts["frames"]),
-                      "confidently_wrong": rate(counts["wrong"], counts["frames"]),
-                      "confidently_wrong_frames": counts["wrong"],
-                      "confidently_wrong_95": cg.wilson(counts["wrong"], counts["frames"]),
-                      "silence_no_crossing": rate(counts["silent"], counts["no_crossing_frames"]),
-                      "per_photographer": per_source}}
+                          "threshold": best["scale"] * cg.FAR_MASS_REFERENCE if measure == "far_mass" else None,
+                          "point": best},
+            "fresh": {"frames": fresh["frames_with_crossing"], "no_crossing_frames": fresh["frames_without_crossing"],
+                      "beacon_on": fresh["beacon_on"], "confidently_wrong": fresh["confidently_wrong"],
+                      "confidently_wrong_frames": wrong,
+                      "confidently_wrong_95": cg.wilson(wrong, fresh["frames_with_crossing"]),
+                      "silence_no_crossing": fresh["silence_no_crossing"], "per_photographer": per_source}}
 
 
 def main(argv=None) -> int:
