@@ -385,6 +385,18 @@ def finished_folds(cv: Path):
         yield fold, args["holdout"][0]
 
 
+def ensemble_members(by_source: dict[str, list[tuple[Path, str]]], runs: int) -> list[list[tuple[Path, str]]]:
+    """The ``(fold, source)`` lists of the photographers every one of ``runs`` runs held out in a
+    finished fold (``by_source``: each source's folds, a run each); the others are said and left
+    out, and an empty list says so as an error."""
+    members = [f for f in by_source.values() if len(f) == runs]
+    for source in sorted(set(by_source) - {f[0][1] for f in members}):
+        print(f"ensemble: {source} was not held out by every run's finished folds, left out", file=sys.stderr)
+    if not members:
+        print("error: no photographer held out by every run", file=sys.stderr)
+    return members
+
+
 def main(argv=None) -> int:
     ap = held_out_parser(__doc__.split("\n\n")[0], frames=200)
     ap.add_argument("--portrait", type=int, default=3, help="portrait views a photo, of each kind (0: landscape only)")
@@ -435,11 +447,8 @@ def main(argv=None) -> int:
     report(a, folds, run_of)
     if a.ensemble:
         runs = 1 + len(a.also)
-        members = [f for f in by_source.values() if len(f) == runs]
-        for source in sorted(set(by_source) - {f[0][1] for f in members}):
-            print(f"ensemble: {source} was not held out by every run's finished folds, left out", file=sys.stderr)
+        members = ensemble_members(by_source, runs)
         if not members:
-            print("error: no photographer held out by every run", file=sys.stderr)
             return 2
         print(f"the ensemble of the {runs} runs:")
         report(a, [ensemble_curves(f, a.frames, a.seed, a.portrait, a.mirror, a.portrait_frames, a.grid, a.zoom,

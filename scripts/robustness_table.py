@@ -15,7 +15,8 @@ clip through the runtime (:class:`~crossing_assist.runtime.listen.Listener`, the
 gate thresholds). Per condition, pooled over folds: the model's accuracy and bin MAE (argmax of
 the clip's first frame), beacon on, confidently wrong and silence on no-crossing views; the
 change against ``clean`` beside each; ``--also CV2`` pools the folds of more runs of the recipe
-(other seeds) with CV's. Writes ``CV/robustness[_mirror].json`` and prints a
+(other seeds) with CV's, and ``--ensemble`` measures their ensemble instead (each photographer's
+folds' plays averaged, decided with ``--gate``'s). Writes ``CV/robustness[_mirror].json`` and prints a
 markdown table. Each condition's plays are saved in the fold folder
 (``listened_robustness…_CONDITION.npz``), so ``--gate BUNDLE`` replays them with that bundle's
 gate (its measure, recomputed from the saved probabilities, and its thresholds per orientation
@@ -23,7 +24,7 @@ and camera FOV, e.g. the shipped default's) instead of each fold's own, without 
 model again; written to ``CV/robustness[_mirror]_gate.json``.
 
     .venv/bin/python scripts/robustness_table.py runs/default/cv [--mirror] [--frames 100] [--also CV2 ...] \
-        [--gate crossing_assist/assets/default_bundle]
+        [--gate crossing_assist/assets/default_bundle] [--ensemble]
 """
 
 from __future__ import annotations
@@ -38,7 +39,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from choose_gate import (  # noqa: E402  (a sibling script)
-    add_also, draw_tag, finished_folds, fold_bundle, held_out_parser, held_out_rows, model_accuracy, tag,
+    add_also, draw_tag, ensemble_members, finished_folds, fold_bundle, held_out_parser, held_out_rows, model_accuracy,
+    tag,
 )
 
 from crossing_assist.bundle import BundleError, UncertaintySpec, read_bundle  # noqa: E402
@@ -114,6 +116,25 @@ def fold_table(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     return out
 
 
+def ensemble_table(run_folds: list[tuple[Path, str]], n_frames: int, seed: int, mirror: bool,
+                   gate: UncertaintySpec) -> dict:
+    """Per condition, what the ensemble of the runs' folds that held one photographer out hears
+    (``run_folds``: (fold, source), a run each, each played already by :func:`fold_table`): their
+    saved plays averaged frame by frame (:meth:`Listener.average`, as ``crossing-export ensemble``
+    pools its members) and decided with ``gate``; no model runs."""
+    from crossing_assist.runtime.engine import Engine
+
+    fold, source = run_folds[0]
+    draw = draw_tag(mirror, n_frames, seed)
+    engine = gated(Engine(fold / f"bundle{tag(mirror)}", threads=1), gate)
+    out = {"source": source}
+    for condition in CONDITIONS:
+        lis, _ = Listener.average(engine, [f / f"listened_robustness{draw}_{condition}.npz" for f, _ in run_folds],
+                                  gate.measure)
+        out[condition] = {**model_accuracy(lis), **summarise(lis.heard())}
+    return out
+
+
 def pool(folds: list[dict]) -> dict:
     """Per condition: each rate weighted by its fold's frame count."""
     out = {}
@@ -147,7 +168,14 @@ def main(argv=None) -> int:
     ap.add_argument("--gate", type=Path, metavar="BUNDLE",
                     help="decide with this bundle's gate (measure and thresholds, e.g. the shipped default's) "
                          "instead of each fold's own, replaying the saved plays")
+    ap.add_argument("--ensemble", action="store_true",
+                    help="the table of the ensemble of the runs (CV and each --also) instead of their pooled folds: "
+                         "each photographer's folds' plays averaged frame by frame, as crossing-export ensemble of "
+                         "the folds' bundles plays them, decided with --gate's (e.g. the shipped ensemble's); "
+                         "written to CV/robustness…_ensembleK.json")
     a = ap.parse_args(argv)
+    if a.ensemble and not (a.also and a.gate):
+        ap.error("--ensemble: pass the other runs of the recipe with --also and the gate to decide with with --gate")
     gate = None
     if a.gate is not None:
         try:
@@ -161,20 +189,29 @@ def main(argv=None) -> int:
             return 2
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}
-    folds = []
+    folds, by_source = [], {}
     for i, cv in enumerate([a.cv, *a.also]):
         for fold, source in finished_folds(cv):
             print(f"{cv} fold {source}", file=sys.stderr, flush=True)
             # one key per fold in the pooled per-fold figures
             folds.append({**fold_table(fold, source, ptl, neg, used, a.frames, a.seed, a.mirror, gate),
                           "fold": f"{source} ({cv})" if i else source})
+            by_source.setdefault(source, []).append((fold, source))
     if not folds:
         print(f"error: no finished fold in {a.cv}", file=sys.stderr)
         return 2
+    runs = [str(cv) for cv in (a.cv, *a.also)]
+    suffix = "" if gate is None else "_gate"
+    if a.ensemble:
+        members = ensemble_members(by_source, len(runs))
+        if not members:
+            return 2
+        folds = [{**ensemble_table(m, a.frames, a.seed, a.mirror, gate), "fold": m[0][1]} for m in members]
+        suffix += f"_ensemble{len(runs)}"
     table = pool(folds)
-    (a.cv / f"robustness{tag(a.mirror)}{'' if gate is None else '_gate'}.json").write_text(
+    (a.cv / f"robustness{tag(a.mirror)}{suffix}.json").write_text(
         json.dumps({"frames_per_fold": a.frames, "folds": [f["fold"] for f in folds], "conditions": table,
-                    **({"pooled_runs": [str(cv) for cv in (a.cv, *a.also)]} if a.also else {}),
+                    **({"ensemble_of_runs" if a.ensemble else "pooled_runs": runs} if a.also else {}),
                     **({} if gate is None else {"gate": {"bundle": str(a.gate), **gate.to_json()}})}, indent=1))
     print(markdown(table))
     return 0

@@ -395,3 +395,49 @@ def test_robustness_table_replays_saved_plays_with_another_bundles_gate(tmp_path
     monkeypatch.setattr(rt, "read_bundle", lambda path: type("B", (), {"calibration": type("C", (), {
         "uncertainty": UncertaintySpec("mutual_info", 0.2)})()})())
     assert rt.main([str(tmp_path / "cv"), "--gate", str(mi)]) == 2
+
+
+def test_robustness_table_ensemble_averages_each_photographers_plays_across_runs(tmp_path, monkeypatch):
+    """``robustness_table.py --also … --ensemble --gate BUNDLE``: per photographer, the runs' saved
+    plays of each condition are averaged frame by frame and decided with the gate, so two runs that
+    place every goal right outvote a third that hears no crossing anywhere (pooled: 2 of 3 right);
+    the table is written apart, naming the runs it merged."""
+    import shutil
+
+    from runtime_toy import bar_frame, make_toy_bundle
+
+    import robustness_table as rt
+    from crossing_assist.actions import UNKNOWN, bin_center_x
+    from crossing_assist.bundle import UncertaintySpec
+    from crossing_assist.runtime.engine import Engine
+
+    toy = make_toy_bundle(tmp_path / "toy")
+    strips = (2, 6, 11)
+    runs = [tmp_path / name for name in ("a", "b", "c")]
+    for cv, right in zip(runs, (True, True, False)):
+        fold = cv / "fold-ptl_x"
+        shutil.copytree(toy, fold / "bundle")
+        lis = rt.Listener(Engine(toy), seconds=0.3)
+        for strip in strips:
+            lis.add(bar_frame(bin_center_x(strip) if right else None), strip)
+        lis.add(bar_frame(None), UNKNOWN)
+        for condition in rt.CONDITIONS:
+            lis.save(fold / f"listened_robustness{rt.draw_tag(False, 7, 0)}_{condition}.npz")
+    monkeypatch.setattr(rt, "read_manifest", lambda path: type("M", (), {"rows": []})())
+    monkeypatch.setattr(rt, "finished_folds", lambda cv: [(cv / "fold-ptl_x", "ptl:x")])
+    monkeypatch.setattr(rt, "fold_bundle", lambda fold, *a: fold / "bundle")
+    monkeypatch.setattr(rt, "held_out_rows", lambda *a: pytest.fail("saved plays must be replayed, not listened again"))
+    monkeypatch.setattr(rt, "read_bundle", lambda path: type("B", (), {"calibration": type("C", (), {
+        "uncertainty": UncertaintySpec("far_mass", 1.0)})()})())
+    also = [arg for cv in runs[1:] for arg in ("--also", str(cv))]
+
+    assert rt.main([str(runs[0]), *also, "--frames", "7", "--gate", str(toy)]) == 0
+    pooled = json.loads((runs[0] / "robustness_gate.json").read_text())["conditions"]
+    assert pooled["clean"]["accuracy"] == pytest.approx(2 / 3)
+    assert rt.main([str(runs[0]), *also, "--frames", "7", "--gate", str(toy), "--ensemble"]) == 0
+    out = json.loads((runs[0] / "robustness_gate_ensemble3.json").read_text())
+    assert out["folds"] == ["ptl:x"] and out["ensemble_of_runs"] == [str(cv) for cv in runs]
+    assert all(out["conditions"][c]["accuracy"] == 1.0 and out["conditions"][c]["beacon_on"] == 1.0
+               for c in rt.CONDITIONS)
+    with pytest.raises(SystemExit):   # an ensemble needs the other runs and a gate to decide with
+        rt.main([str(runs[0]), "--ensemble", "--gate", str(toy)])
