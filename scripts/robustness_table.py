@@ -172,10 +172,10 @@ def main(argv=None) -> int:
                     help="the table of the ensemble of the runs (CV and each --also) instead of their pooled folds: "
                          "each photographer's folds' plays averaged frame by frame, as crossing-export ensemble of "
                          "the folds' bundles plays them, decided with --gate's (e.g. the shipped ensemble's); "
-                         "written to CV/robustness…_ensembleK.json")
+                         "written to CV/robustness…_gate_ensembleK.json")
     a = ap.parse_args(argv)
     if a.ensemble and not (a.also and a.gate):
-        ap.error("--ensemble: pass the other runs of the recipe with --also and the gate to decide with with --gate")
+        ap.error("--ensemble: pass the other runs of the recipe with --also and the gate to decide with (--gate)")
     gate = None
     if a.gate is not None:
         try:
