@@ -4,8 +4,8 @@
 #   scripts/build_default_bundle.sh                 # runs/default -> the embedded bundle
 #   RUN=runs/x OUT=/tmp/b scripts/build_default_bundle.sh
 #   MEMBERS="runs/default_s1 runs/default_s2" scripts/build_default_bundle.sh   # an ensemble of three seeds
-#   MIRROR=0 MAX_INT8_DROP=0.02 RUN=runs/full_s0 MEMBERS=runs/full_s1 CV_DIR=runs/res256/cv \
-#       scripts/build_default_bundle.sh   # what ships since 2026-12-03 late (docs/models.md)
+#   MIRROR=0 MAX_INT8_DROP=0.02 RUN=runs/full_s0 MEMBERS="runs/full_s1 runs/full_s2" CV_DIR=runs/res256/cv \
+#       scripts/build_default_bundle.sh   # what ships since 2026-12-04 (docs/models.md)
 #
 # MEMBERS: more runs of the same recipe (other seeds; a folder holding a bundle is taken as it is),
 # each exported as RUN is; the bundle is their ensemble with RUN (crossing-export ensemble: the graphs
