@@ -7,7 +7,9 @@ the held-out photographer's unseen photos once through the fold's bundle (the sa
 model's own probability of *not* being >= 2 strips off, the confidently-wrong criterion). For each
 score and beacon-on rate (the beacon on for the frames with the lowest scores; an ``unknown`` argmax
 is always off) it prints the confidently-wrong rate (on and >= 2 strips off the label). With several
-runs (``--with``) it scores their ensemble too: the mean of the members' probabilities. ``--sheet``
+runs (``--with``) it scores their ensemble too: the mean of the members' probabilities, and the
+far mass plus ``--disagreement`` times how much the members disagree (their mutual information:
+the entropy of the mean less the members' mean entropy). ``--sheet``
 draws the frames confidently wrong at 90 % beacon on and says how far each misses the far point.
 
 ``--view portrait|portrait_window|landscape`` scores the clips ``scripts/choose_gate.py`` saved
@@ -53,11 +55,25 @@ def window_mass(probs: np.ndarray, k: int = 1) -> np.ndarray:
     return out
 
 
-def scores(probs: np.ndarray, mutual_info: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """The per-frame scores compared (lower = surer)."""
-    out = {"entropy": np.array([entropy(p) for p in probs]), "1 - max p": 1.0 - probs.max(1), "1 - P(argmax +- 1)": 1.0 - window_mass(probs)}
+def member_disagreement(members: list[np.ndarray]) -> np.ndarray:
+    """Per frame, how much ensemble members' probabilities (each ``[frames, A]``) disagree: the
+    entropy of their mean less their mean entropy (the mutual information between the prediction
+    and the member; 0 when all agree)."""
+    ent = lambda p: np.array([entropy(q) for q in p])  # noqa: E731
+    return np.maximum(0.0, ent(np.mean(members, 0)) - np.mean([ent(m) for m in members], 0))
+
+
+def scores(probs: np.ndarray, mutual_info: np.ndarray | None = None, disagreement: np.ndarray | None = None,
+           weights: tuple[float, ...] = ()) -> dict[str, np.ndarray]:
+    """The per-frame scores compared (lower = surer); with the members' ``disagreement``, the far
+    mass plus each of ``weights`` times it."""
+    far = 1.0 - window_mass(probs)
+    out = {"entropy": np.array([entropy(p) for p in probs]), "1 - max p": 1.0 - probs.max(1), "1 - P(argmax +- 1)": far}
     if mutual_info is not None:
         out["mutual information"] = np.asarray(mutual_info, float)
+    if disagreement is not None:
+        for w in weights:
+            out[f"1 - P(argmax +- 1) + {w:g} x members' disagreement"] = far + w * disagreement
     return out
 
 
@@ -178,6 +194,9 @@ def main(argv=None) -> int:
     ap.add_argument("--portrait", type=int, default=3, help="with --view: portrait views a photo, as listened to")
     ap.add_argument("--coverages", type=float, nargs="+", default=list(COVERAGES), metavar="C",
                     help="beacon-on rates to read the confidently-wrong rate at (0 < C < 1)")
+    ap.add_argument("--disagreement", type=float, nargs="+", default=[0.1, 0.3], metavar="W",
+                    help="with --with: the ensemble is also ranked by its far mass plus W times the members' "
+                         "disagreement (mutual information between the members, nats), for each W (default 0.1 0.3)")
     a = ap.parse_args(argv)
     if not all(0 < c < 1 for c in a.coverages):
         print(f"error: --coverages {a.coverages}: each must lie in (0, 1)", file=sys.stderr)
@@ -214,7 +233,7 @@ def main(argv=None) -> int:
         return 2
     labels = np.concatenate([f["labels"] for f in members[0]])
     ok = np.ones(len(labels), bool)
-    entries = []   # (name, probs, mutual information): each run, then their ensemble
+    entries = []   # (name, probs, mutual information, members' disagreement): each run, then their ensemble
     for cv, run in zip(runs, members):
         probs = [p for f in run for p in f["probs"]]   # None where inference failed
         width = next((len(p) for p in probs if p is not None), None)
@@ -223,9 +242,10 @@ def main(argv=None) -> int:
             return 2
         ok &= np.asarray([p is not None for p in probs])
         entries.append((str(cv), np.asarray([p or [np.nan] * width for p in probs], float),
-                        None if a.view else np.concatenate([f["mutual_info"] for f in run])))
+                        None if a.view else np.concatenate([f["mutual_info"] for f in run]), None))
     if len(entries) > 1:
-        entries.append(("ensemble (mean probabilities)", np.mean([p for _, p, _ in entries], 0), None))
+        each = [p for _, p, _, _ in entries]
+        entries.append(("ensemble (mean probabilities)", np.mean(each, 0), None, member_disagreement(each)))
     labels = labels[ok]
     pos = labels != 0
     head = "| score | " + " | ".join(f"on {c:.0%}" for c in a.coverages) + " |\n|---|" + "---:|" * len(a.coverages)
@@ -233,11 +253,12 @@ def main(argv=None) -> int:
               "failed": int((~ok).sum()), "runs_scored": {}}
     print(f"{pos.sum()} held-out frames with a crossing, {(~pos).sum()} without; confidently wrong (of frames with a "
           f"crossing) at each beacon-on rate, frame level")
-    for name, probs, mi in entries:
+    for name, probs, mi, dis in entries:
         probs = probs[ok]
         pred = probs.argmax(1)
         acc = float((pred[pos] == labels[pos]).mean())
-        rows = {k: wrong_at_coverage(s, pred, labels, a.coverages) for k, s in scores(probs, None if mi is None else mi[ok]).items()}
+        ranked = scores(probs, None if mi is None else mi[ok], None if dis is None else dis[ok], tuple(a.disagreement))
+        rows = {k: wrong_at_coverage(s, pred, labels, a.coverages) for k, s in ranked.items()}
         result["runs_scored"][name] = {"accuracy": acc, "bin_mae": float(np.abs(pred[pos] - labels[pos]).mean()),
                                        "scores": rows}
         print(f"\n{name}: argmax accuracy {acc:.3f}\n{head}")

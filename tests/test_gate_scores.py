@@ -50,6 +50,21 @@ def test_a_score_that_ranks_the_wrong_frames_last_gives_fewer_wrong_at_the_same_
     assert by_entropy["confidently_wrong"] == 0.4 and by_window["confidently_wrong"] == 0.0
 
 
+
+def test_members_disagreement_is_zero_when_they_agree_and_ranks_a_split_ensemble_last():
+    # frame 0: both members sure of strip 6; frame 1: each sure of a different strip, 4 apart, so the
+    # mean is as unsure as frame 2 whose members agree on the same spread
+    a = _probs([{6: 0.97, 7: 0.03}, {3: 0.9, 4: 0.1}, {3: 0.45, 4: 0.05, 7: 0.45, 8: 0.05}])
+    b = _probs([{6: 0.97, 7: 0.03}, {7: 0.9, 8: 0.1}, {3: 0.45, 4: 0.05, 7: 0.45, 8: 0.05}])
+    d = gs.member_disagreement([a, b])
+    assert d[0] == pytest.approx(0.0, abs=1e-9) and d[2] == pytest.approx(0.0, abs=1e-9)
+    assert d[1] == pytest.approx(np.log(2), abs=0.01)       # two sure members, no overlap: one bit
+    s = gs.scores(np.mean([a, b], 0), disagreement=d, weights=(0.1,))
+    combined = s["1 - P(argmax +- 1) + 0.1 x members' disagreement"]
+    assert s["1 - P(argmax +- 1)"][1] == pytest.approx(s["1 - P(argmax +- 1)"][2])   # far mass cannot tell them apart
+    assert combined[1] > combined[2] > combined[0]
+
+
 def test_cv_bundles_fold_metrics_counts_failures_as_wrong_and_skips_no_crossing_frames():
     """scripts/cv_bundles.py: accuracy, bin MAE and far-x over the frames with a crossing; a failed
     inference (None) is a wrong answer, never a dropped frame."""
