@@ -58,7 +58,8 @@ def window_mass(probs: np.ndarray, k: int = 1) -> np.ndarray:
 def member_disagreement(members: list[np.ndarray]) -> np.ndarray:
     """Per frame, how much ensemble members' probabilities (each ``[frames, A]``) disagree: the
     entropy of their mean less their mean entropy (the mutual information between the prediction
-    and the member; 0 when all agree)."""
+    and the member, as ``crossing_assist.models.mc`` computes it over MC samples, without torch;
+    0 when all agree)."""
     ent = lambda p: np.array([entropy(q) for q in p])  # noqa: E731
     return np.maximum(0.0, ent(np.mean(members, 0)) - np.mean([ent(m) for m in members], 0))
 

@@ -50,7 +50,6 @@ def test_a_score_that_ranks_the_wrong_frames_last_gives_fewer_wrong_at_the_same_
     assert by_entropy["confidently_wrong"] == 0.4 and by_window["confidently_wrong"] == 0.0
 
 
-
 def test_members_disagreement_is_zero_when_they_agree_and_ranks_a_split_ensemble_last():
     # frame 0: both members sure of strip 6; frame 1: each sure of a different strip, 4 apart, so the
     # mean is as unsure as frame 2 whose members agree on the same spread
