@@ -86,6 +86,11 @@ def _subset(ds, rows, out: Path) -> Path:
     return out
 
 
+def upper_tag(upper: bool) -> str:
+    """File-name suffix of a choice made at the confidently-wrong rate's upper 95 % bound (:func:`choose`)."""
+    return "_upper" if upper else ""
+
+
 def tag(mirror: bool) -> str:
     """File-name suffix of what was measured with the folds' mirror-TTA bundles."""
     return "_mirror" if mirror else ""
@@ -311,7 +316,7 @@ def pool(folds: list[dict]) -> list[dict]:
     return out
 
 
-def leave_one_run_out(folds: list[dict], run_of: list[str]) -> dict | None:
+def leave_one_run_out(folds: list[dict], run_of: list[str], upper: bool = False) -> dict | None:
     """How far the rule carries to another model: each CV run's folds (``run_of``: each fold's
     run) measured at the scale :func:`choose` picks on the other runs' folds; the runs' rates and
     their pooled beacon-on and confidently-wrong rates. None with a single run."""
@@ -320,7 +325,7 @@ def leave_one_run_out(folds: list[dict], run_of: list[str]) -> dict | None:
         return None
     per_run = []
     for run in runs:
-        best, met = choose(pool([f for f, r in zip(folds, run_of) if r != run]))
+        best, met = choose(pool([f for f, r in zip(folds, run_of) if r != run]), upper=upper)
         point = next(c for c in pool([f for f, r in zip(folds, run_of) if r == run]) if c["scale"] == best["scale"])
         per_run.append({"run": run, "scale": best["scale"], "targets_met_on_the_others": met,
                         **{k: point[k] for k in ("beacon_on", "confidently_wrong", "confidently_wrong_frames", "frames")}})
@@ -341,12 +346,21 @@ def pooled_accuracy(folds: list[dict]) -> dict:
     return out
 
 
-def choose(curve: list[dict], max_wrong: float = 0.005, min_silence: float = 0.98) -> tuple[dict, bool]:
-    ok = [c for c in curve if c["confidently_wrong"] <= max_wrong and (c["silence_no_crossing"] or 1) >= min_silence]
+def choose(curve: list[dict], max_wrong: float = 0.005, min_silence: float = 0.98,
+           upper: bool = False) -> tuple[dict, bool]:
+    """The pooled curve point with the most beacon-on whose confidently-wrong rate is at most
+    ``max_wrong`` and whose silence off-crossing is at least ``min_silence``, and True; else the
+    point nearest to those targets, and False. ``upper``: the confidently-wrong rate read is the
+    upper end of its 95 % interval (:func:`wilson`) instead of the rate measured, so the point
+    chosen is one whose rate on the next photos is unlikely to be over the limit (the measured
+    rate at the largest qualifying beacon-on is biased low: ``scripts/fresh_check.py``)."""
+    wrong = (lambda c: wilson(c["confidently_wrong_frames"], c["frames"])[1]) if upper else \
+        (lambda c: c["confidently_wrong"])  # noqa: E731
+    ok = [c for c in curve if wrong(c) <= max_wrong and (c["silence_no_crossing"] or 1) >= min_silence]
     if ok:
         return max(ok, key=lambda c: (c["beacon_on"], -c["scale"])), True
     # nearest to the targets: the smallest excess over them, then the most beacon-on
-    excess = lambda c: max(0, c["confidently_wrong"] - max_wrong) / max_wrong + \
+    excess = lambda c: max(0, wrong(c) - max_wrong) / max_wrong + \
         max(0, min_silence - (c["silence_no_crossing"] or 1)) / (1 - min_silence)  # noqa: E731
     return min(curve, key=lambda c: (excess(c), -c["beacon_on"])), False
 
@@ -417,6 +431,10 @@ def main(argv=None) -> int:
                     help="also choose for the ensemble of the runs (CV and each --also): each photographer's folds' "
                          "plays averaged frame by frame, as crossing-export ensemble of the folds' bundles would "
                          "play them (no model runs); written apart (gate…_ensembleK.json)")
+    ap.add_argument("--upper", action="store_true",
+                    help="choose where the upper end of the confidently-wrong rate's 95 %% interval, not the rate "
+                         "measured, is within the limit: a threshold the next photos are unlikely to push over it "
+                         "(scripts/fresh_check.py --upper measures that); written apart (gate…_upper.json)")
     ap.add_argument("--zoom", type=float, default=1.0, metavar="Z",
                     help="portrait frames (narrower than the training camera) shown magnified up to Z instead of at "
                          "the training scale, as crossing-export --view-zoom Z bundles show them (for models trained "
@@ -468,7 +486,7 @@ def report(a: argparse.Namespace, folds: list[dict], run_of: list[str], suffix_e
     result: dict = {}
     for view in folds[0]:
         curve = pool([f[view] for f in folds])
-        best, met = choose(curve)
+        best, met = choose(curve, upper=a.upper)
         one = next(c for c in curve if c["scale"] == 1.0)
         model = pooled_accuracy([f[view] for f in folds])
         result[view] = {"scale": best["scale"], "targets_met": met, "at_scale": best, "at_fitted_threshold": one,
@@ -477,14 +495,15 @@ def report(a: argparse.Namespace, folds: list[dict], run_of: list[str], suffix_e
                         **model, "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
         if a.also:
             result[view]["pooled_runs" if not suffix_extra else "ensemble_of_runs"] = [str(cv) for cv in (a.cv, *a.also)]
-            loro = leave_one_run_out([f[view] for f in folds], run_of)
+            loro = leave_one_run_out([f[view] for f in folds], run_of, a.upper)
             if loro:
                 result[view]["leave_one_run_out"] = loro
                 print(f"{view}: chosen on the other runs, measured on each: beacon on {loro['beacon_on']:.3f}, "
                       f"confidently wrong {100 * loro['confidently_wrong']:.2f} % ({loro['confidently_wrong_frames']} "
                       f"of {loro['frames']}; per run " + " / ".join(f"{100 * r['confidently_wrong']:.2f} %"
                                                                    for r in loro["per_run"]) + ")")
-        suffix = tag(a.mirror) + ("" if view == "landscape" else f"_{view}") + zoom_tag(a.zoom) + measure_tag(a.measure) + suffix_extra
+        suffix = (tag(a.mirror) + ("" if view == "landscape" else f"_{view}") + zoom_tag(a.zoom) + measure_tag(a.measure)
+                  + upper_tag(a.upper) + suffix_extra)
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
                            a.cv / f"gate_risk_coverage{suffix}.png",
                            f"held out, {view}: " + (f"far mass threshold / {FAR_MASS_REFERENCE:g}" if a.measure
@@ -498,7 +517,7 @@ def report(a: argparse.Namespace, folds: list[dict], run_of: list[str], suffix_e
               + f" ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
     # landscape stays at the top level (what build_default_bundle.sh and older readers take)
     portrait = {k: result[k] for k in PORTRAIT_SETS if k in result}   # "portrait" sets the portrait threshold
-    (a.cv / f"gate{tag(a.mirror)}{zoom_tag(a.zoom)}{measure_tag(a.measure)}{suffix_extra}.json").write_text(
+    (a.cv / f"gate{tag(a.mirror)}{zoom_tag(a.zoom)}{measure_tag(a.measure)}{upper_tag(a.upper)}{suffix_extra}.json").write_text(
         json.dumps({**result["landscape"], **portrait}, indent=1))
 
 

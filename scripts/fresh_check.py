@@ -50,9 +50,10 @@ def photographer_plays(folds: list[Path], mirror: bool, frames: int, seed: int, 
 
 
 def fresh_check(run_folds: list[list[tuple[Path, str]]], *, mirror: bool, frames: int, choose_frames: int,
-                seed: int, grid: int, measure: str | None) -> dict:
+                seed: int, grid: int, measure: str | None, upper: bool = False) -> dict:
     """``run_folds``: per photographer, ``(fold folder, source)`` of each run. The threshold chosen
-    on the ``choose_frames`` draw (its pooled curve point) and the pooled rates on the other clips."""
+    on the ``choose_frames`` draw (its pooled curve point; ``upper``: by :func:`choose_gate.choose`'s
+    upper-bound rule) and the pooled rates on the other clips."""
     drawn, rest = [], []
     for folds in run_folds:
         source = folds[0][1]
@@ -67,7 +68,7 @@ def fresh_check(run_folds: list[list[tuple[Path, str]]], *, mirror: bool, frames
                                                                [k for k, i in enumerate(sub) if i in in_view])}
                                 for m in cg.gate_scales(grid)]})
         rest.append((source, lis, [i for i in range(len(lis.labels)) if i not in seen], t0))
-    best, met = cg.choose(cg.pool(drawn))
+    best, met = cg.choose(cg.pool(drawn), upper=upper)
     heard, per_source = [], {}
     for source, lis, idx, t0 in rest:
         h = lis.heard(best["scale"] * t0, idx)
@@ -75,7 +76,8 @@ def fresh_check(run_folds: list[list[tuple[Path, str]]], *, mirror: bool, frames
         heard += h
     fresh = summarise(heard)
     wrong = round((fresh["confidently_wrong"] or 0) * fresh["frames_with_crossing"])
-    return {"chosen_on": {"frames_per_photographer": choose_frames, "scale": best["scale"], "targets_met": met,
+    return {"chosen_on": {"frames_per_photographer": choose_frames, "rule": "upper 95 % bound" if upper else "rate",
+                          "scale": best["scale"], "targets_met": met,
                           "threshold": best["scale"] * cg.FAR_MASS_REFERENCE if measure == "far_mass" else None,
                           "point": best},
             "fresh": {"frames": fresh["frames_with_crossing"], "no_crossing_frames": fresh["frames_without_crossing"],
@@ -96,6 +98,8 @@ def main(argv=None) -> int:
     ap.add_argument("--mirror", action="store_true", help="the folds' bundles with mirror test-time augmentation")
     ap.add_argument("--grid", type=int, default=cg.GRID, metavar="STEPS", help="gate scales a doubling")
     ap.add_argument("--measure", choices=("far_mass",), help="replay the gate with this measure (as choose_gate.py)")
+    ap.add_argument("--upper", action="store_true",
+                    help="choose as choose_gate.py --upper: the confidently-wrong rate's upper 95 %% bound within the limit")
     a = ap.parse_args(argv)
     if not 0 < a.choose_frames < a.frames:
         ap.error(f"--choose-frames {a.choose_frames}: between 1 and --frames ({a.frames})")
@@ -111,13 +115,13 @@ def main(argv=None) -> int:
         return 2
     try:
         out = fresh_check(run_folds, mirror=a.mirror, frames=a.frames, choose_frames=a.choose_frames, seed=a.seed,
-                          grid=a.grid, measure=a.measure)
+                          grid=a.grid, measure=a.measure, upper=a.upper)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     c, f = out["chosen_on"], out["fresh"]
     what = f"the ensemble of {len(runs)} runs" if len(runs) > 1 else str(a.cv)
-    print(f"{what}: chosen on {a.choose_frames} photos a photographer: scale {c['scale']:g}"
+    print(f"{what}: chosen on {a.choose_frames} photos a photographer{' (upper bound)' if a.upper else ''}: scale {c['scale']:g}"
           + (f" (far mass {c['threshold']:.4g})" if a.measure else "")
           + f"{'' if c['targets_met'] else ' (targets not met)'}: beacon on {100 * c['point']['beacon_on']:.1f} %, "
           f"confidently wrong {100 * c['point']['confidently_wrong']:.2f} % ({c['point']['confidently_wrong_frames']} "
@@ -128,7 +132,7 @@ def main(argv=None) -> int:
           f"{100 * (f['beacon_on'] or 0):.1f} %, confidently wrong {100 * (f['confidently_wrong'] or 0):.2f} % "
           f"({f['confidently_wrong_frames']}; 95 % interval {100 * lo:.2f}-{100 * hi:.2f} %), silence {silence}")
     name = (f"fresh{cg.tag(a.mirror)}_{a.choose_frames}of{a.frames}" + (f"_seed{a.seed}" if a.seed else "")
-            + cg.measure_tag(a.measure) + (f"_ensemble{len(runs)}" if len(runs) > 1 else "") + ".json")
+            + cg.measure_tag(a.measure) + cg.upper_tag(a.upper) + (f"_ensemble{len(runs)}" if len(runs) > 1 else "") + ".json")
     atomic_write_text(a.cv / name, json.dumps({"runs": [str(r) for r in runs], **out}, indent=1))
     print(f"-> {a.cv / name}")
     return 0
