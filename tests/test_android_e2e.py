@@ -338,6 +338,27 @@ def test_frozen_camera_frames_trigger_the_stop_cue(run: dict) -> None:
     assert WATCHDOG_S < dog["t"] - last_fresh <= WATCHDOG_S + 0.25  # polled every 20 ms; slack for a busy CI
 
 
+def test_a_model_too_slow_for_the_phone_stops_the_beacon_and_says_so(run: dict) -> None:
+    """Each model run made 800 ms long (over the 0.5 s watchdog) while the camera keeps giving
+    frames: the stop cue plays, the phone says it is too slow (not that the camera stalled) and
+    vibrates that pattern; the watchdog names the same reason; at normal speed the beacon returns
+    (the driver waits for it)."""
+    s = run["result"]["slow"]
+    trace = run["result"]["trace"]
+    assert s["after"]["audio"]["kind"] == "stop"
+    assert s["state"]["status"] == STATUS_STOP["slow"]
+    during = [e for e in trace if s["t_slow"] < e["t"] <= s["t_fast"]]
+    frames = [e for e in during if e["kind"] == "frame" and e["t"] > s["t_slow"] + 0.1]
+    assert frames and not any(e["fresh"] for e in frames), "a decision 800 ms late counted as fresh"
+    assert all(e["latency_ms"] >= 790 for e in frames)
+    dogs = [e for e in during if e["kind"] == "watchdog"]
+    assert dogs and all(e["reason"] == "slow" for e in dogs), dogs
+    assert _vibrations(during, "slow") and not _vibrations(during, "stale")
+    offset = s["state"]["now_s"] - s["state"]["t"]       # speech is stamped in page time, the trace from the app's start
+    spoken = [e["text"] for e in s["state"]["speech"] if e["t"] - offset > s["t_slow"]]
+    assert STATUS_STOP["slow"] in spoken and STATUS_STOP["stale"] not in spoken, spoken
+
+
 def _vibrations(trace: list[dict], reason: str) -> list[dict]:
     return [e for e in trace if e["kind"] == "vibrate" and e["reason"] == reason]
 

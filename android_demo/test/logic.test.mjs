@@ -312,6 +312,7 @@ test('actions: headings of the 4-action space and the pan law', () => {
 
 test('status line: stop reasons and coarse directions', () => {
   assert.match(statusMessage({ stop: true, reason: 'stale' })[0], /stalled/);
+  assert.match(statusMessage({ stop: true, reason: 'slow' })[0], /too slow/);
   assert.match(statusMessage({ stop: true, reason: 'uncertain' })[0], /scan/);
   assert.match(statusMessage({ stop: false, heading_deg: 3 })[0], /straight/);
   assert.match(statusMessage({ stop: false, heading_deg: -15 })[0], /slightly left/);

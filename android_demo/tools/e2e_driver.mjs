@@ -278,6 +278,23 @@ async function fullPhases(page, context, server, args, result) {
     state: await page.evaluate(screenState) };
   await page.evaluate(() => document.getElementById('video').play());
 
+  // A phone too slow for the model: each run takes 800 ms, over the 0.5 s watchdog. The camera
+  // keeps giving frames, so the stop cue plays and the app says the phone is too slow, not that
+  // the camera stalled; at normal speed again, the beacon comes back.
+  await waitFor(page, () => window.crossingAssist.audio.state().kind === 'beacon', null, 20000, 'a beacon before the slow model');
+  const tSlow = await page.evaluate(() => {
+    const a = window.crossingAssist;
+    a.fastRun = a.model.run;
+    a.model.run = async (...args) => { await new Promise((r) => setTimeout(r, 800)); return a.fastRun.apply(a.model, args); };
+    return (performance.now() - a.t0) / 1000;
+  });
+  await waitFor(page, () => window.crossingAssist.audio.state().kind === 'stop', null, 5000, 'the stop cue with a slow model');
+  await sleep(2500);
+  result.slow = { t_slow: tSlow, after: await page.evaluate(sample), state: await page.evaluate(screenState) };
+  await page.evaluate(() => { const a = window.crossingAssist; a.model.run = a.fastRun; });
+  result.slow.t_fast = await page.evaluate(() => (performance.now() - window.crossingAssist.t0) / 1000);
+  await waitFor(page, () => window.crossingAssist.audio.state().kind === 'beacon', null, 20000, 'a beacon at normal speed again');
+
   // Double tap ends guidance.
   await control(page).dblclick();
   await waitFor(page, () => window.crossingAssist.mode === 'ready', null, 10000, 'the end of guidance');

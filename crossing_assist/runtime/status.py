@@ -7,12 +7,16 @@ both must agree on.
 
 from __future__ import annotations
 
-#: Stop reasons beyond the Decider's: audio cannot play, the app is in the background, the
-#: field-of-view setting is invalid, the phone is tilted too far, or held upright while unsure.
+#: Stop reasons beyond the Decider's: the model answered a frame too late (slow), audio cannot
+#: play, the app is in the background, the field-of-view setting is invalid, the phone is tilted
+#: too far, or held upright while unsure.
 #: Each is a stop (the beacon never plays then).
 STATUS_STOP = {
     "uncertain": "Stop. Not sure: scan slowly.",
     "stale": "Stop. Camera stalled.",
+    # the app's stale decision when a frame came but the model answered it after the watchdog
+    # period (a phone too slow for the bundle), not a stalled camera
+    "slow": "Stop. The phone is too slow to guide.",
     "failed": "Stop. The model failed.",
     "audio": "Audio stopped. Tap to resume.",
     "background": "Stop. The app is in the background.",

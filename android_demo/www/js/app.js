@@ -64,6 +64,7 @@ const $ = (id) => document.getElementById(id);
 const app = {
   ready: false, running: false, mode: 'loading', meta: null, model: null, decider: null, fov: null, audio: null,
   stream: null, grabber: null, watchdog: null, trace: [], frames: [], last: null, error: null, offline: 'not yet',
+  inflight: null, // capture time of the frame the model is running on (null: none)
   t0: performance.now(), settings: loadSettings(), policy: new SpeechPolicy(), haptics: new Haptics(),
   speaker: new Speaker(true), audioFailed: false, paused: false, wakeLock: null, wakeLockRequests: 0,
   perf: { frames: 0, busyS: 0, startedS: 0 },
@@ -248,6 +249,7 @@ async function step(frame, captured, dt) {
   let outputs = null;
   let obs;
   const t0 = performance.now();
+  app.inflight = captured; // a model run holds the decision up: a stall now is the phone's speed, not the camera
   try {
     outputs = await app.model.run(seen.rgb, seen.height, seen.width);
     obs = observationFromOutputs(outputs, app.decider.cfg.measure);
@@ -256,6 +258,7 @@ async function step(frame, captured, dt) {
     obs = { probs: null, uncertainty: Infinity, ok: false };
   }
   const latencyMs = performance.now() - t0;
+  app.inflight = null;
   if (!app.running || app.paused) return;
   const yaw = app.yaw ? app.yaw.take(dt) : 0;
   const d = app.decider.step(captured, obs, yaw);
@@ -264,7 +267,8 @@ async function step(frame, captured, dt) {
   app.last = d;
   if (!app.audioFailed) {
     app.audio.render(fresh ? cueFor(d) : STOP_CUE);
-    feedback(now(), fresh ? d : { ...d, stop: true, reason: 'stale', heading_deg: null });
+    // a frame the camera gave but the model answered too late for: the phone is too slow
+    feedback(now(), fresh ? d : { ...d, stop: true, reason: 'slow', heading_deg: null });
   }
   app.frameId = (app.frameId || 0) + 1; // unique over restarts (seq restarts with the camera)
   record({ kind: 'frame', id: app.frameId, t: captured, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, obs, decision: d,
@@ -325,10 +329,13 @@ function poll() {
   if (app.paused) return;
   const { fired } = app.watchdog.poll(t);
   if (fired) {
-    record({ kind: 'watchdog', t });
+    // no fresh decision for WATCHDOG_S: while a model run is still going the model is too slow
+    // for this phone; otherwise no new frame came (the camera stalled)
+    const reason = app.inflight !== null && app.inflight !== undefined ? 'slow' : 'stale';
+    record({ kind: 'watchdog', t, reason });
     if (!app.audioFailed) {
       app.audio.render(STOP_CUE);
-      feedback(t, { stop: true, reason: 'stale', heading_deg: null });
+      feedback(t, { stop: true, reason, heading_deg: null });
     }
   }
   app.polls = (app.polls || 0) + 1;

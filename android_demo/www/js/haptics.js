@@ -9,6 +9,7 @@
 export const STOP_PATTERNS = Object.freeze({
   uncertain: [200, 100, 200],
   stale: [600],
+  slow: [600, 150, 100], // the model answered too late (long, short)
   failed: [100, 60, 100, 60, 100],
   audio: [400, 150, 400, 150, 400],
   background: [80, 80, 80],

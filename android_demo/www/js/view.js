@@ -10,6 +10,7 @@ import { measureValue } from './logic.js';
 export const STATUS_STOP = Object.freeze({
   uncertain: 'Stop. Not sure: scan slowly.',
   stale: 'Stop. Camera stalled.',
+  slow: 'Stop. The phone is too slow to guide.',
   failed: 'Stop. The model failed.',
   audio: 'Audio stopped. Tap to resume.',
   background: 'Stop. The app is in the background.',
