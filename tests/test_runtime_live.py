@@ -212,3 +212,36 @@ def test_import_runtime_leaves_torch_out():
             "'crossing_assist.export', 'crossing_assist.iil'))]; print(bad); sys.exit(3 if bad else 0)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_a_decision_later_than_the_watchdog_plays_the_stop_cue_and_the_trace_says_late(toy_bundle, monkeypatch):  # noqa: F811
+    """A board too slow for the bundle: each inference takes 0.6 s (the clock moves inside
+    predict), over the 0.5 s period. Every step plays the stop cue and is marked late in the
+    trace; at 0.1 s an inference the same frames play the beacon."""
+    from crossing_assist.runtime.pipeline import trace_record
+
+    def run(seconds_a_frame):
+        engine, clock = Engine(toy_bundle), FakeClock()
+        real = engine.predict
+
+        def slow(frame, fov_deg=None, roll_deg=None):
+            clock.now += seconds_a_frame
+            return real(frame, fov_deg, roll_deg)
+
+        monkeypatch.setattr(engine, "predict", slow)
+
+        def frames():
+            for i in range(8):
+                yield clock.now - 100.0, bar_frame(0.2 + 0.01 * (i % 2))   # offsets from the start
+
+        player, steps, th = _live(engine, frames(), clock)
+        th.join(20)
+        return player, steps
+
+    player, steps = run(0.6)
+    assert len(steps) == 8 and all(s.late and s.cue.kind == KIND_STOP for s in steps)
+    assert not any(s.decision.stop for s in steps[2:]), "the decisions themselves were beacons"
+    recs = [trace_record(i, s) for i, s in enumerate(steps)]
+    assert all(r["late"] and r["cue"] == "stop" for r in recs)
+    _, fast = run(0.1)
+    assert not any(s.late for s in fast) and fast[-1].cue.kind != KIND_STOP

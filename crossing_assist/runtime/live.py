@@ -8,7 +8,7 @@ handed over by a reference swap (:meth:`CuePlayer.set_loop`), never under a lock
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, Iterable
 
 import numpy as np
@@ -74,7 +74,9 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
             prev = frame
             step = pipeline.step(frame, captured - start)
             fresh = is_fresh(clock(), captured, cfg.watchdog_s)
-            player.set_loop(step.loop if fresh else stop_loop)
+            if not fresh:   # decided too late to play: the stop cue, and the trace says so
+                step = replace(step, cue=Cue(KIND_STOP), loop=stop_loop, late=True)
+            player.set_loop(step.loop)
             if fresh:
                 dog.beat(captured)
             if on_step is not None:

@@ -22,12 +22,15 @@ from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
 
 @dataclass(frozen=True)
 class Step:
-    """Everything one frame produced; ``loop`` is the cue's prepared (n, 2) float32 samples."""
+    """Everything one frame produced; ``loop`` is the cue's prepared (n, 2) float32 samples.
+    ``late``: live, the decision came after the watchdog period from its frame's capture (a
+    board too slow for the bundle), so ``cue`` and ``loop`` are the stop cue that played instead."""
 
     prediction: Prediction
     decision: Decision
     cue: Cue
     loop: np.ndarray
+    late: bool = False
 
 
 @lru_cache(maxsize=16)
@@ -82,13 +85,14 @@ def open_pipeline(bundle: str | os.PathLike, *, fov_deg: float | None = None, wa
 
 
 def trace_record(i: int, step: Step) -> dict:
-    """One trace.jsonl line: frame index, model outputs and the decision."""
+    """One trace.jsonl line: frame index, model outputs, the cue played (``late``: the stop cue
+    played because the decision came too late, live only) and the decision."""
     p, d = step.prediction, step.decision
     rec = {"frame": i, "ok": p.ok, "error": p.error or None, "action": p.action if p.ok else None,
            "probs": None if p.probs is None else [round(float(v), 5) for v in p.probs],
            "entropy": p.entropy if p.ok else None, "mutual_info": p.mutual_info if p.ok else None,
            "uncertainty": p.uncertainty if p.ok else None, "conformal_set": list(p.conformal_set),
-           "cue": step.cue.kind}
+           "cue": step.cue.kind, "late": step.late}
     rec.update(d.to_json())
     rec["belief"] = [round(v, 5) for v in rec["belief"]]
     return rec
