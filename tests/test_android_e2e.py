@@ -357,6 +357,7 @@ def test_a_model_too_slow_for_the_phone_stops_the_beacon_and_says_so(run: dict) 
     offset = s["state"]["now_s"] - s["state"]["t"]       # speech is stamped in page time, the trace from the app's start
     spoken = [e["text"] for e in s["state"]["speech"] if e["t"] - offset > s["t_slow"]]
     assert STATUS_STOP["slow"] in spoken and STATUS_STOP["stale"] not in spoken, spoken
+    assert "too slow for this phone" in s["speed_text"], (s["speed_text"], s["perf"])    # the helper view says why, and the fix
 
 
 def _vibrations(trace: list[dict], reason: str) -> list[dict]:

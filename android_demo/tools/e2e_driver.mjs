@@ -290,7 +290,9 @@ async function fullPhases(page, context, server, args, result) {
   });
   await waitFor(page, () => window.crossingAssist.audio.state().kind === 'stop', null, 5000, 'the stop cue with a slow model');
   await sleep(2500);
-  result.slow = { t_slow: tSlow, after: await page.evaluate(sample), state: await page.evaluate(screenState) };
+  result.slow = { t_slow: tSlow, after: await page.evaluate(sample), state: await page.evaluate(screenState),
+    speed_text: await page.evaluate(() => document.getElementById('speed').textContent),
+    perf: await page.evaluate(() => ({ ...window.crossingAssist.perf })) };
   await page.evaluate(() => { const a = window.crossingAssist; a.model.run = a.fastRun; });
   result.slow.t_fast = await page.evaluate(() => (performance.now() - window.crossingAssist.t0) / 1000);
   await waitFor(page, () => window.crossingAssist.audio.state().kind === 'beacon', null, 20000, 'a beacon at normal speed again');

@@ -67,7 +67,7 @@ const app = {
   inflight: null, // capture time of the frame the model is running on (null: none)
   t0: performance.now(), settings: loadSettings(), policy: new SpeechPolicy(), haptics: new Haptics(),
   speaker: new Speaker(true), audioFailed: false, paused: false, wakeLock: null, wakeLockRequests: 0,
-  perf: { frames: 0, busyS: 0, startedS: 0 },
+  perf: { frames: 0, busyS: 0, startedS: 0, recentMs: 0 },
 };
 window.crossingAssist = app;
 const view = new HelperView(document);
@@ -315,10 +315,12 @@ async function runLoop() {
     const levelled = app.grabber.level(frame, app.tilt?.rollDeg(captured) ?? null, app.meta.geometry.pad_rgb ?? PAD_RGB);
     await step(levelled, captured, prevCaptured === null ? 0 : captured - prevCaptured);
     prevCaptured = captured;
-    p.busyS += (performance.now() - t0) / 1000;
+    const ms = performance.now() - t0;
+    p.busyS += ms / 1000;
     p.frames += 1;
+    p.recentMs = p.frames === 1 ? ms : 0.5 * (p.recentMs + ms); // the last two or three frames' time
     const elapsed = Math.max(1e-3, now() - p.startedS);
-    view.speed(p.frames / elapsed, (1000 * p.busyS) / p.frames, p.busyS / elapsed);
+    view.speed(p.frames / elapsed, (1000 * p.busyS) / p.frames, p.busyS / elapsed, 1000 * WATCHDOG_S, p.recentMs);
   }
 }
 

@@ -154,8 +154,15 @@ export class HelperView {
     this.el('turning').textContent = rateDps === null ? 'gyroscope off' : `${fmt(Math.abs(rateDps), 0)}°/s ${side}`;
   }
 
-  /** Frames per second, model ms per frame and the duty cycle (share of the time spent in the model). */
-  speed(fps, ms, duty) {
-    this.el('speed').textContent = `${fmt(fps, 1)} frames/s, model ${fmt(ms, 0)} ms/frame, duty ${fmt(100 * duty, 0)}%`;
+  /**
+   * Frames per second, model ms per frame and the duty cycle (share of the time spent in the
+   * model); when the last frames' time `recentMs` is over `limitMs` (the watchdog period), a
+   * frame's decision comes too late to play, which the helper is told, with the fix.
+   */
+  speed(fps, ms, duty, limitMs = Infinity, recentMs = ms) {
+    const slow = recentMs > limitMs
+      ? ` — too slow for this phone: decisions come after ${fmt(limitMs, 0)} ms, so it says stop; build the app with fewer ensemble members`
+      : '';
+    this.el('speed').textContent = `${fmt(fps, 1)} frames/s, model ${fmt(ms, 0)} ms/frame, duty ${fmt(100 * duty, 0)}%${slow}`;
   }
 }
