@@ -204,3 +204,29 @@ def test_listener_load_replays_another_measure_from_the_saved_probabilities(tmp_
     assert heard != lis.heard(t)    # the bundle's own measure (entropy) at that threshold decides otherwise
     with pytest.raises(ValueError, match="cannot replay measure 'variance'"):
         Listener.load(Engine(toy_bundle), tmp_path / "heard.npz", measure="variance")
+
+
+
+def test_eval_bundle_gives_the_graph_what_the_runtime_does_for_a_portrait_photo(tmp_path, monkeypatch):
+    """crossing-eval --bundle's model figures on a portrait photo: the graph gets the view crop's
+    rows at the portrait FOV, as Engine.predict gives it, not the whole frame; a landscape photo
+    at the training FOV keeps every row."""
+    from crossing_assist import inference
+    from crossing_assist.data_tools.images import save_rgb
+    from crossing_assist.geometry import Geometry, view_rows
+    from crossing_assist.models.evaluate import EvalConfig, _eval_bundle, _split
+
+    geo = Geometry(fit="letterbox", camera_fov_deg=(67.0, 53.0), train_fov_deg=67.0, view_crop=True)
+    bundle = make_toy_bundle(tmp_path / "b", TOY2, size=(36, 48), geometry=geo)
+    data = bar_dataset(tmp_path / "d", n=2)
+    cfg = EvalConfig(bundle=str(bundle), data=str(data), split="val")
+    part = _split(cfg)
+    for r, (h, w) in zip(part.rows, ((128, 96), (96, 128))):          # one portrait, one landscape photo
+        save_rgb(part.image_path(r), bar_frame(0.5, h=h, w=w))
+    seen, real = [], inference.predict
+    monkeypatch.setattr(inference, "predict",
+                        lambda sess, n, images, **kw: (seen.extend(i.shape for i in images), real(sess, n, images, **kw))[1])
+    probs, _, _ = _eval_bundle(cfg, part)
+    top, rows = view_rows(128, 96, 53.0, (36, 48), 67.0)
+    assert rows < 128 and seen == [(rows, 96, 3), (96, 128, 3)]
+    assert probs.shape[0] == 2

@@ -138,7 +138,10 @@ def _eval_bundle(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, Any]
     from .. import inference
 
     bundle, sess = inference.open_session(cfg.bundle, threads=cfg.threads, seed=cfg.seed)
-    images = [load_frame(part.image_path(r), r.flags) for r in part.rows]
+    # what the runtime's Engine.predict gives the graph: each frame's rows as the training camera
+    # saw them at the FOV of the frame's orientation (schema 3's view crop; all rows before)
+    images = [bundle.view(img, bundle.camera_fov(img.shape[1], img.shape[0]))
+              for img in (load_frame(part.image_path(r), r.flags) for r in part.rows)]
     out = inference.predict(sess, bundle.actions.n, images, progress=cfg.progress)
     majority = bundle.training.get("majority_action")
     info = {"source": "bundle", "bundle": str(cfg.bundle), "samples": int(bundle.mc.samples),
