@@ -42,7 +42,8 @@ from crossing_assist import __version__
 from crossing_assist.actions import DEFAULT_FOV_DEG, VALID_SPACES, ActionSpace, get_space
 from crossing_assist.errors import UserError
 from crossing_assist.errors import short_repr as _short  # one cut-to-length repr for every error line
-from crossing_assist.geometry import FITS, FOV_RANGE_DEG, SENSOR_ASPECT_RANGE, VIEW_ZOOM_RANGE, Geometry, GeometryError, check_fov
+from crossing_assist.geometry import (FITS, FOV_RANGE_DEG, PAD_RGB, SENSOR_ASPECT_RANGE, VIEW_ZOOM_RANGE, Geometry, GeometryError,
+                                     check_fov)
 
 SCHEMA_VERSION = 4
 READABLE_SCHEMAS = (1, 2, 3, 4)
@@ -394,7 +395,7 @@ def _parse_geometry(d: Any, fov_deg: float, version: int) -> Geometry:
             fovs.append(check_fov(v))
         except GeometryError as exc:
             raise BundleError(f"bundle.json: geometry.camera_fov_deg.{name}: {exc}") from None
-    pad = (0, 0, 0)
+    pad = PAD_RGB   # a stretch bundle pads nothing but a levelled frame's corners, as the app does
     if fit == "letterbox":
         pad = _get(d, "pad_rgb", "geometry")
         if (not isinstance(pad, list) or len(pad) != 3

@@ -367,3 +367,32 @@ def test_far_mass_export_fits_its_threshold_on_the_graphs_probabilities(work, tm
     assert engine.decision_config().measure == "far_mass" and engine.decision_config().threshold == u.threshold
     with pytest.raises(ExportError, match="--measure 'variance'; valid: entropy, mutual_info, far_mass"):
         dataclasses.replace(cfg, measure="variance")
+
+
+def test_calibration_frames_are_what_the_runtime_gives_the_graph(tmp_path):
+    """The export calibrates on each frame as Engine.predict feeds it: a portrait photo's rows
+    cropped to the training camera's view at the portrait FOV, a 4:3 landscape photo whole; a
+    frame too narrow for any FOV is one clear ExportError."""
+    from crossing_assist.data_tools.images import save_rgb
+    from crossing_assist.data_tools.manifest import Row, write_manifest
+    from crossing_assist.export.exporter import ExportError, load_labelled
+    from crossing_assist.geometry import Geometry, view_rows
+
+    def dataset(shapes):
+        root = tmp_path / f"d{len(list(tmp_path.iterdir()))}"
+        (root / "images").mkdir(parents=True)
+        rows = []
+        for i, (h, w) in enumerate(shapes):
+            save_rgb(root / "images" / f"{i}.png", np.full((h, w, 3), 90, np.uint8))
+            rows.append(Row(image=f"images/{i}.png", label=6, far_x=0.45, source=f"s:{i}", split="val"))
+        write_manifest(root, rows)
+        return str(root)
+
+    geo = Geometry(fit="letterbox", camera_fov_deg=(67.0, 53.0), train_fov_deg=67.0, view_crop=True, sensor_aspect=4 / 3)
+    d = load_labelled(dataset([(128, 96), (96, 128)]), "val", 13, progress=False, geometry=geo, canvas=(36, 48))
+    _, rows = view_rows(128, 96, 53.0, (36, 48), 67.0)
+    assert rows < 128 and [im.shape for im in d.images] == [(rows, 96, 3), (96, 128, 3)]
+    raw = load_labelled(dataset([(128, 96), (96, 128)]), "val", 13, progress=False)
+    assert raw.images[0].shape == (128, 96, 3)
+    with pytest.raises(ExportError, match="calib-data"):
+        load_labelled(dataset([(160, 32), (96, 128)]), "val", 13, progress=False, geometry=geo, canvas=(36, 48))

@@ -277,3 +277,12 @@ def test_demo_gives_9_16_video_its_crops_fov_with_sensor_aspect(tmp_path):
     assert r.returncode == 0, r.stderr
     trace = [json.loads(line) for line in (tmp_path / "n" / "trace.jsonl").read_text().splitlines()]
     assert trace and all(t["stop"] for t in trace), trace[:2]
+
+
+def test_a_stretch_bundle_levels_with_the_same_fill_as_the_app(tmp_path):
+    """A stretch bundle states no pad colour; a levelled frame's corners are filled with
+    geometry.PAD_RGB, as the phone app fills them (pad_rgb ?? PAD_RGB), not black."""
+    from crossing_assist.geometry import PAD_RGB, Geometry
+
+    b = read_bundle(make_toy_bundle(tmp_path / "s", TOY2, geometry=Geometry(fit="stretch", camera_fov_deg=(67.0, 53.0))))
+    assert b.geometry.fit == "stretch" and tuple(b.geometry.pad_rgb) == PAD_RGB

@@ -179,7 +179,7 @@ def ensemble_bundle(cfg: EnsembleConfig, log: Callable[[str], None] = print) -> 
                           "calib_data": cfg.calib_data, "calib_split": cfg.calib_split,
                           "members": [m.get("provenance", {}) for m in metas]}
     n = bundles[0].actions.n
-    data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress)
+    data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress, bundles[0].geometry, bundles[0].input.size)
     meta["calibration"] = cal.CalibrationResult(1.0, cfg.coverage, 0.0, 0, cfg.measure, 1.0).spec().to_json()
     calib, metrics = _fit_and_measure(model, meta, data, cfg, 1.0, None, log)
     meta["calibration"] = calib.spec().to_json()

@@ -50,7 +50,7 @@ from crossing_assist import inference
 from crossing_assist.export import calibrate as cal
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
 from crossing_assist.export.quantize import INT8_MODES, quantize_convs
-from crossing_assist.geometry import SENSOR_ASPECT, VIEW_ZOOM_RANGE, Geometry
+from crossing_assist.geometry import SENSOR_ASPECT, VIEW_ZOOM_RANGE, Geometry, GeometryError
 from crossing_assist.runtime.belief import far_mass
 
 if TYPE_CHECKING:  # annotations only: models is imported where it is used (_load_policy)
@@ -141,8 +141,12 @@ class Labelled:
         return Labelled([self.images[i] for i in idx], self.actions[idx], self.far_x[idx], self.sources[idx])
 
 
-def load_labelled(data_dir: str, split: str, n_actions: int, progress: bool = True) -> Labelled:
-    """Read a dataset split (manifest.csv) as raw frames + action labels."""
+def load_labelled(data_dir: str, split: str, n_actions: int, progress: bool = True,
+                  geometry: Geometry | None = None, canvas: tuple[int, int] | None = None) -> Labelled:
+    """Read a dataset split (manifest.csv) as frames + action labels: each frame as the runtime
+    gives it to the graph when ``geometry`` is given (its view crop at the FOV of the frame's
+    orientation on ``canvas``, :meth:`Geometry.view`; a 4:3 landscape photo keeps every row),
+    else raw. A frame whose default FOV is outside 20..170 degrees is an ExportError."""
     from tqdm import tqdm
 
     from crossing_assist.data_tools.images import load_frame
@@ -152,6 +156,11 @@ def load_labelled(data_dir: str, split: str, n_actions: int, progress: bool = Tr
     if len(ds.rows) < 2:
         raise ExportError(f"Invalid --calib-data {data_dir}: split {split!r} has {len(ds.rows)} frames; need >= 2")
     images = [load_frame(ds.image_path(r), r.flags) for r in tqdm(ds.rows, desc="frames", disable=not progress, unit="img")]
+    if geometry is not None:
+        try:
+            images = [geometry.view(im, geometry.camera_fov(im.shape[1], im.shape[0]), canvas) for im in images]
+        except GeometryError as exc:
+            raise ExportError(f"Invalid --calib-data {data_dir}: {exc}") from None
     actions = get_space(n_actions).bins_to_actions(ds.labels())
     return Labelled(images, actions, ds.far_x(), np.asarray([r.source for r in ds.rows]))
 
@@ -313,7 +322,9 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     n = policy.n_actions
     p = policy.config.p if cfg.p is None else cfg.p
     majority = policy.config.majority_action or None   # 0 (unknown): runs whose baseline counted negatives
-    data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress) if cfg.calib_data else None
+    spec1 = _spec(policy.config, 1, 0.0)
+    data = (load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress,
+                          _geometry(policy.config, spec1, cfg.view_zoom), spec1.size) if cfg.calib_data else None)
     calib, metrics, notes = cal.uncalibrated(n, cfg.measure), {}, []
     if data is not None:
         with torch.random.fork_rng(devices=[]):
