@@ -230,3 +230,22 @@ def test_eval_bundle_gives_the_graph_what_the_runtime_does_for_a_portrait_photo(
     top, rows = view_rows(128, 96, 53.0, (36, 48), 67.0)
     assert rows < 128 and seen == [(rows, 96, 3), (96, 128, 3)]
     assert probs.shape[0] == 2
+
+
+def test_eval_bundle_refuses_a_frame_too_narrow_for_any_camera_in_one_line(tmp_path):
+    """A 1:4 photo from a 4:3 sensor's phone would be a camera under 20 degrees across, which the
+    runtime refuses (stop cue): crossing-eval names the photo in one line and exits 2."""
+    from crossing_assist.data_tools.images import save_rgb
+    from crossing_assist.geometry import Geometry
+    from crossing_assist.models.evaluate import EvalConfig, _split
+
+    geo = Geometry(fit="letterbox", camera_fov_deg=(67.0, 53.0), train_fov_deg=67.0, view_crop=True, sensor_aspect=4 / 3)
+    bundle = make_toy_bundle(tmp_path / "b", TOY2, size=(36, 48), geometry=geo)
+    data = bar_dataset(tmp_path / "d", n=2)
+    part = _split(EvalConfig(bundle=str(bundle), data=str(data), split="val"))
+    save_rgb(part.image_path(part.rows[0]), bar_frame(0.5, h=160, w=40))
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(bundle), "--data",
+                        str(data), "--split", "val", "--portrait", "0", "--out", str(tmp_path / "e"), "--quiet"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0, r.stderr
+    assert part.rows[0].image.split("/")[-1] in r.stderr and "too narrow" in r.stderr

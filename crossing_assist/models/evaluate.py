@@ -20,7 +20,7 @@ import torch
 from ..actions import get_space
 from ..data_tools.images import load_frame
 from ..data_tools.manifest import Dataset, atomic_write_text, read_manifest
-from ..geometry import content_window, letterbox
+from ..geometry import GeometryError, content_window, letterbox
 from ..inference import SEED_RANGE, is_seed
 from .cache import compute_features
 from .checkpoint import load_checkpoint, load_policy
@@ -140,8 +140,14 @@ def _eval_bundle(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, Any]
     bundle, sess = inference.open_session(cfg.bundle, threads=cfg.threads, seed=cfg.seed)
     # what the runtime's Engine.predict gives the graph: each frame's rows as the training camera
     # saw them at the FOV of the frame's orientation (schema 3's view crop; all rows before)
-    images = [bundle.view(img, bundle.camera_fov(img.shape[1], img.shape[0]))
-              for img in (load_frame(part.image_path(r), r.flags) for r in part.rows)]
+    images = []
+    for r in part.rows:
+        img = load_frame(part.image_path(r), r.flags)
+        try:
+            images.append(bundle.view(img, bundle.camera_fov(img.shape[1], img.shape[0])))
+        except GeometryError as exc:   # the runtime refuses such a frame (stop cue): say which, do not guess
+            raise ConfigError(f"{part.image_path(r)}: {img.shape[1]}x{img.shape[0]} is too narrow for a camera "
+                              f"({exc}); the runtime stops on such frames: leave it out of the split") from None
     out = inference.predict(sess, bundle.actions.n, images, progress=cfg.progress)
     majority = bundle.training.get("majority_action")
     info = {"source": "bundle", "bundle": str(cfg.bundle), "samples": int(bundle.mc.samples),
