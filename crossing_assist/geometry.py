@@ -192,6 +192,12 @@ class Geometry:
         top, rows = self.rows_seen(frame.shape[0], frame.shape[1], fov_deg, canvas)
         return frame[top:top + rows]
 
+    def camera_view(self, frame: np.ndarray, canvas: tuple[int, int], fov_deg: float | None = None) -> np.ndarray:
+        """:meth:`view` at the frame's camera FOV (:meth:`camera_fov`): what a consumer gives the
+        graph for a frame of any orientation, as ``Engine.predict`` does. GeometryError for a
+        frame too narrow for any camera."""
+        return self.view(frame, self.camera_fov(frame.shape[1], frame.shape[0], fov_deg), canvas)
+
     def camera_fov(self, width: int, height: int, override: float | None = None) -> float:
         """Horizontal FOV (degrees) for a ``width x height`` frame: ``override`` (the user's or the
         device's) as given, else the default for the frame's orientation and aspect

@@ -158,7 +158,7 @@ def load_labelled(data_dir: str, split: str, n_actions: int, progress: bool = Tr
     images = [load_frame(ds.image_path(r), r.flags) for r in tqdm(ds.rows, desc="frames", disable=not progress, unit="img")]
     if geometry is not None:
         try:
-            images = [geometry.view(im, geometry.camera_fov(im.shape[1], im.shape[0]), canvas) for im in images]
+            images = [geometry.camera_view(im, canvas) for im in images]
         except GeometryError as exc:
             raise ExportError(f"Invalid --calib-data {data_dir}: {exc}") from None
     actions = get_space(n_actions).bins_to_actions(ds.labels())

@@ -144,7 +144,7 @@ def _eval_bundle(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, Any]
     for r in part.rows:
         img = load_frame(part.image_path(r), r.flags)
         try:
-            images.append(bundle.view(img, bundle.camera_fov(img.shape[1], img.shape[0])))
+            images.append(bundle.geometry.camera_view(img, bundle.input.size))
         except GeometryError as exc:   # the runtime refuses such a frame (stop cue): say which, do not guess
             raise ConfigError(f"{part.image_path(r)}: {img.shape[1]}x{img.shape[0]} is too narrow for a camera "
                               f"({exc}); the runtime stops on such frames: leave it out of the split") from None
