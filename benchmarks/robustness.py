@@ -48,10 +48,11 @@ def main(argv=None) -> int:
             frame = img if c == "clean" else corrupt(img, c, rng)
             for b, eng in engines.items():
                 p = eng.predict(frame)
-                thr = eng.decision_config().threshold
                 a_ = p.action if p.ok else 0
                 err = abs(a_ - r.label) if a_ else None
-                stats[b, c].append((a_ == r.label, err, p.ok and p.uncertainty <= thr and a_ != 0 and err >= 2))
+                # the gate threshold of the frame's own orientation and FOV (a per-frame stand-in for the gate)
+                thr = eng.decision_config(p.orientation, p.fov_deg).threshold if p.ok else 0.0
+                stats[b, c].append((a_ == r.label, err, p.ok and p.uncertainty < thr and a_ != 0 and err >= 2))
     print(f"{len(rows)} {a.split} photos of {a.data}; per corruption: accuracy / bin MAE (known predictions) / "
           f"confidently wrong (gate open, >= 2 strips off)")
     print(f"{'corruption':<14}" + "".join(f"{b:>30}" for b in engines))
