@@ -318,13 +318,12 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     check_replaceable(cfg.out, force=cfg.force)  # before minutes of work, and again when writing
     torch.set_num_threads(max(1, cfg.threads))
     policy, ckpt = _load_policy(cfg.run)
-    _geometry(policy.config, _spec(policy.config, 1, 0.0), cfg.view_zoom)   # a bad --view-zoom: before minutes of work
+    canvas = policy.config.input_size
+    geometry = _geometry(policy.config, _spec(policy.config, 1, 0.0), cfg.view_zoom)   # a bad --view-zoom: before minutes of work
     n = policy.n_actions
     p = policy.config.p if cfg.p is None else cfg.p
     majority = policy.config.majority_action or None   # 0 (unknown): runs whose baseline counted negatives
-    spec1 = _spec(policy.config, 1, 0.0)
-    data = (load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress,
-                          _geometry(policy.config, spec1, cfg.view_zoom), spec1.size) if cfg.calib_data else None)
+    data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress, geometry, canvas) if cfg.calib_data else None
     calib, metrics, notes = cal.uncalibrated(n, cfg.measure), {}, []
     if data is not None:
         with torch.random.fork_rng(devices=[]):

@@ -333,7 +333,7 @@ function poll() {
   if (fired) {
     // no fresh decision for WATCHDOG_S: while a model run is still going the model is too slow
     // for this phone; otherwise no new frame came (the camera stalled)
-    const reason = app.inflight !== null && app.inflight !== undefined ? 'slow' : 'stale';
+    const reason = app.inflight !== null ? 'slow' : 'stale';
     record({ kind: 'watchdog', t, reason });
     if (!app.audioFailed) {
       app.audio.render(STOP_CUE);
