@@ -11,7 +11,7 @@ import pytest
 from crossing_assist.actions import UNKNOWN, bin_center_x, x_to_bin
 from crossing_assist.data_tools.augment import crop_window, field_view, magnify, portrait_views, roll
 from crossing_assist.data_tools.corrupt import CORRUPTIONS, corrupt
-from crossing_assist.data_tools.images import flag_value, load_frame, load_rgb, save_rgb, true_aspect
+from crossing_assist.data_tools.images import ImageError, flag_value, load_frame, load_rgb, save_rgb, true_aspect
 from crossing_assist.data_tools.manifest import Row, read_manifest, write_manifest
 
 H, W = 120, 160                                         # a 4:3 landscape photo
@@ -224,6 +224,42 @@ def test_load_frame_applies_exif_orientation(tmp_path):
     assert out.shape == (80, 40, 3)                        # displayed portrait
     assert out[:8, :, 0].mean() > 200 and out[-8:, :, 0].mean() < 60   # stored left -> displayed top
     assert load_rgb(tmp_path / "r.jpg").shape == (80, 40, 3)
+
+
+def test_heic_phone_photos_are_read_upright_and_truncated_ones_refused(tmp_path):
+    """An iPhone-style HEIC (the turn in the container's irot box and in EXIF, as iOS writes
+    both): read as displayed, turned once, not twice; a cut file is named as unreadable."""
+    pillow_heif = pytest.importorskip("pillow_heif")
+    from PIL import Image
+
+    from crossing_assist.data_tools.images import check_image_file, is_square_image
+
+    pillow_heif.register_heif_opener()
+    img = np.zeros((40, 80, 3), np.uint8)                   # stored 80 wide x 40 high
+    img[:, :10] = (255, 0, 0)                              # red on the stored left edge
+    exif = Image.Exif()
+    exif[0x0112] = 6                                       # rotate 90 CW to display
+    Image.fromarray(img).save(tmp_path / "r.heic", quality=95, exif=exif.tobytes())   # pillow-heif writes irot from it
+    out = load_frame(tmp_path / "r.heic")
+    assert out.shape == (80, 40, 3) and out.dtype == np.uint8          # displayed portrait
+    root = out
+    while isinstance(root.base, np.ndarray):
+        root = root.base
+    assert root.flags.owndata    # numpy's own pixels: a view into libheif's buffer was freed under it (a crash)
+    assert out[:8, :, 0].mean() > 200 and out[-8:, :, 0].mean() < 60   # stored left -> displayed top
+    assert check_image_file(tmp_path / "r.heic") is None and not is_square_image(tmp_path / "r.heic")
+    data = (tmp_path / "r.heic").read_bytes()
+    (tmp_path / "cut.heic").write_bytes(data[: len(data) * 2 // 3])
+    assert "not a readable image" in check_image_file(tmp_path / "cut.heic")
+    with pytest.raises(ImageError, match="cut.heic: not a readable HEIC/HEIF image"):
+        load_rgb(tmp_path / "cut.heic")
+
+
+def test_heic_without_pillow_heif_says_what_to_install(tmp_path, monkeypatch):
+    (tmp_path / "x.heic").write_bytes(b"\0\0\0\x18ftypheic\0\0\0\0mif1heic" + bytes(64))
+    monkeypatch.setitem(sys.modules, "pillow_heif", None)   # as if not installed
+    with pytest.raises(ImageError, match=r"x.heic: a HEIC/HEIF photo; reading it needs pillow-heif \(pip install"):
+        load_rgb(tmp_path / "x.heic")
 
 
 # ----------------------------------------------------------------------------- negatives

@@ -120,7 +120,27 @@ def test_minimal_ptl_layout_with_images_elsewhere(tmp_path):
     ds = read_manifest(tmp_path / "ds")
     assert [r.image for r in ds.rows] == ["images/pics/x.jpg", "images/y.jpg"]
     assert [r.source for r in ds.rows] == ["ptl:ann", "ptl:unnamed"] and ds.rows[1].split == "test"
-    assert all(r.flags == ("aspect=4:3",) for r in ds.rows)   # the squash to undo; no far_y column
+    assert all(r.flags == () for r in ds.rows)   # 8x6 photos as taken: no squash to undo; no far_y column
     (root / "labels.csv").write_text("image,split,far_x\nx.jpg,train,0.5\n")
     with pytest.raises(PTLError, match="line 1: header lacks column.*photographer, bin12"):
         import_ptl(PTLImportConfig(root, tmp_path / "ds2", progress=False))
+
+
+def test_photos_as_taken_keep_their_aspect_and_only_square_copies_are_unsquashed(tmp_path):
+    """A researcher's own photos in the PTL layout: a portrait phone photo stays portrait (it was
+    stretched to 4:3 landscape when every row got PTL's squash flag), a landscape one stays as it
+    is, and a square 224x224 copy (PTL's squash) is read back at 4:3."""
+    from crossing_assist.data_tools.images import load_frame
+
+    root = tmp_path / "mine"
+    save_rgb(root / "portrait.jpg", np.full((400, 300, 3), 90, np.uint8))
+    save_rgb(root / "landscape.jpg", np.full((300, 400, 3), 90, np.uint8))
+    save_rgb(root / "ptl_copy.jpg", np.full((224, 224, 3), 90, np.uint8))
+    (root / "labels.csv").write_text("image,split,photographer,far_x,bin12\nportrait.jpg,test,ann,0.5,7\n"
+                                     "landscape.jpg,test,ann,0.5,7\nptl_copy.jpg,test,ann,0.5,7\n")
+    import_ptl(PTLImportConfig(root, tmp_path / "ds", progress=False))
+    ds = read_manifest(tmp_path / "ds")
+    shapes = {r.image: load_frame(ds.image_path(r), r.flags).shape[:2] for r in ds.rows}
+    assert shapes == {"images/portrait.jpg": (400, 300), "images/landscape.jpg": (300, 400),
+                      "images/ptl_copy.jpg": (224, 299)}
+    assert [r.flags for r in ds.rows] == [(), (), ("aspect=4:3",)]

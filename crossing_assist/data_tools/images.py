@@ -17,12 +17,44 @@ class ImageError(UserError):
     """An image that cannot be read or written; the message names the path."""
 
 
+# ISO base media brands of HEIF stills (``ftyp`` box): iPhones save HEIC by default, many
+# Android phones can; OpenCV cannot decode them, pillow-heif (libheif) can.
+HEIF_BRANDS = frozenset({b"heic", b"heix", b"heim", b"heis", b"hevc", b"hevx", b"hevm", b"hevs", b"mif1", b"msf1"})
+
+
+def is_heif(head: bytes) -> bool:
+    """Whether a file's first 12 bytes open a HEIF still image (an ``ftyp`` box of a HEIF brand)."""
+    return len(head) >= 12 and head[4:8] == b"ftyp" and head[8:12] in HEIF_BRANDS
+
+
+def _load_heif(path: Path) -> np.ndarray:
+    """A HEIF/HEIC photo as upright RGB. libheif applies the container's rotation and mirror
+    (``irot``/``imir``; iPhones write the same turn in both those and the EXIF orientation, and
+    pillow-heif resets the EXIF one), so the pixels come back as displayed: no EXIF turn on top."""
+    try:
+        import pillow_heif  # noqa: PLC0415 - optional: only HEIC photos need it
+    except ImportError:
+        raise ImageError(f"{path}: a HEIC/HEIF photo; reading it needs pillow-heif "
+                         "(pip install pillow-heif, or the package's [heic] extra)") from None
+    try:
+        heif = pillow_heif.open_heif(str(path), convert_hdr_to_8bit=True)
+        img = np.array(heif, copy=True)   # a view would point into libheif's buffer, freed with ``heif``
+    except Exception as exc:  # noqa: BLE001 - libheif's errors vary by version; the path is what matters
+        raise ImageError(f"{path}: not a readable HEIC/HEIF image ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+    if img.ndim == 2:
+        img = np.repeat(img[:, :, None], 3, axis=2)
+    return np.ascontiguousarray(img[:, :, :3].astype(np.uint8, copy=False))
+
+
 def load_rgb(path: str | os.PathLike) -> np.ndarray:
-    """Read an image file as an H×W×3 uint8 RGB array; ImageError naming the path if unreadable."""
+    """Read an image file as an H×W×3 uint8 RGB array, as displayed (EXIF orientation applied;
+    HEIC/HEIF phone photos through pillow-heif); ImageError naming the path if unreadable."""
     path = Path(path)
     if not path.is_file():
         raise ImageError(f"{path}: image not found")
     data = np.fromfile(str(path), dtype=np.uint8)
+    if is_heif(data[:12].tobytes()):
+        return _load_heif(path)
     img = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
     if img is None:
         raise ImageError(f"{path}: not a readable image (empty, truncated or an unknown format)")
@@ -93,6 +125,18 @@ def check_image_file(path: str | os.PathLike) -> str | None:
     except ImageError:
         return "is not a readable image (unknown format or corrupt)"
     return None
+
+
+def is_square_image(path: str | os.PathLike) -> bool:
+    """Whether the image stored at ``path`` is square (any turn keeps a square square). Large
+    images are decoded at an eighth of their size (fast for a 12 MP JPEG), which keeps a square
+    square and a 4:3 photo 4:3; small ones whole, where rounding could make 6×8 look square."""
+    path = Path(path)
+    data = np.fromfile(str(path), dtype=np.uint8)
+    img = None if is_heif(data[:12].tobytes()) else cv2.imdecode(data, cv2.IMREAD_REDUCED_GRAYSCALE_8)
+    if img is None or min(img.shape[:2]) < 64:
+        img = load_rgb(path)
+    return img.shape[0] == img.shape[1]
 
 
 def save_rgb(path: str | os.PathLike, image: np.ndarray, *, quality: int = 92) -> Path:

@@ -17,21 +17,24 @@ from __future__ import annotations
 
 import csv
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path, PurePosixPath
 
 from tqdm import tqdm
 
 from crossing_assist.actions import parse_label
-from crossing_assist.data_tools.images import check_image_file
+from crossing_assist.data_tools.images import check_image_file, is_square_image
 from crossing_assist.data_tools.manifest import SPLITS, Row, check_row, is_file, reading_csv, write_manifest
 from crossing_assist.errors import UserError
 from crossing_assist.fileio import link_or_copy
 
 REQUIRED = ("image", "split", "photographer", "far_x", "bin12")
 IMAGE_MODES = ("copy", "reference")
-#: PTL's files are 224x224 copies of 4:3 photos squashed without a crop: ``aspect=4:3`` tells
-#: readers (:func:`crossing_assist.data_tools.images.load_frame`) to undo the squash.
+#: PTL's files are 224x224 copies of 4:3 photos squashed without a crop: ``aspect=4:3`` on a
+#: square file tells readers (:func:`crossing_assist.data_tools.images.load_frame`) to undo the
+#: squash. A file that is not square (a photo as the phone saved it, portrait or landscape)
+#: already has its camera's aspect and gets no flag: stretching a portrait photo to 4:3 would
+#: show the model a frame no camera took.
 PTL_ASPECT = "4:3"
 LIGHTS = {"0": "red", "1": "green", "2": "countdown_green", "3": "countdown_blank", "4": "none"}
 
@@ -65,7 +68,7 @@ def _row_from_record(rec: dict[str, str]) -> tuple[Row, str]:
         label = parse_label(rec["bin12"] or "")
     except ValueError:
         raise ValueError(f"bin12 {rec['bin12']!r} invalid; valid: 1..12 or unknown") from None
-    flags = [f"aspect={PTL_ASPECT}"]
+    flags = []
     far_y = (rec.get("far_y") or "").strip()
     if far_y:
         try:
@@ -110,6 +113,8 @@ def read_ptl_labels(ptl_dir: Path) -> list[Row]:
             bad = check_image_file(Path(ptl_dir) / image)
             if bad:
                 raise PTLError(f"{path} line {line}: image {image!r} {bad}; replace or remove it")
+            if is_square_image(Path(ptl_dir) / image):
+                row = replace(row, flags=(f"aspect={PTL_ASPECT}", *row.flags))
             rows.append(row)
     if not rows:
         raise PTLError(f"{path}: no rows")
