@@ -249,3 +249,51 @@ def test_eval_bundle_refuses_a_frame_too_narrow_for_any_camera_in_one_line(tmp_p
                        capture_output=True, text=True)
     assert r.returncode == 2 and r.stderr.strip().count("\n") == 0, r.stderr
     assert part.rows[0].image.split("/")[-1] in r.stderr and "too narrow" in r.stderr
+
+
+def _portrait_strict_toy(tmp_path):
+    """A toy bundle whose portrait frames never pass the gate (threshold 1e-6) and landscape ones do."""
+    import dataclasses
+
+    return make_toy_bundle(tmp_path / "strict", dataclasses.replace(TOY2, threshold=1.0, portrait_threshold=1e-6))
+
+
+def test_a_sweep_by_scale_keeps_each_clips_own_threshold(tmp_path):
+    """Landscape and portrait clips mixed: scale 1 plays as the bundle plays (portrait silent here),
+    where one threshold for all (the landscape one) would have put the portrait beacon on."""
+    lis = Listener(Engine(_portrait_strict_toy(tmp_path)), seconds=0.5)
+    for strip in (2, 6, 11):
+        lis.add(bar_frame(bin_center_x(strip), h=72, w=96), strip)      # landscape
+        lis.add(bar_frame(bin_center_x(strip), h=128, w=96), strip)     # portrait
+    assert [h.on for h in lis.heard()] == [True, False] * 3
+    assert [h.on for h in lis.heard(scale=1.0)] == [True, False] * 3
+    assert all(h.on for h in lis.heard(threshold=1.0))
+    (one,) = lis.risk_coverage(scales=[1.0])
+    assert one["scale"] == 1.0 and one["beacon_on"] == summarise(lis.heard())["beacon_on"] == 0.5
+    assert lis.risk_coverage(scales=[1e7])[0]["beacon_on"] == 1.0    # everything passes a huge scale
+    with pytest.raises(ValueError, match="not both"):
+        lis.heard(threshold=1.0, scale=1.0)
+
+
+def test_crossing_eval_on_portrait_photos_sweeps_around_the_portrait_threshold(tmp_path):
+    """A researcher's portrait photos as taken: the curve is around the portrait threshold and its
+    x 1 point is what the summary says the user heard; the summary names them portrait."""
+    from crossing_assist.data_tools.images import save_rgb
+    from crossing_assist.data_tools.manifest import Row, write_manifest
+
+    data = tmp_path / "data"
+    rows = []
+    for i, strip in enumerate((2, 6, 11)):
+        save_rgb(data / "images" / f"p{i}.png", bar_frame(bin_center_x(strip), h=128, w=96))
+        rows.append(Row(f"images/p{i}.png", strip, bin_center_x(strip), "src:0", "val", {}, ()))
+    write_manifest(data, rows)
+    out = tmp_path / "eval"
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(_portrait_strict_toy(tmp_path)),
+                        "--data", str(data), "--split", "val", "--portrait", "0", "--clip-seconds", "0.5",
+                        "--examples", "0", "--out", str(out), "--quiet"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "as taken (3 portrait) (heard, 3 + 0 no-crossing frames)" in r.stdout
+    view = json.loads((out / "metrics.json").read_text())["listen"]["landscape"]
+    assert view["orientations"] == {"portrait": 3} and view["bundle_threshold"] == pytest.approx(1e-6)
+    at_one = next(c for c in view["risk_coverage"] if c["scale"] == 1.0)
+    assert at_one["beacon_on"] == view["beacon_on"] == 0.0 and at_one["threshold"] == pytest.approx(1e-6)

@@ -212,7 +212,10 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             v = m.get("listen", {}).get(name)
             if v:
                 f = lambda x, p=".3f": "n/a" if x is None else format(x, p)  # noqa: E731
-                print(f"{name:>15} (heard, {v['frames_with_crossing']} + {v['frames_without_crossing']} no-crossing "
+                kinds = v.get("orientations") or {}
+                label = name if name != "landscape" or set(kinds) <= {"landscape"} else \
+                    "as taken (" + ", ".join(f"{n} {o}" for o, n in sorted(kinds.items())) + ")"
+                print(f"{label:>15} (heard, {v['frames_with_crossing']} + {v['frames_without_crossing']} no-crossing "
                       f"frames): accuracy {f(v['accuracy'])}, bin MAE {f(v['bin_mae'])}, far-x error "
                       f"{f(v['far_x_error'], '.4f')}, beacon on {f(v['beacon_on'])} (goal in view "
                       f"{f(v['beacon_on_goal_in_view'])}), confidently wrong {f(v['confidently_wrong'], '.4f')}, "

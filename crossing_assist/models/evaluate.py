@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 import json
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -220,11 +221,14 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
         inside = [h for h, (_, _, _, ins, _) in zip(heard, frames) if ins]
         entry["beacon_on_goal_in_view"] = float(np.mean([h.on for h in inside])) if inside else None
         entry["heading_error_deg"] = error_stats(heading_errors(heard, far_x))
-        orient = "landscape" if name == "landscape" else "portrait"
-        fov = next((f for *_, f in frames if f is not None), None)
-        t0 = float(engine.decision_config(orient, fov).threshold)   # the gate threshold of the view's orientation and FOV
-        curve = lis.risk_coverage([t0 * m for m in GATE_SCALES])
-        entry.update(bundle_threshold=t0, risk_coverage=curve, best_threshold_here=choose_threshold(curve))
+        # The curve scales every clip's own threshold (its orientation's and FOV's), so a view of
+        # mixed photos (portrait photos as taken, portrait no-crossing views) plays at x 1 as the
+        # bundle plays it; thresholds are quoted at the commonest camera of the view's photos.
+        cams = Counter(lis.camera(i) for i in (np.flatnonzero(known) if known.any() else range(len(lis.clips))))
+        t0 = float(engine.decision_config(*cams.most_common(1)[0][0]).threshold)
+        curve = [{"threshold": t0 * c["scale"], **c} for c in lis.risk_coverage(scales=GATE_SCALES)]
+        entry.update(bundle_threshold=t0, risk_coverage=curve, best_threshold_here=choose_threshold(curve),
+                     orientations=dict(Counter(o for o, _ in cams.elements())))   # of the photos with a crossing
         plot_risk_coverage(curve, t0, out / ("risk_coverage.png" if name == "landscape" else f"risk_coverage_{name}.png"),
                            f"{cfg.split}, {name}: what the user hears ({len(lis.clips)} frames)")
         result[name] = entry

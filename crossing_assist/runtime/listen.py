@@ -204,24 +204,38 @@ class Listener:
             lis.labels.append(int(label))
         return lis, {k: v for k, v in d.items() if k not in SAVED}
 
-    def heard(self, threshold: float | None = None, idx: Sequence[int] | None = None) -> list[Heard]:
+    def camera(self, i: int) -> tuple[str, float | None]:
+        """Clip ``i``'s (orientation, camera FOV) as its first good frame saw them (a clip with none:
+        landscape at the bundle's FOV): what picks its gate threshold."""
+        first = next((p for p in self.clips[i] if p.ok), None)
+        return ("landscape", None) if first is None else (first.orientation or "landscape", first.fov_deg)
+
+    def heard(self, threshold: float | None = None, idx: Sequence[int] | None = None, *,
+              scale: float | None = None) -> list[Heard]:
         """The last decisions at the bundle's gate threshold for each clip's orientation and FOV
-        (or ``threshold`` for all)."""
+        (or ``threshold`` for all; or ``scale`` times each clip's own threshold)."""
+        if threshold is not None and scale is not None:
+            raise ValueError("give a threshold for every clip or a scale of each clip's own, not both")
         over = ({} if threshold is None else {"threshold": float(threshold)}) | \
             ({} if self.measure is None else {"measure": self.measure})
         cfgs: dict = {}
         out = []
         for i in range(len(self.clips)) if idx is None else idx:
-            first = next((p for p in self.clips[i] if p.ok), None)
-            key = ("landscape", None) if first is None else (first.orientation or "landscape", first.fov_deg)
+            key = self.camera(i)
             if key not in cfgs:
                 cfgs[key] = self.engine.decision_config(*key, **over)
+                if scale is not None:
+                    cfgs[key] = replace(cfgs[key], threshold=cfgs[key].threshold * float(scale))
             out.append(replace(decide_still(self.clips[i], cfgs[key], self.fps), label=self.labels[i]))
         return out
 
-    def risk_coverage(self, thresholds: Sequence[float], idx: Sequence[int] | None = None) -> list[dict]:
-        """For each gate threshold: beacon-on rate, confidently-wrong rate, silence off-crossing."""
-        return [{"threshold": float(t), **summarise(self.heard(t, idx))} for t in thresholds]
+    def risk_coverage(self, thresholds: Sequence[float] = (), idx: Sequence[int] | None = None, *,
+                      scales: Sequence[float] = ()) -> list[dict]:
+        """For each gate threshold (every clip at it), or each scale of every clip's own threshold
+        (``scales``: a sweep in which a set of mixed orientations and cameras plays as the bundle
+        plays it at 1): beacon-on rate, confidently-wrong rate, silence off-crossing."""
+        return [{"threshold": float(t), **summarise(self.heard(t, idx))} for t in thresholds] + \
+            [{"scale": float(m), **summarise(self.heard(idx=idx, scale=m))} for m in scales]
 
 
 def _check_replayable(measure: str | None) -> None:
