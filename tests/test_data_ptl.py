@@ -144,3 +144,49 @@ def test_photos_as_taken_keep_their_aspect_and_only_square_copies_are_unsquashed
     assert shapes == {"images/portrait.jpg": (400, 300), "images/landscape.jpg": (300, 400),
                       "images/ptl_copy.jpg": (224, 299)}
     assert [r.flags for r in ds.rows] == [(), (), ("aspect=4:3",)]
+
+
+def test_phone_photos_with_data_after_the_image_import_and_cut_ones_do_not(tmp_path):
+    """Pixel and Samsung motion photos append an MP4 after the JPEG's end marker (and PNGs can carry
+    trailing bytes): whole images, imported. The same JPEG cut inside its scan, or its end marker
+    missing, is refused with its line; a tiny PNG is one clear line, not an internal error."""
+    from crossing_assist.data_tools.images import check_image_file
+
+    root = tmp_path / "mine"
+    img = np.random.default_rng(0).integers(0, 255, (240, 320, 3), dtype=np.uint8)
+    save_rgb(root / "plain.jpg", img)
+    jpeg = (root / "plain.jpg").read_bytes()
+    video = b"\x00\x00\x00\x18ftypmp42" + bytes(range(256)) * 200 + b"\xff\xd8\xff\xe0"   # an MP4 after the image
+    (root / "motion.MP.jpg").write_bytes(jpeg + video)
+    save_rgb(root / "plain.png", img)
+    (root / "trailer.png").write_bytes((root / "plain.png").read_bytes() + b"extra bytes")
+    assert [check_image_file(root / n) for n in ("motion.MP.jpg", "trailer.png")] == [None, None]
+    cut = jpeg[: len(jpeg) * 2 // 3]
+    (root / "cut.jpg").write_bytes(cut + video)          # the image cut, something after it
+    (root / "cut2.jpg").write_bytes(cut)
+    (root / "cut.png").write_bytes((root / "plain.png").read_bytes()[:-20])
+    for name in ("cut.jpg", "cut2.jpg", "cut.png"):
+        assert "is truncated" in check_image_file(root / name), name
+    (root / "labels.csv").write_text("image,split,photographer,far_x,bin12\nmotion.MP.jpg,test,ann,0.5,7\n"
+                                     "trailer.png,test,ann,0.5,7\n")
+    import_ptl(PTLImportConfig(root, tmp_path / "ds", progress=False))
+    assert len(read_manifest(tmp_path / "ds")) == 2
+    save_rgb(root / "tiny.png", np.zeros((1, 2, 3), np.uint8))
+    (root / "labels.csv").write_text("image,split,photographer,far_x,bin12\ntiny.png,test,ann,0.5,7\n"
+                                     "cut.jpg,test,ann,0.5,7\n")
+    proc = _cli("import-ptl", root, "--out", tmp_path / "ds2", "--quiet")
+    assert proc.returncode == 2 and "line 3: image 'cut.jpg' is truncated (no JPEG end marker)" in proc.stderr
+
+
+def test_square_photos_taken_square_keep_their_aspect_with_square_square(tmp_path):
+    from crossing_assist.data_tools.images import load_frame
+
+    root = tmp_path / "mine"
+    save_rgb(root / "sq.jpg", np.full((300, 300, 3), 90, np.uint8))
+    (root / "labels.csv").write_text("image,split,photographer,far_x,bin12\nsq.jpg,test,ann,0.5,7\n")
+    proc = _cli("import-ptl", root, "--out", tmp_path / "ds", "--square", "square", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    (row,) = read_manifest(tmp_path / "ds").rows
+    assert row.flags == () and load_frame(tmp_path / "ds" / row.image, row.flags).shape[:2] == (300, 300)
+    with pytest.raises(PTLError, match="Unknown square mode"):
+        import_ptl(PTLImportConfig(root, tmp_path / "ds2", progress=False, square="round"))

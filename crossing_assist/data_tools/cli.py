@@ -23,7 +23,7 @@ def _frame_size(text: str) -> tuple[int, int]:
 
 def _cmd_import_ptl(args: argparse.Namespace) -> int:
     from crossing_assist.data_tools.ptl import PTLImportConfig, import_ptl
-    cfg = PTLImportConfig(Path(args.ptl_dir), Path(args.out), args.images, not args.quiet)
+    cfg = PTLImportConfig(Path(args.ptl_dir), Path(args.out), args.images, not args.quiet, args.square)
     path = import_ptl(cfg)
     from crossing_assist.data_tools.manifest import read_manifest
     ds = read_manifest(path.parent)
@@ -158,6 +158,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--images", choices=("copy", "reference"), default="copy",
                    help="copy (hard link where possible) the images into OUT/images, or reference "
                         "them in place by relative path (checked on every read)")
+    p.add_argument("--square", choices=("squashed", "square"), default="squashed",
+                   help="what a square image is: a 4:3 photo squashed, as PTL's 224x224 copies (default: "
+                        "read back at 4:3), or a photo taken square; other images keep their own aspect")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_import_ptl)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import cv2
@@ -17,18 +18,19 @@ class ImageError(UserError):
     """An image that cannot be read or written; the message names the path."""
 
 
-# ISO base media brands of HEIF stills (``ftyp`` box): iPhones save HEIC by default, many
-# Android phones can; OpenCV cannot decode them, pillow-heif (libheif) can.
+# ISO base media brands of HEIC stills (``ftyp`` box): iPhones save HEIC by default, many
+# Android phones can; OpenCV cannot decode them, pillow-heif (libheif) can. (AVIF is left to
+# OpenCV, which decodes it but ignores its rotation box; pillow-heif's wheels do not decode AVIF.)
 HEIF_BRANDS = frozenset({b"heic", b"heix", b"heim", b"heis", b"hevc", b"hevx", b"hevm", b"hevs", b"mif1", b"msf1"})
 
 
 def is_heif(head: bytes) -> bool:
-    """Whether a file's first 12 bytes open a HEIF still image (an ``ftyp`` box of a HEIF brand)."""
+    """Whether a file's first 12 bytes open a HEIC still image (an ``ftyp`` box of a HEIC brand)."""
     return len(head) >= 12 and head[4:8] == b"ftyp" and head[8:12] in HEIF_BRANDS
 
 
 def _load_heif(path: Path) -> np.ndarray:
-    """A HEIF/HEIC photo as upright RGB. libheif applies the container's rotation and mirror
+    """A HEIC/HEIF photo as upright RGB. libheif applies the container's rotation and mirror
     (``irot``/``imir``; iPhones write the same turn in both those and the EXIF orientation, and
     pillow-heif resets the EXIF one), so the pixels come back as displayed: no EXIF turn on top."""
     try:
@@ -100,26 +102,69 @@ def load_frame(path: str | os.PathLike, flags: tuple[str, ...] = ()) -> np.ndarr
     return img
 
 
+#: After a JPEG scan's entropy-coded data, the next marker: 0xFF (fill bytes may repeat it) then a
+#: byte that is not a stuffed zero or a restart marker (RST0-7 sit inside the scan).
+_NEXT_MARKER = re.compile(rb"\xff+([^\x00\xd0-\xd7\xff])")
+
+
+def _jpeg_ends(data: bytes) -> bool:
+    """Whether a JPEG's main image reaches its end marker (EOI), walking its segments and scans
+    from the start. Data after the EOI is allowed: phones append to their JPEGs (Pixel and
+    Samsung motion photos an MP4, depth maps, an MPO's second image)."""
+    i, n = 2, len(data)
+    while i + 1 < n:
+        if data[i] != 0xFF:
+            return False                               # not at a marker: corrupt
+        while i + 1 < n and data[i + 1] == 0xFF:       # fill bytes
+            i += 1
+        if i + 1 >= n:
+            return False
+        marker = data[i + 1]
+        if marker == 0xD9:
+            return True
+        if marker == 0x01 or 0xD0 <= marker <= 0xD7:   # standalone markers
+            i += 2
+            continue
+        if i + 4 > n:
+            return False
+        end = i + 2 + int.from_bytes(data[i + 2:i + 4], "big")
+        if marker == 0xDA:                             # a scan: its coded data runs to the next marker
+            m = _NEXT_MARKER.search(data, end)
+            if m is None:
+                return False
+            end = m.start(1) - 1
+        i = end
+    return False
+
+
+def _png_ends(data: bytes) -> bool:
+    """Whether a PNG's chunks reach IEND whole (data after it allowed)."""
+    i, n = 8, len(data)
+    while i + 8 <= n:
+        length, kind = int.from_bytes(data[i:i + 4], "big"), data[i + 4:i + 8]
+        i += 12 + length
+        if kind == b"IEND":
+            return i <= n
+    return False
+
+
 def check_image_file(path: str | os.PathLike) -> str | None:
-    """A cheap check that ``path`` holds a whole image: None when it looks fine, else what is
-    wrong ("is empty", "is not an image", "is truncated ..."). JPEG and PNG are checked by their
-    start and end markers (a truncated JPEG still decodes, with a grey bottom, so decoding alone
-    would pass it); other formats are decoded."""
+    """A check that ``path`` holds a whole image: None when it looks fine, else what is wrong
+    ("is empty", "is not an image", "is truncated ..."). JPEG and PNG are walked to their end
+    marker (a truncated JPEG still decodes, with a grey bottom, so decoding alone would pass it;
+    data a phone appends after the end, e.g. a motion photo's video, is fine); other formats are
+    decoded."""
     path = Path(path)
     try:
-        size = path.stat().st_size
-        with open(path, "rb") as fh:
-            head = fh.read(8)
-            fh.seek(max(0, size - 4096))
-            tail = fh.read()
+        data = path.read_bytes()
     except (OSError, ValueError) as exc:
         return f"cannot be read ({getattr(exc, 'strerror', None) or exc})"
-    if size == 0:
+    if not data:
         return "is empty"
-    if head[:3] == b"\xff\xd8\xff":
-        return None if b"\xff\xd9" in tail else "is truncated (no JPEG end marker)"
-    if head == b"\x89PNG\r\n\x1a\n":
-        return None if b"IEND" in tail[-16:] else "is truncated (no PNG end chunk)"
+    if data[:3] == b"\xff\xd8\xff":
+        return None if _jpeg_ends(data) else "is truncated (no JPEG end marker)"
+    if data[:8] == b"\x89PNG\r\n\x1a\n":
+        return None if _png_ends(data) else "is truncated (no PNG end chunk)"
     try:
         load_rgb(path)
     except ImageError:
@@ -133,7 +178,10 @@ def is_square_image(path: str | os.PathLike) -> bool:
     square and a 4:3 photo 4:3; small ones whole, where rounding could make 6×8 look square."""
     path = Path(path)
     data = np.fromfile(str(path), dtype=np.uint8)
-    img = None if is_heif(data[:12].tobytes()) else cv2.imdecode(data, cv2.IMREAD_REDUCED_GRAYSCALE_8)
+    try:
+        img = None if is_heif(data[:12].tobytes()) else cv2.imdecode(data, cv2.IMREAD_REDUCED_GRAYSCALE_8)
+    except cv2.error:   # a few pixels a side: nothing left at an eighth
+        img = None
     if img is None or min(img.shape[:2]) < 64:
         img = load_rgb(path)
     return img.shape[0] == img.shape[1]

@@ -30,6 +30,8 @@ from crossing_assist.fileio import link_or_copy
 
 REQUIRED = ("image", "split", "photographer", "far_x", "bin12")
 IMAGE_MODES = ("copy", "reference")
+#: What a square image file is: PTL's squashed 4:3 copy (``squashed``, default) or a photo taken square.
+SQUARE_MODES = ("squashed", "square")
 #: PTL's files are 224x224 copies of 4:3 photos squashed without a crop: ``aspect=4:3`` on a
 #: square file tells readers (:func:`crossing_assist.data_tools.images.load_frame`) to undo the
 #: squash. A file that is not square (a photo as the phone saved it, portrait or landscape)
@@ -49,6 +51,7 @@ class PTLImportConfig:
     out_dir: Path
     images: str = "copy"          # "copy" or "reference"
     progress: bool = True
+    square: str = "squashed"      # a square file: PTL's 4:3 photo squashed ("squashed") or taken square
 
 
 def _row_from_record(rec: dict[str, str]) -> tuple[Row, str]:
@@ -85,8 +88,11 @@ def _row_from_record(rec: dict[str, str]) -> tuple[Row, str]:
     return row, image
 
 
-def read_ptl_labels(ptl_dir: Path) -> list[Row]:
-    """Rows of ``ptl_dir/labels.csv`` with image paths relative to ``ptl_dir`` (checked to exist)."""
+def read_ptl_labels(ptl_dir: Path, square: str = "squashed") -> list[Row]:
+    """Rows of ``ptl_dir/labels.csv`` with image paths relative to ``ptl_dir`` (checked to exist
+    and whole); a square file gets ``aspect=4:3`` unless ``square`` is ``"square"``."""
+    if square not in SQUARE_MODES:
+        raise PTLError(f"Unknown square mode: {square!r}; valid: {', '.join(SQUARE_MODES)}")
     path = Path(ptl_dir) / "labels.csv"
     if not path.is_file():
         raise PTLError(f"{path}: not found; a PTL folder holds labels.csv and the images")
@@ -113,7 +119,7 @@ def read_ptl_labels(ptl_dir: Path) -> list[Row]:
             bad = check_image_file(Path(ptl_dir) / image)
             if bad:
                 raise PTLError(f"{path} line {line}: image {image!r} {bad}; replace or remove it")
-            if is_square_image(Path(ptl_dir) / image):
+            if square == "squashed" and is_square_image(Path(ptl_dir) / image):
                 row = replace(row, flags=(f"aspect={PTL_ASPECT}", *row.flags))
             rows.append(row)
     if not rows:
@@ -131,7 +137,7 @@ def import_ptl(cfg: PTLImportConfig) -> Path:
     out = Path(cfg.out_dir).resolve()
     if out == ptl:
         raise PTLError(f"--out {cfg.out_dir} is the PTL folder itself; choose another folder")
-    rows = read_ptl_labels(ptl)
+    rows = read_ptl_labels(ptl, cfg.square)
     out.mkdir(parents=True, exist_ok=True)
     placed: list[Row] = []
     for row in tqdm(rows, desc="import-ptl", unit="img", disable=not cfg.progress):
