@@ -125,3 +125,29 @@ def test_label_studio_tasks_round_trip_to_votes(tmp_path):
     (tmp_path / "export.json").write_text(json.dumps(tasks))
     votes = tally(read_label_studio(tmp_path / "export.json", FrameIndex([f for f, _ in results[0].frames])))
     assert [v.counts for v in votes.values()] == [{5: 1}, {6: 1}]
+
+
+VIDEOS = __import__("pathlib").Path(__file__).parent / "data" / "videos"
+
+
+def _upright(rgb):
+    """The phone test videos' picture: red bar along the top and green bar down the left."""
+    h, w = rgb.shape[:2]
+    red = (rgb[..., 0] > 180) & (rgb[..., 1] < 90) & (rgb[..., 2] < 90)
+    green = (rgb[..., 1] > 180) & (rgb[..., 0] < 90) & (rgb[..., 2] < 90)
+    return h > w and red[: h // 16].mean() > 0.3 and green[:, : w // 16].mean() > 0.3
+
+
+def test_phone_videos_are_extracted_upright_at_their_own_frame_times(tmp_path):
+    """A portrait phone video (landscape frames + rotation matrix) comes out upright; a variable
+    frame rate video is sampled at its frames' real times (index / average fps put frame 30,
+    shown at 1.33 s, at 2.25 s and skipped the real 1.0-1.33 s gap's sampling)."""
+    results, _ = extract_frames(FramesConfig((VIDEOS / "rot90_hevc.mov", VIDEOS / "rot90_vfr_h264.mp4"),
+                                             tmp_path / "out", fps=2, progress=False))
+    hevc, vfr = results
+    assert hevc.error is None and vfr.error is None
+    for rel, _ in hevc.frames + vfr.frames:
+        assert _upright(load_rgb(tmp_path / "out" / rel)), rel
+    assert [t for _, t in hevc.frames] == [0.0, 0.5, 1.0, 1.5, 2.0, 2.5]
+    # 30 fps to 0.967 s, then a frame every 0.2 s from 1.333 s: the first frame at or after each 0.5 s
+    assert [t for _, t in vfr.frames] == [0.0, 0.5, 1.333, 1.533, 2.133, 2.533, 3.133]

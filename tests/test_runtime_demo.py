@@ -167,3 +167,25 @@ def test_the_summary_advises_sideways_only_for_a_mostly_unsure_portrait_video():
     assert len(advice) == 1 and "unsure on 60% of these portrait frames" in advice[0] and "sideways" in advice[0]
     assert not any(line.startswith("advice:") for line in lines((640, 480), 6, 4))   # landscape already
     assert not any(line.startswith("advice:") for line in lines((480, 640), 4, 6))   # mostly guided
+
+
+def test_a_phone_video_plays_upright_at_its_frames_own_times():
+    """crossing-demo's source on a portrait phone video with variable frame rate: upright portrait
+    frames, stamped with the container's times (index / average fps drifted by up to 0.9 s)."""
+    from pathlib import Path
+
+    from crossing_assist.runtime.sources import VideoSource
+    from crossing_assist.video_clock import FrameClock
+
+    src = VideoSource(Path(__file__).parent / "data" / "videos" / "rot90_vfr_h264.mp4")
+    frames = list(src)
+    ts = [round(t, 3) for t, _ in frames]
+    assert len(frames) == 40 and src.frame_count == 40
+    assert ts[:3] == [0.0, 0.033, 0.067] and ts[29:32] == [0.967, 1.333, 1.533] and ts[-1] == 3.133
+    assert all(f.shape[0] > f.shape[1] for _, f in frames)            # portrait, as the phone was held
+    top = frames[0][1][: 360 // 16]
+    assert ((top[..., 0] > 180) & (top[..., 1] < 90)).mean() > 0.3     # the red bar on top: upright
+    clock = FrameClock(25.0)                                            # a raw stream: no times (always 0)
+    assert [round(clock.time(0.0), 3) for _ in range(3)] == [0.0, 0.04, 0.08]
+    clock = FrameClock(30.0)
+    assert [clock.time(m) for m in (0.0, 100.0, 50.0, float("nan"))] == pytest.approx([0.0, 0.1, 0.1 + 1 / 30, 0.1 + 2 / 30])

@@ -26,6 +26,7 @@ from tqdm import tqdm
 from crossing_assist.data_tools.images import save_rgb
 from crossing_assist.data_tools.manifest import atomic_write_text
 from crossing_assist.errors import UserError
+from crossing_assist.video_clock import FrameClock
 
 FRAMES_CSV = "frames.csv"
 LABEL_STUDIO_TASKS = "label_studio_tasks.json"
@@ -79,12 +80,13 @@ def extract_video(path: Path, name: str, cfg: FramesConfig) -> VideoResult:
         expect = int(count / native * cfg.fps) + 1 if native and count > 0 else None
         written: list[tuple[str, float]] = []
         next_t, index = 0.0, 0
+        clock = FrameClock(native or 30.0)
         bar = tqdm(total=expect, desc=name[:24], unit="frame", disable=not cfg.progress, leave=False)
         while True:
             ok, frame = cap.read()
             if not ok or frame is None:
                 break
-            t = index / native if native else cap.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
+            t = clock.time(cap.get(cv2.CAP_PROP_POS_MSEC))   # the frame's own time: phones record variable frame rate
             index += 1
             if t + 1e-6 < next_t:
                 continue
@@ -101,7 +103,7 @@ def extract_video(path: Path, name: str, cfg: FramesConfig) -> VideoResult:
         return VideoResult(path, name, (), error=f"{path}: no frame could be decoded (empty or truncated video)")
     warning = None
     if count > 0 and index < count * 0.98 - 1:
-        warning = (f"{path}: decoding stopped at frame {index} of {count} (t={index / (native or 1):.2f} s); "
+        warning = (f"{path}: decoding stopped at frame {index} of {count} (t={clock.last or 0.0:.2f} s); "
                    "the file looks truncated; kept the frames before that point")
     return VideoResult(path, name, tuple(written), warning=warning)
 

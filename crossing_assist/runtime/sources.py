@@ -1,4 +1,4 @@
-"""Frame sources: a video file (timestamps from its frame rate) or a camera (monotonic clock).
+"""Frame sources: a video file (its frames' own presentation times) or a camera (monotonic clock).
 
 A source yields ``(t_seconds, frame_rgb)`` with ``frame_rgb`` H x W x 3 uint8 RGB; it ends when
 the video ends or the camera stops delivering. Tests substitute any iterable of such pairs.
@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from crossing_assist.errors import UserError
+from crossing_assist.video_clock import FrameClock
 
 
 class SourceError(UserError, RuntimeError):
@@ -21,7 +22,9 @@ class SourceError(UserError, RuntimeError):
 
 
 class VideoSource:
-    """Frames of a video file in order; ``t = index / fps`` (the video's own timeline)."""
+    """Frames of a video file in order; ``t`` is each frame's presentation time in the file
+    (:class:`~crossing_assist.video_clock.FrameClock`: right for variable frame rate; ``index /
+    fps`` where the file carries no times)."""
 
     def __init__(self, path: str | Path, *, max_width: int | None = None) -> None:
         self.path = Path(path)
@@ -32,18 +35,17 @@ class VideoSource:
             raise SourceError(f"video {self.path} cannot be opened by OpenCV (unsupported or corrupt file)")
         fps = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
         self.fps = fps if 1.0 <= fps <= 1000.0 else 30.0
-        self.frame_count = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        self.frame_count = max(0, int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0))   # raw streams: garbage
         self.max_width = max_width
 
     def __iter__(self) -> Iterator[tuple[float, np.ndarray]]:
-        i = 0
+        clock = FrameClock(self.fps)
         try:
             while True:
                 ok, bgr = self._cap.read()
                 if not ok or bgr is None:
                     return
-                yield i / self.fps, _to_rgb(bgr, self.max_width)
-                i += 1
+                yield clock.time(self._cap.get(cv2.CAP_PROP_POS_MSEC)), _to_rgb(bgr, self.max_width)
         finally:
             self._cap.release()
 
