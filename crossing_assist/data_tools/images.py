@@ -42,7 +42,8 @@ def _load_heif(path: Path) -> np.ndarray:
         heif = pillow_heif.open_heif(str(path), convert_hdr_to_8bit=True)
         img = np.array(heif, copy=True)   # a view would point into libheif's buffer, freed with ``heif``
     except Exception as exc:  # noqa: BLE001 - libheif's errors vary by version; the path is what matters
-        raise ImageError(f"{path}: not a readable HEIC/HEIF image ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ImageError(f"{path}: not a readable HEIC/HEIF image ({why})") from None
     if img.ndim == 2:
         img = np.repeat(img[:, :, None], 3, axis=2)
     return np.ascontiguousarray(img[:, :, :3].astype(np.uint8, copy=False))
