@@ -207,6 +207,16 @@ class Geometry:
         return check_fov(default_fov(width, height, self.camera_fov_deg, self.sensor_aspect))
 
 
+def letterbox_geometry(train_fov_deg: float = TRAIN_FOV_DEG, pad_rgb: tuple[int, int, int] = PAD_RGB,
+                       view_zoom: float = 1.0) -> Geometry:
+    """The geometry a letterbox model's bundle carries: the view crop (schema 3), the phone
+    sensor's aspect for frames narrower than it, the default camera FOVs; ``view_zoom`` (schema 4)
+    for models trained on magnified views. The exporter writes it; training shows each frame
+    through it (:meth:`Geometry.camera_view`), so both see the rows the runtime will."""
+    return Geometry(fit="letterbox", pad_rgb=tuple(pad_rgb), train_fov_deg=train_fov_deg, view_crop=True,
+                    sensor_aspect=SENSOR_ASPECT, view_zoom=view_zoom)
+
+
 def orientation(width: int, height: int) -> str:
     """``portrait`` if the frame is taller than wide, else ``landscape``."""
     return "portrait" if height > width else "landscape"

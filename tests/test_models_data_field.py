@@ -9,7 +9,8 @@ import torch
 from crossing_assist.actions import UNKNOWN, bin_center_x, x_to_bin
 from crossing_assist.data_tools.images import save_rgb
 from crossing_assist.data_tools.manifest import Row, read_manifest, write_manifest
-from crossing_assist.geometry import PAD_RGB, content_window
+from crossing_assist.data_tools.images import load_frame
+from crossing_assist.geometry import PAD_RGB, content_window, letterbox_geometry
 from crossing_assist.models.backbones import create_backbone
 from crossing_assist.models.cache import cache_key, compute_features
 from crossing_assist.models.data import Variant, load_variants, make_variants
@@ -50,10 +51,17 @@ def test_make_variants_puts_identity_first_then_field_views():
     assert len(vs) == 2 * 3 + 2 and len({v.tag for v in vs}) == len(vs)
 
 
+def _served(h, w):
+    """The content window of an h x w frame as a letterbox bundle's graph gets it (its view crop)."""
+    top, rows = letterbox_geometry().rows_seen(h, w, letterbox_geometry().camera_fov(w, h), CANVAS)
+    return content_window(rows, w, CANVAS)
+
+
 def test_letterbox_variants_carry_the_content_window(ds):
     ident = (Variant(), Variant(mirrored=True))
-    want = {"land.png": (0.0, 1.0), "square.png": content_window(60, 60, CANVAS),
-            "portrait.png": content_window(80, 60, CANVAS), "squashed.png": (0.0, 1.0)}   # 4:3 once unsquashed
+    want = {"land.png": (0.0, 1.0), "square.png": _served(60, 60),
+            "portrait.png": _served(80, 60), "squashed.png": (0.0, 1.0)}   # 4:3 once unsquashed
+    assert want["portrait.png"][1] - want["portrait.png"][0] > content_window(80, 60, CANVAS)[1] - content_window(80, 60, CANVAS)[0]
     for row in ds.rows[:4]:
         out = load_variants(ds, row, CANVAS, ident, 67.0, fit="letterbox")
         for (img, fx, lab, win), v in zip(out, ident):
@@ -67,6 +75,19 @@ def test_letterbox_variants_carry_the_content_window(ds):
             assert abs((col + 0.5) / CANVAS[1] - (win[0] + (win[1] - win[0]) * x)) < 2.5 / CANVAS[1]
     stretch = load_variants(ds, ds.rows[2], CANVAS, ident, 67.0, fit="stretch")
     assert all(w == (0.0, 1.0) for *_, w in stretch)
+
+
+def test_training_frames_are_the_pixels_the_bundle_serves(ds):
+    """Each frame, plain, is exactly what the exported bundle's graph gets from Engine.predict: a
+    portrait frame through the view crop (it was letterboxed whole, so the model learned portrait
+    frames at 3/4 of the scale it was served them)."""
+    from crossing_assist.geometry import letterbox
+
+    served = letterbox_geometry()   # what crossing-export writes for a letterbox model (view zoom 1)
+    for row in ds.rows[:4]:
+        (img, _, _, _), = load_variants(ds, row, CANVAS, (Variant(),), 67.0, fit="letterbox")
+        frame = load_frame(ds.image_path(row), row.flags)
+        assert np.array_equal(img, letterbox(served.camera_view(frame, CANVAS), CANVAS, PAD_RGB)), row.image
 
 
 def test_field_variants_are_seeded_by_seed_field_and_image(ds):

@@ -297,3 +297,33 @@ def test_crossing_eval_on_portrait_photos_sweeps_around_the_portrait_threshold(t
     assert view["orientations"] == {"portrait": 3} and view["bundle_threshold"] == pytest.approx(1e-6)
     at_one = next(c for c in view["risk_coverage"] if c["scale"] == 1.0)
     assert at_one["beacon_on"] == view["beacon_on"] == 0.0 and at_one["threshold"] == pytest.approx(1e-6)
+
+
+def test_crossing_eval_cuts_portrait_views_from_landscape_photos_only(tmp_path):
+    """--portrait 2 on a researcher's portrait photos: no "portrait views" of a portrait photo
+    (they assumed it spanned the landscape camera's 67 deg and counted each photo 4 times)."""
+    from crossing_assist.data_tools.images import save_rgb
+    from crossing_assist.data_tools.manifest import Row, write_manifest
+
+    data = tmp_path / "data"
+    rows = []
+    for i, (strip, h, w) in enumerate(((2, 128, 96), (6, 128, 96), (11, 72, 96))):   # two portrait, one landscape
+        save_rgb(data / "images" / f"p{i}.png", bar_frame(bin_center_x(strip), h=h, w=w))
+        rows.append(Row(f"images/p{i}.png", strip, bin_center_x(strip), "src:0", "val", {}, ()))
+    write_manifest(data, rows)
+    out = tmp_path / "eval"
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(make_toy_bundle(tmp_path / "b", TOY2)),
+                        "--data", str(data), "--split", "val", "--portrait", "2", "--clip-seconds", "0.5",
+                        "--examples", "0", "--out", str(out), "--quiet"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    lis = json.loads((out / "metrics.json").read_text())["listen"]
+    assert lis["landscape"]["frames_with_crossing"] == 3 and lis["landscape"]["orientations"] == {"landscape": 1, "portrait": 2}
+    assert lis["portrait"]["frames_with_crossing"] == 2 == lis["portrait_window"]["frames_with_crossing"]   # the landscape photo's only
+    data2 = tmp_path / "data2"
+    save_rgb(data2 / "images" / "p.png", bar_frame(bin_center_x(6), h=128, w=96))
+    write_manifest(data2, [Row("images/p.png", 6, bin_center_x(6), "src:0", "val", {}, ())])
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(tmp_path / "b"),
+                        "--data", str(data2), "--split", "val", "--portrait", "2", "--clip-seconds", "0.5",
+                        "--examples", "0", "--out", str(tmp_path / "eval2"), "--quiet"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr   # only portrait photos: no portrait views at all, no crash
+    assert set(json.loads((tmp_path / "eval2" / "metrics.json").read_text())["listen"]) == {"landscape", "clip_seconds", "fps"}

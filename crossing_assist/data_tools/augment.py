@@ -384,9 +384,12 @@ def user_views(image: np.ndarray, far_x: float | None, label: int, n: int,
     """What a user's phone gives of one labelled photo, for a bundle of ``geometry`` (its
     ``camera_fov_deg`` and ``train_fov_deg``): ``landscape``, the photo as taken (FOV None = the
     bundle's), and with ``n`` > 0 views a photo the :func:`portrait_sets` at the bundle's portrait
-    FOV; each view ``(frame, far_x, label, goal in view, FOV)``."""
+    FOV; each view ``(frame, far_x, label, goal in view, FOV)``. Portrait views are cut from
+    landscape photos only: they assume the photo spans the training camera's FOV across its width,
+    and a portrait photo with a crossing already is what a phone held upright sees (any cut of a
+    no-crossing frame is still one, so those give their views whatever their shape)."""
     views = {"landscape": [(image, far_x, label, label != 0, None)]}
-    if n:
+    if n and (image.shape[1] > image.shape[0] or label == UNKNOWN):
         views.update(portrait_sets(image, far_x, label, n, portrait_fov_deg=geometry.camera_fov_deg[1],
                                    train_fov_deg=geometry.train_fov_deg))
     return views

@@ -50,7 +50,7 @@ from crossing_assist import inference
 from crossing_assist.export import calibrate as cal
 from crossing_assist.export.graph import BundleGraph, GraphSpec, export_graph, model_bytes, set_metadata
 from crossing_assist.export.quantize import INT8_MODES, quantize_convs
-from crossing_assist.geometry import SENSOR_ASPECT, VIEW_ZOOM_RANGE, Geometry, GeometryError
+from crossing_assist.geometry import VIEW_ZOOM_RANGE, Geometry, GeometryError, letterbox_geometry
 from crossing_assist.runtime.belief import far_mass
 
 if TYPE_CHECKING:  # annotations only: models is imported where it is used (_load_policy)
@@ -216,8 +216,9 @@ def _geometry(config: PolicyConfig, spec: GraphSpec, view_zoom: float = 1.0) -> 
     if view_zoom != 1 and not letterbox:
         raise ExportError(f"Invalid --view-zoom {view_zoom}: the checkpoint stretches frames (fit {spec.fit}); "
                           "a view zoom needs a letterbox model")
-    return Geometry(fit=spec.fit, pad_rgb=spec.pad_rgb, train_fov_deg=config.fov_deg, view_crop=letterbox,
-                    sensor_aspect=SENSOR_ASPECT if letterbox else None, view_zoom=view_zoom)
+    if letterbox:
+        return letterbox_geometry(config.fov_deg, spec.pad_rgb, view_zoom)
+    return Geometry(fit=spec.fit, pad_rgb=spec.pad_rgb, train_fov_deg=config.fov_deg)
 
 
 def parity_check(policy, spec: GraphSpec, frames: np.ndarray) -> float:

@@ -74,6 +74,8 @@ def cache_key(backbone: Backbone, frozen_blocks: int, size: tuple[int, int],
     }
     if fit != "stretch" or any(v.field >= 0 for v in variants):   # keys of older entries unchanged
         spec.update(fit=fit, fields=[v.field for v in variants], seed=seed, version=2)
+    if fit == "letterbox":   # frames shown through the view crop since 2026-12-04: older entries did not
+        spec["view_crop"] = True
     views = [v for v in variants if v.field >= 0]
     if views:
         spec["field_recipe"] = field_recipe(views[0].without, views[0].zoom)

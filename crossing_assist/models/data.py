@@ -24,9 +24,9 @@ import zlib
 
 from ..actions import UNKNOWN
 from ..data_tools import augment
-from ..data_tools.images import flag_value, load_frame, load_rgb
+from ..data_tools.images import ImageError, flag_value, load_frame, load_rgb
 from ..data_tools.manifest import Dataset, Row
-from ..geometry import PAD_RGB, content_window, letterbox
+from ..geometry import PAD_RGB, GeometryError, content_window, letterbox, letterbox_geometry
 
 
 @dataclass(frozen=True)
@@ -100,7 +100,15 @@ def load_variants(ds: Dataset, row: Row, size: tuple[int, int], variants: tuple[
             img, fx, lab = apply_variant(base, row.far_x, row.label, v, fov_deg)
             out.append((img, np.nan if fx is None or lab == UNKNOWN else float(fx), int(lab), (0.0, 1.0)))
         return out
-    base = load_frame(ds.image_path(row), row.flags)
+    # the rows the runtime will give the graph: a portrait frame (a researcher's own, or a
+    # portrait no-crossing view) loses the rows beyond the training camera's view, as
+    # Engine.predict crops them, so it is learned at the scale it is served (4:3 keeps them all)
+    zoom = max((v.zoom for v in variants if v.field >= 0), default=1.0)
+    path = ds.image_path(row)
+    try:
+        base = letterbox_geometry(fov_deg, view_zoom=zoom).camera_view(load_frame(path, row.flags), size)
+    except GeometryError as exc:
+        raise ImageError(f"{path}: {exc}") from None
     scale = 2 * max(size) / max(base.shape[:2])
     if scale < 1:  # keep a margin over the canvas for crops, but do not warp megapixels
         base = resize_rgb(base, (max(8, round(base.shape[0] * scale)), max(8, round(base.shape[1] * scale))))

@@ -207,6 +207,8 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
     space = engine.space
     result: dict = {"clip_seconds": cfg.clip_seconds, "fps": 10.0}
     for name, frames in _views(cfg, _split(cfg), engine.bundle.geometry).items():
+        if not frames:   # portrait views of a split with no landscape photo
+            continue
         lis = Listener(engine, cfg.clip_seconds, 10.0)
         for img, _, lab, _, fov in tqdm(frames, desc=f"listen {name}", disable=not cfg.progress, unit="frame"):
             lis.add(img, lab, fov)
