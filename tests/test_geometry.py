@@ -387,3 +387,35 @@ def test_engine_levels_a_frame_by_the_sensors_roll(tmp_path):
     assert engine.predict(rolled, roll_deg=-30.0).action <= engine.predict(rolled).action   # the wrong way: further off
     step = Pipeline(engine).step(rolled, 0.0, roll_deg=30.0)
     assert step.prediction.action in (6, 7)
+
+
+def test_photo_clip_reads_each_photos_fov_from_its_shape_or_photo_fov(tmp_path, capsys):
+    """photo-clip's window FOV (what crossing-demo --fov should get): from a phone's FOV for each
+    photo's orientation and aspect (a 3:4 portrait photo is 53 deg across, not the landscape 67),
+    or from --photo-fov; a FOV outside 20..170 is one line."""
+    import json
+
+    from crossing_assist.actions import bin_center_x
+    from crossing_assist.data_tools.cli import main
+    from crossing_assist.data_tools.images import save_rgb
+    from crossing_assist.data_tools.manifest import Row, write_manifest
+    from crossing_assist.geometry import window_fov
+
+    for name, (h, w) in (("land", (120, 160)), ("port", (160, 120))):
+        save_rgb(tmp_path / name / "images" / "a.png", np.full((h, w, 3), 90, np.uint8))
+        write_manifest(tmp_path / name, [Row("images/a.png", 7, bin_center_x(7), "s", "val", {}, ())])
+    runs = {"land": ("3:4", None, 67.0), "port": ("9:16", None, 53.0), "port60": ("9:16", 60.0, 60.0)}
+    for tag, (aspect, photo_fov, want) in runs.items():
+        out = tmp_path / f"{tag}.mp4"
+        args = ["photo-clip", str(tmp_path / tag[:4]), "--out", str(out), "--aspect", aspect, "--count", "1",
+                "--seconds-each", "0.5", "--height", "64"] + ([] if photo_fov is None else ["--photo-fov", str(photo_fov)])
+        assert main(args) == 0
+        side = json.loads(out.with_suffix(".json").read_text())
+        w = round(float(aspect.split(":")[0]) / float(aspect.split(":")[1]) * 64)
+        pw = round(64 * (160 / 120 if tag == "land" else 120 / 160))
+        assert side["photo_fov_deg"] == [want]
+        assert side["fov_deg"] == pytest.approx(window_fov(w / pw, want), abs=1e-3), tag
+        assert f"--fov {side['fov_deg']:.1f}" in capsys.readouterr().out
+    assert main(["photo-clip", str(tmp_path / "port"), "--out", str(tmp_path / "x.mp4"), "--photo-fov", "10"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "field of view" in err[0]

@@ -66,7 +66,7 @@ def _cmd_photo_clip(args: argparse.Namespace) -> int:
     except ValueError:
         raise ManifestError(f"--aspect {args.aspect!r} invalid; expected W:H, e.g. 3:4") from None
     clip, side, fov = make_photo_clip(PhotoClipConfig(Path(args.dataset), Path(args.out), args.split, args.count,
-                                                      args.seconds_each, args.fps, aspect, args.height))
+                                                      args.seconds_each, args.fps, aspect, args.height, args.photo_fov))
     print(f"wrote {clip} and {side}; the frames see {fov:.1f} deg across: crossing-demo {clip} --fov {fov:.1f}")
     return 0
 
@@ -180,6 +180,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=float, default=10.0)
     p.add_argument("--aspect", default="3:4", help="the phone frame's W:H, e.g. 3:4 (portrait) or 4:3 (landscape)")
     p.add_argument("--height", type=int, default=320, help="frame height in pixels")
+    p.add_argument("--photo-fov", type=float, default=None, metavar="DEG",
+                   help="horizontal FOV of the camera that took the photos (default: a phone's for each "
+                        "photo's orientation and aspect: 67 deg for 4:3 landscape, 53 for 3:4 portrait)")
     p.set_defaults(func=_cmd_photo_clip)
 
     p = sub.add_parser("stats", help="counts per bin / action space / split, majority baseline, histogram")

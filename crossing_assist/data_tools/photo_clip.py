@@ -6,7 +6,9 @@ whole landscape photo) slides from the photo's left edge to its right, so the go
 the frame and out of view. The sidecar ``<clip>.json`` (the same fields as ``synth --video``,
 read by :mod:`crossing_assist.runtime.truth`) holds per frame the label (bin of the window, the
 edge strip when the goal is out of view but inferable) and the goal's bearing. The window's
-horizontal field of view follows from the photo's (``fov_deg``, the camera that took it):
+horizontal field of view follows from the photo's (``fov_deg``, the camera that took it; by
+default a phone's for the photo's orientation and aspect, 67 deg for a 4:3 landscape photo and
+53 deg for a 3:4 portrait one, :func:`~crossing_assist.geometry.letterbox_geometry`):
 ``2 atan(w'/W tan(fov/2))``; ``crossing-demo --fov`` should be given that value (printed, and in
 the sidecar's ``fov_deg``).
 """
@@ -24,7 +26,7 @@ import numpy as np
 from crossing_assist.actions import UNKNOWN, format_label, x_to_bin
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import ManifestError, atomic_write_text, read_manifest
-from crossing_assist.geometry import TRAIN_FOV_DEG, window_fov
+from crossing_assist.geometry import GeometryError, check_fov, letterbox_geometry, window_fov
 
 
 @dataclass(frozen=True)
@@ -37,7 +39,7 @@ class PhotoClipConfig:
     fps: float = 10.0
     aspect: float = 3 / 4          # width / height of the phone's frame
     height: int = 320              # output frame height (px)
-    fov_deg: float = TRAIN_FOV_DEG # horizontal FOV of the photos' camera
+    fov_deg: float | None = None   # horizontal FOV of the photos' camera (None: a phone's for each photo's shape)
 
 
 def make_photo_clip(cfg: PhotoClipConfig) -> tuple[Path, Path, float]:
@@ -50,6 +52,11 @@ def make_photo_clip(cfg: PhotoClipConfig) -> tuple[Path, Path, float]:
                             "valid: 1..200 photos, 0.5..30 s each, 1..60 fps")
     if not 0.2 <= cfg.aspect <= 5:
         raise ManifestError(f"aspect={cfg.aspect:.3f} invalid; valid: 0.2..5 (width / height)")
+    if cfg.fov_deg is not None:
+        try:
+            check_fov(cfg.fov_deg)
+        except GeometryError as exc:
+            raise ManifestError(f"photo FOV: {exc}") from None
     ds = read_manifest(cfg.dataset).split(cfg.split)
     rows = [r for r in ds.rows if r.label != UNKNOWN and r.far_x is not None]
     if not rows:
@@ -64,19 +71,24 @@ def make_photo_clip(cfg: PhotoClipConfig) -> tuple[Path, Path, float]:
         raise ManifestError(f"OpenCV cannot write mp4v video to {tmp}")
     truth: dict[str, list] = {"t": [], "far_x": [], "label": [], "photo": [], "goal_azimuth_deg": []}
     per = max(2, int(round(cfg.seconds_each * cfg.fps)))
-    fovs = []
+    fovs, photo_fovs = [], []
     try:
         for r in rows:
             photo = load_frame(ds.image_path(r), r.flags)
             ph, pw = photo.shape[:2]
+            try:
+                photo_fov = cfg.fov_deg or letterbox_geometry().camera_fov(pw, ph)
+            except GeometryError as exc:
+                raise ManifestError(f"{r.image}: {exc}; give the camera's with --photo-fov") from None
+            photo_fovs.append(photo_fov)
             if w > int(round(pw * h / ph)) + 1:
                 raise ManifestError(f"--aspect {cfg.aspect:.3f} is wider than the photo {r.image} ({pw}x{ph}); "
                                     "a window cannot be wider than what the camera saw")
             photo = cv2.resize(photo, (max(w, int(round(pw * h / ph))), h), interpolation=cv2.INTER_AREA)
             pw = photo.shape[1]
-            fov = window_fov(min(1.0, w / pw), cfg.fov_deg)   # a full-height window of the photo
+            fov = window_fov(min(1.0, w / pw), photo_fov)   # a full-height window of the photo
             fovs.append(fov)
-            f_px = (pw / 2) / math.tan(math.radians(cfg.fov_deg) / 2)   # the photo camera's focal length
+            f_px = (pw / 2) / math.tan(math.radians(photo_fov) / 2)   # the photo camera's focal length
             goal_px = r.far_x * pw
             for k in range(per):
                 x0 = int(round((pw - w) * k / (per - 1)))
@@ -97,7 +109,7 @@ def make_photo_clip(cfg: PhotoClipConfig) -> tuple[Path, Path, float]:
     fov = float(np.mean(fovs))
     meta = {"synthetic": False, "description": f"{len(rows)} labelled photos from {cfg.dataset} ({cfg.split}), "
             f"a {w}x{h} window panning across each", "fps": cfg.fps, "size": [w, h], "fov_deg": round(fov, 3),
-            "photo_fov_deg": cfg.fov_deg, "n_frames": len(truth["t"]), "codec": "mp4v", **truth}
+            "photo_fov_deg": [round(f, 3) for f in photo_fovs], "n_frames": len(truth["t"]), "codec": "mp4v", **truth}
     side = out.with_suffix(".json")
     atomic_write_text(side, json.dumps(meta, indent=1) + "\n")
     return out, side, fov
