@@ -1,6 +1,7 @@
 """Live path: watchdog, frozen and failing input, real audio through an ALSA file PCM, no
 device, and the torch-free import."""
 
+import json
 import subprocess
 import sys
 import textwrap
@@ -245,3 +246,78 @@ def test_a_decision_later_than_the_watchdog_plays_the_stop_cue_and_the_trace_say
     assert all(r["late"] and r["cue"] == "stop" for r in recs)
     _, fast = run(0.1)
     assert not any(s.late for s in fast) and fast[-1].cue.kind != KIND_STOP
+
+
+REOPEN = textwrap.dedent("""
+    import json, sys, time
+    from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer, Cue, KIND_BEACON
+    from crossing_assist.runtime.audio import LiveAudio
+    p = CuePlayer(BeaconConfig(sample_rate={sr}))
+    p.set_cue(Cue(KIND_BEACON, pan=0.6, heading_deg=27.0, rate_hz=4.0))
+    la = LiveAudio(p, check_s=0.2).start()
+    time.sleep(0.5)
+    la._stream.abort()              # the device went away: no more callbacks
+    before = la.blocks
+    deadline = time.monotonic() + 10
+    while la.reopened == 0 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.3)
+    out = dict(lost=la.lost, reopened=la.reopened, resumed=la.blocks > before)
+    la.stop()
+    print(json.dumps(out))
+""")
+
+
+@pytest.mark.skipif(not _sounddevice_ok(), reason="PortAudio (libportaudio2) is not installed")
+def test_an_interrupted_audio_stream_is_said_and_reopened(tmp_path):
+    """Headphones pulled or a Bluetooth link dropped: the callbacks stop; the watch says so on
+    stderr and opens the stream again, and the player's cue plays on."""
+    sr = 16000
+    (tmp_path / ".asoundrc").write_text(ALSA_CONF.format(sr=sr, path=tmp_path / "played.raw"))
+    env = {"HOME": str(tmp_path), "PATH": "/usr/bin:/bin"}
+    proc = subprocess.run([sys.executable, "-c", REOPEN.format(sr=sr)], env=env, capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    got = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert got == {"lost": 1, "reopened": 1, "resumed": True}, (got, proc.stderr)
+    assert "audio output lost" in proc.stderr and "audio output back" in proc.stderr
+
+
+def test_the_audio_watch_counts_a_stream_whose_callbacks_stop_as_lost(capsys):
+    """A vanished device can leave PortAudio's stream 'active' with no more callbacks: no new
+    block within check_s is a loss too; a failed reopen is retried until one opens."""
+    from crossing_assist.runtime.audio import AudioDeviceError, LiveAudio
+
+    class Stream:
+        active = True
+
+        def abort(self):
+            pass
+
+        close = stop = abort
+
+    class Playing(Stream):            # a stream that calls back: a block between any two checks
+        @property
+        def active(self):
+            la.blocks += 1
+            return True
+
+    la = LiveAudio(CuePlayer(BeaconConfig()), check_s=0.05)
+    opens = iter([Stream(), AudioDeviceError("gone"), AudioDeviceError("gone"), Playing()])
+
+    def fake_open():
+        got = next(opens)
+        if isinstance(got, Exception):
+            raise got
+        return got
+
+    la._open = fake_open
+    la.start()                       # the first stream never calls back
+    deadline = time.monotonic() + 5
+    while la.reopened == 0 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    time.sleep(0.3)                  # the reopened stream plays: no second loss
+    la.stop()
+    assert (la.lost, la.reopened) == (1, 1)
+    err = capsys.readouterr().err
+    assert err.count("audio output lost") == 1 and err.count("audio output back") == 1
