@@ -7,9 +7,8 @@ import pytest
 import torch
 
 from crossing_assist.actions import UNKNOWN, bin_center_x, x_to_bin
-from crossing_assist.data_tools.images import save_rgb
+from crossing_assist.data_tools.images import load_frame, save_rgb
 from crossing_assist.data_tools.manifest import Row, read_manifest, write_manifest
-from crossing_assist.data_tools.images import load_frame
 from crossing_assist.geometry import PAD_RGB, content_window, letterbox_geometry
 from crossing_assist.models.backbones import create_backbone
 from crossing_assist.models.cache import cache_key, compute_features
@@ -61,7 +60,8 @@ def test_letterbox_variants_carry_the_content_window(ds):
     ident = (Variant(), Variant(mirrored=True))
     want = {"land.png": (0.0, 1.0), "square.png": _served(60, 60),
             "portrait.png": _served(80, 60), "squashed.png": (0.0, 1.0)}   # 4:3 once unsquashed
-    assert want["portrait.png"][1] - want["portrait.png"][0] > content_window(80, 60, CANVAS)[1] - content_window(80, 60, CANVAS)[0]
+    whole = content_window(80, 60, CANVAS)   # the portrait frame letterboxed whole: narrower than served
+    assert want["portrait.png"][1] - want["portrait.png"][0] > whole[1] - whole[0]
     for row in ds.rows[:4]:
         out = load_variants(ds, row, CANVAS, ident, 67.0, fit="letterbox")
         for (img, fx, lab, win), v in zip(out, ident):
