@@ -255,6 +255,25 @@ def test_heic_phone_photos_are_read_upright_and_truncated_ones_refused(tmp_path)
         load_rgb(tmp_path / "cut.heic")
 
 
+def test_avif_photos_are_read_upright(tmp_path):
+    """OpenCV decodes AVIF but ignores its rotation box; Pillow reads the turn."""
+    from PIL import Image, features
+
+    if not features.check("avif"):
+        pytest.skip("this Pillow has no AVIF support")
+    img = np.zeros((40, 80, 3), np.uint8)
+    img[:, :10] = (255, 0, 0)                              # red on the stored left edge
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    Image.fromarray(img).save(tmp_path / "r.avif", quality=95, exif=exif.tobytes())
+    out = load_rgb(tmp_path / "r.avif")
+    assert out.shape == (80, 40, 3) and out[:8, :, 0].mean() > 200 and out[-8:, :, 0].mean() < 60
+    data = (tmp_path / "r.avif").read_bytes()
+    (tmp_path / "cut.avif").write_bytes(data[: len(data) // 2])
+    with pytest.raises(ImageError, match="cut.avif"):
+        load_rgb(tmp_path / "cut.avif")
+
+
 def test_heic_without_pillow_heif_says_what_to_install(tmp_path, monkeypatch):
     (tmp_path / "x.heic").write_bytes(b"\0\0\0\x18ftypheic\0\0\0\0mif1heic" + bytes(64))
     monkeypatch.setitem(sys.modules, "pillow_heif", None)   # as if not installed

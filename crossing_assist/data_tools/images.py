@@ -19,14 +19,20 @@ class ImageError(UserError):
 
 
 # ISO base media brands of HEIC stills (``ftyp`` box): iPhones save HEIC by default, many
-# Android phones can; OpenCV cannot decode them, pillow-heif (libheif) can. (AVIF is left to
-# OpenCV, which decodes it but ignores its rotation box; pillow-heif's wheels do not decode AVIF.)
+# Android phones can; OpenCV cannot decode them, pillow-heif (libheif) can.
 HEIF_BRANDS = frozenset({b"heic", b"heix", b"heim", b"heis", b"hevc", b"hevx", b"hevm", b"hevs", b"mif1", b"msf1"})
+# AVIF: OpenCV decodes it but ignores its rotation box; Pillow (with AVIF support) reports the
+# turn as the EXIF orientation, which is applied.
+AVIF_BRANDS = frozenset({b"avif", b"avis"})
 
 
 def is_heif(head: bytes) -> bool:
     """Whether a file's first 12 bytes open a HEIC still image (an ``ftyp`` box of a HEIC brand)."""
     return len(head) >= 12 and head[4:8] == b"ftyp" and head[8:12] in HEIF_BRANDS
+
+
+def _first_line(exc: Exception) -> str:
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
 
 
 def _load_heif(path: Path) -> np.ndarray:
@@ -42,11 +48,25 @@ def _load_heif(path: Path) -> np.ndarray:
         heif = pillow_heif.open_heif(str(path), convert_hdr_to_8bit=True)
         img = np.array(heif, copy=True)   # a view would point into libheif's buffer, freed with ``heif``
     except Exception as exc:  # noqa: BLE001 - libheif's errors vary by version; the path is what matters
-        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ImageError(f"{path}: not a readable HEIC/HEIF image ({why})") from None
+        raise ImageError(f"{path}: not a readable HEIC/HEIF image ({_first_line(exc)})") from None
     if img.ndim == 2:
         img = np.repeat(img[:, :, None], 3, axis=2)
     return np.ascontiguousarray(img[:, :, :3].astype(np.uint8, copy=False))
+
+
+def _load_avif(path: Path) -> np.ndarray | None:
+    """An AVIF photo upright through Pillow, or None where Pillow cannot read AVIF (then OpenCV
+    reads it, unturned)."""
+    try:
+        from PIL import Image, ImageOps, features  # noqa: PLC0415 - optional: only AVIF needs it
+        if not features.check("avif"):
+            return None
+        with Image.open(path) as im:
+            return np.array(ImageOps.exif_transpose(im).convert("RGB"))
+    except ImportError:
+        return None
+    except Exception as exc:  # noqa: BLE001 - a broken file: say so as for any image
+        raise ImageError(f"{path}: not a readable AVIF image ({_first_line(exc)})") from None
 
 
 def load_rgb(path: str | os.PathLike) -> np.ndarray:
@@ -56,8 +76,13 @@ def load_rgb(path: str | os.PathLike) -> np.ndarray:
     if not path.is_file():
         raise ImageError(f"{path}: image not found")
     data = np.fromfile(str(path), dtype=np.uint8)
-    if is_heif(data[:12].tobytes()):
+    head = data[:12].tobytes()
+    if is_heif(head):
         return _load_heif(path)
+    if head[4:8] == b"ftyp" and head[8:12] in AVIF_BRANDS:
+        img = _load_avif(path)
+        if img is not None:
+            return img
     img = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
     if img is None:
         raise ImageError(f"{path}: not a readable image (empty, truncated or an unknown format)")
