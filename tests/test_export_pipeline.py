@@ -396,3 +396,28 @@ def test_calibration_frames_are_what_the_runtime_gives_the_graph(tmp_path):
     assert raw.images[0].shape == (128, 96, 3)
     with pytest.raises(ExportError, match="calib-data"):
         load_labelled(dataset([(160, 32), (96, 128)]), "val", 13, progress=False, geometry=geo, canvas=(36, 48))
+
+
+def test_the_calibration_log_says_when_its_folds_are_not_held_out_by_source(work, tmp_path):
+    """A researcher calibrating on one video: its folds are contiguous blocks of that one source,
+    and the log says so instead of naming the same source five times 'by source'."""
+    root, _ = work
+    from dataclasses import replace
+
+    from crossing_assist.data_tools.manifest import read_manifest
+
+    rows = [replace(r, source="vid:one") for r in read_manifest(root / "data").rows]
+    (tmp_path / "one").mkdir()
+    for r in rows:
+        (tmp_path / "one" / r.image).symlink_to(root / "data" / r.image)
+    write_manifest(tmp_path / "one", rows)
+    lines = []
+    for data, out in ((root / "data", "several"), (tmp_path / "one", "single")):
+        logged = []
+        export_bundle(ExportConfig(run=str(root / "run"), out=str(tmp_path / out), samples=8, calib_data=str(data),
+                                   batch=8, parity_frames=4, progress=False), log=logged.append)
+        lines.append(next(m for m in logged if m.startswith("held-out conformal coverage")))
+    several, single = lines
+    assert "folds by source: vid:" in several
+    assert "contiguous blocks of the one source vid:one (not held out by source" in single
+    assert "block 1 " in single and "by source:" not in single

@@ -333,9 +333,13 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
                                   cfg.batch, cfg.progress)
         folds = cal.source_folds(data.sources, cfg.calib_folds)
         cross = cal.cross_fit(logits, data.actions, folds, cfg.coverage, data.sources)
+        one = len(set(data.sources)) == 1   # then the folds are contiguous blocks: not held out by source
         log(f"held-out conformal coverage {cross['coverage']:.3f} (target {cfg.coverage:.2f}, mean set "
-            f"{cross['mean_set_size']:.2f}) over {len(folds)} folds by source: " +
-            ", ".join(f"{'+'.join(f['sources'])} {f['coverage']:.3f}" for f in cross["folds"]))
+            f"{cross['mean_set_size']:.2f}) over {len(folds)} " +
+            (f"contiguous blocks of the one source {data.sources[0]} (not held out by source; calibrate on "
+             "several sources for that): " if one else "folds by source: ") +
+            ", ".join(f"{f'block {i + 1}' if one else '+'.join(f['sources'])} {f['coverage']:.3f}"
+                      for i, f in enumerate(cross["folds"])))
         temperature = cal.fit_temperature(logits, data.actions)
         log(f"temperature {temperature:.3f} (NLL {cal.nll(logits, data.actions):.4f} -> "
             f"{cal.nll(logits, data.actions, temperature):.4f} on {len(data.actions)} frames)")
