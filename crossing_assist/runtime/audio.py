@@ -40,6 +40,8 @@ class LiveAudio:
         self.player = player
         self.device = device
         self.blocksize = int(blocksize)
+        if check_s is not None and not check_s > 0:
+            raise ValueError(f"check_s {check_s!r}: a positive number of seconds, or None for no watch")
         self.check_s = check_s
         self.status_count = 0
         self.blocks = 0
@@ -111,8 +113,11 @@ class LiveAudio:
             self._watch = None
         stream, self._stream = self._stream, None
         if stream is not None:
-            stream.stop()
-            stream.close()
+            try:
+                stream.stop()
+                stream.close()
+            except Exception:  # noqa: BLE001 - the device went away under it: abort instead
+                _close(stream)
 
     def __enter__(self) -> "LiveAudio":
         return self.start()
