@@ -60,6 +60,10 @@ def test_portrait_views_spread_left_to_right_with_in_view_flags():
     assert not in2 and x2 is None and b2 == 1
     views = portrait_views(img, None, UNKNOWN, n=2)
     assert all(v[1] is None and v[2] == UNKNOWN and not v[3] for v in views)
+    # a voted strip without far_x (crossing-data votes): its centre decides "in view", no x
+    voted = portrait_views(img, None, 2, n=3)
+    assert [(v[1], v[2], v[3]) for v in voted] == [(None, x_to_bin(bin_center_x(2) * W / 90), True),
+                                                    (None, 1, False), (None, 1, False)]
 
 
 # ----------------------------------------------------------------------------- roll

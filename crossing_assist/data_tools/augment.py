@@ -323,16 +323,19 @@ def portrait_views(image: np.ndarray, far_x: float | None, label: int, n: int = 
                    ) -> list[tuple[np.ndarray, float | None, int, bool]]:
     """``n`` windows of ``aspect`` (3:4 portrait by default) cut from a landscape photo at
     offsets spread evenly from its left to its right edge (:func:`crop_window`): (window, goal
-    x in it or None when out of view, bin, goal in view). Out-of-view goals lie in the edge strip."""
+    x in it or None when out of view, bin, goal in view). Out-of-view goals lie in the edge strip.
+    A voted label without ``far_x`` stands at its strip's centre for the bin and for "in view"
+    (as in :func:`crop_window`); its x stays None (no exact position to measure headings by)."""
     h, w = _check_image(image).shape[:2]
     cw = max(1, int(round(aspect * h)))
+    goal, _ = _goal(far_x, label)
     out = []
     for k in range(n):
         off = k / (n - 1) if n > 1 else 0.5
         win, x, b = crop_window(image, far_x, label, aspect, off)
         x0 = int(round(off * (w - cw)))
-        inside = far_x is not None and b != UNKNOWN and 0.0 <= (far_x * w - x0) / cw < 1.0
-        out.append((win, x if inside else None, b, inside))
+        inside = goal is not None and b != UNKNOWN and 0.0 <= (goal * w - x0) / cw < 1.0
+        out.append((win, x if inside and far_x is not None else None, b, inside))
     return out
 
 
