@@ -26,9 +26,9 @@ HEIF_BRANDS = frozenset({b"heic", b"heix", b"heim", b"heis", b"hevc", b"hevx", b
 AVIF_BRANDS = frozenset({b"avif", b"avis"})
 
 
-def is_heif(head: bytes) -> bool:
-    """Whether a file's first 12 bytes open a HEIC still image (an ``ftyp`` box of a HEIC brand)."""
-    return len(head) >= 12 and head[4:8] == b"ftyp" and head[8:12] in HEIF_BRANDS
+def _brand(head: bytes) -> bytes | None:
+    """The major brand of an ISO base media file (HEIC, AVIF) from its first 12 bytes, else None."""
+    return head[8:12] if len(head) >= 12 and head[4:8] == b"ftyp" else None
 
 
 def _first_line(exc: Exception) -> str:
@@ -76,10 +76,10 @@ def load_rgb(path: str | os.PathLike) -> np.ndarray:
     if not path.is_file():
         raise ImageError(f"{path}: image not found")
     data = np.fromfile(str(path), dtype=np.uint8)
-    head = data[:12].tobytes()
-    if is_heif(head):
+    brand = _brand(data[:12].tobytes())
+    if brand in HEIF_BRANDS:
         return _load_heif(path)
-    if head[4:8] == b"ftyp" and head[8:12] in AVIF_BRANDS:
+    if brand in AVIF_BRANDS:
         img = _load_avif(path)
         if img is not None:
             return img
@@ -133,84 +133,87 @@ def load_frame(path: str | os.PathLike, flags: tuple[str, ...] = ()) -> np.ndarr
 _NEXT_MARKER = re.compile(rb"\xff+([^\x00\xd0-\xd7\xff])")
 
 
-def _jpeg_ends(data: bytes) -> bool:
+#: JPEG start-of-frame markers (0xC0-0xCF but DHT 0xC4, JPG 0xC8, DAC 0xCC): they hold the size.
+_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+
+
+def _jpeg_walk(data: bytes) -> tuple[bool, tuple[int, int] | None]:
     """Whether a JPEG's main image reaches its end marker (EOI), walking its segments and scans
-    from the start. Data after the EOI is allowed: phones append to their JPEGs (Pixel and
-    Samsung motion photos an MP4, depth maps, an MPO's second image)."""
-    i, n = 2, len(data)
+    from the start, and its (height, width) from its frame header. Data after the EOI is allowed:
+    phones append to their JPEGs (Pixel and Samsung motion photos an MP4, depth maps, an MPO's
+    second image)."""
+    i, n, size = 2, len(data), None
     while i + 1 < n:
         if data[i] != 0xFF:
-            return False                               # not at a marker: corrupt
+            return False, size                         # not at a marker: corrupt
         while i + 1 < n and data[i + 1] == 0xFF:       # fill bytes
             i += 1
         if i + 1 >= n:
-            return False
+            return False, size
         marker = data[i + 1]
         if marker == 0xD9:
-            return True
+            return True, size
         if marker == 0x01 or 0xD0 <= marker <= 0xD7:   # standalone markers
             i += 2
             continue
         if i + 4 > n:
-            return False
+            return False, size
         end = i + 2 + int.from_bytes(data[i + 2:i + 4], "big")
+        if marker in _SOF and size is None and i + 9 <= n:
+            size = int.from_bytes(data[i + 5:i + 7], "big"), int.from_bytes(data[i + 7:i + 9], "big")
         if marker == 0xDA:                             # a scan: its coded data runs to the next marker
             m = _NEXT_MARKER.search(data, end)
             if m is None:
-                return False
+                return False, size
             end = m.start(1) - 1
         i = end
-    return False
+    return False, size
 
 
-def _png_ends(data: bytes) -> bool:
-    """Whether a PNG's chunks reach IEND whole (data after it allowed)."""
+def _png_walk(data: bytes) -> tuple[bool, tuple[int, int] | None]:
+    """Whether a PNG's chunks reach IEND whole (data after it allowed), and its (height, width)
+    from its header chunk."""
+    size = (int.from_bytes(data[20:24], "big"), int.from_bytes(data[16:20], "big")) if len(data) >= 24 else None
     i, n = 8, len(data)
     while i + 8 <= n:
         length, kind = int.from_bytes(data[i:i + 4], "big"), data[i + 4:i + 8]
         i += 12 + length
         if kind == b"IEND":
-            return i <= n
-    return False
+            return i <= n, size
+    return False, size
 
 
-def check_image_file(path: str | os.PathLike) -> str | None:
-    """A check that ``path`` holds a whole image: None when it looks fine, else what is wrong
-    ("is empty", "is not an image", "is truncated ..."). JPEG and PNG are walked to their end
-    marker (a truncated JPEG still decodes, with a grey bottom, so decoding alone would pass it;
-    data a phone appends after the end, e.g. a motion photo's video, is fine); other formats are
-    decoded."""
+def inspect_image_file(path: str | os.PathLike) -> tuple[str | None, tuple[int, int] | None]:
+    """``(problem, size)``, one read of the file: what is wrong with it (None when it holds a whole
+    image: "is empty", "is not an image", "is truncated ...") and, when whole, the image's
+    (height, width) as stored (JPEG, PNG) or decoded (other formats; a turn swaps the two, which
+    keeps a square square). JPEG and PNG are walked to their end marker (a truncated JPEG still
+    decodes, with a grey bottom, so decoding alone would pass it; data a phone appends after the
+    end, e.g. a motion photo's video, is fine); other formats are decoded."""
     path = Path(path)
     try:
         data = path.read_bytes()
     except (OSError, ValueError) as exc:
-        return f"cannot be read ({getattr(exc, 'strerror', None) or exc})"
+        return f"cannot be read ({getattr(exc, 'strerror', None) or exc})", None
     if not data:
-        return "is empty"
+        return "is empty", None
     if data[:3] == b"\xff\xd8\xff":
-        return None if _jpeg_ends(data) else "is truncated (no JPEG end marker)"
+        whole, size = _jpeg_walk(data)
+        if not whole:
+            return "is truncated (no JPEG end marker)", None
+        return (None, size) if size else ("is not a readable image (no JPEG frame header)", None)
     if data[:8] == b"\x89PNG\r\n\x1a\n":
-        return None if _png_ends(data) else "is truncated (no PNG end chunk)"
+        whole, size = _png_walk(data)
+        return (None, size) if whole else ("is truncated (no PNG end chunk)", None)
     try:
-        load_rgb(path)
+        return None, load_rgb(path).shape[:2]
     except ImageError:
-        return "is not a readable image (unknown format or corrupt)"
-    return None
+        return "is not a readable image (unknown format or corrupt)", None
 
 
-def is_square_image(path: str | os.PathLike) -> bool:
-    """Whether the image stored at ``path`` is square (any turn keeps a square square). Large
-    images are decoded at an eighth of their size (fast for a 12 MP JPEG), which keeps a square
-    square and a 4:3 photo 4:3; small ones whole, where rounding could make 6×8 look square."""
-    path = Path(path)
-    data = np.fromfile(str(path), dtype=np.uint8)
-    try:
-        img = None if is_heif(data[:12].tobytes()) else cv2.imdecode(data, cv2.IMREAD_REDUCED_GRAYSCALE_8)
-    except cv2.error:   # a few pixels a side: nothing left at an eighth
-        img = None
-    if img is None or min(img.shape[:2]) < 64:
-        img = load_rgb(path)
-    return img.shape[0] == img.shape[1]
+def check_image_file(path: str | os.PathLike) -> str | None:
+    """What is wrong with the image file at ``path``, or None (:func:`inspect_image_file`)."""
+    return inspect_image_file(path)[0]
 
 
 def save_rgb(path: str | os.PathLike, image: np.ndarray, *, quality: int = 92) -> Path:

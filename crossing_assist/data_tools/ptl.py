@@ -23,7 +23,7 @@ from pathlib import Path, PurePosixPath
 from tqdm import tqdm
 
 from crossing_assist.actions import parse_label
-from crossing_assist.data_tools.images import check_image_file, is_square_image
+from crossing_assist.data_tools.images import inspect_image_file
 from crossing_assist.data_tools.manifest import SPLITS, Row, check_row, is_file, reading_csv, write_manifest
 from crossing_assist.errors import UserError
 from crossing_assist.fileio import link_or_copy
@@ -116,10 +116,10 @@ def read_ptl_labels(ptl_dir: Path, square: str = "squashed") -> list[Row]:
             seen[image] = line
             if not is_file(Path(ptl_dir) / image):
                 raise PTLError(f"{path} line {line}: image {image!r} not found in {ptl_dir}")
-            bad = check_image_file(Path(ptl_dir) / image)
+            bad, size = inspect_image_file(Path(ptl_dir) / image)
             if bad:
                 raise PTLError(f"{path} line {line}: image {image!r} {bad}; replace or remove it")
-            if square == "squashed" and is_square_image(Path(ptl_dir) / image):
+            if square == "squashed" and size[0] == size[1]:
                 row = replace(row, flags=(f"aspect={PTL_ASPECT}", *row.flags))
             rows.append(row)
     if not rows:
