@@ -89,6 +89,21 @@ def test_roll_moves_the_goal_as_the_rotation_does(deg):
         assert x > fx
 
 
+def test_roll_fills_the_uncovered_corners_with_the_pad_and_never_shows_the_goal_twice():
+    """Reflected corners could mirror a goal near a side edge into the corner (a second goal, one
+    strip away from the label); the runtime levels with the pad colour, so training rolls do too."""
+    from crossing_assist.geometry import PAD_RGB
+
+    fx, fy = 0.96, 0.3
+    out, x, b = roll(_dot_image(fx, fy), fx, fy, x_to_bin(fx), 15.0)
+    n, _ = cv2.connectedComponents((out[..., 0] > 200).astype(np.uint8))
+    assert n - 1 == 1                                        # one bright dot: the goal, once
+    np.testing.assert_array_equal(out[0, 0], PAD_RGB)          # a corner the camera did not see
+    np.testing.assert_array_equal(out[-1, -1], PAD_RGB)
+    ys, xs = np.nonzero(out[..., 0] > 200)
+    assert x == pytest.approx((xs.mean() + 0.5) / W, abs=1.5 / W) and b == x_to_bin(x)
+
+
 def test_roll_out_of_frame_goes_to_the_edge_and_unknown_stays_unknown():
     img = _photo()
     _, x, b = roll(img, 0.98, 0.98, 12, 20.0)

@@ -13,7 +13,7 @@ import pytest
 from crossing_assist.actions import parse_label, x_to_bin
 from crossing_assist.data_tools.manifest import read_manifest
 from crossing_assist.data_tools.synth import ClipConfig, SynthConfig, synth_clip, synth_frame
-from crossing_assist.data_tools.synth_scene import Camera, Occluder, goal_label, render, sample_scene
+from crossing_assist.data_tools.synth_scene import Camera, Occluder, goal_label, project, render, sample_scene
 
 ASSETS = Path(__file__).resolve().parents[1] / "crossing_assist" / "assets"
 SMALL = SynthConfig(Path("."), width=48, height=36, supersample=1)
@@ -40,7 +40,23 @@ def test_rendered_goal_is_where_the_label_says():
         cols = np.nonzero(red.any(axis=0))[0]
         assert cols.size > 0
         assert abs((cols.min() + cols.max() + 1) / 2 / w - far_x) < 2.0 / w
+        rows = np.nonzero(red.any(axis=1))[0]   # the pole's foot stands on the goal: its height is far_y
+        assert abs((rows.max() + 1) / h - project(cam, g, w, h)[1]) < 2.0 / h
         assert g is not None
+
+
+def test_frames_with_a_goal_carry_its_height_for_rolled_training_views():
+    """far_y lets a rolled field view turn the goal exactly (without it, half height was assumed:
+    about one strip off near a side edge at 15 degrees)."""
+    from crossing_assist.data_tools.images import flag_value
+
+    rows = [synth_frame(1, i, replace(SMALL, unknown_fraction=0.5))[1] for i in range(30)]
+    known = [r for r in rows if r.label != 0]
+    assert known and len(known) < len(rows)
+    for r in known:
+        assert 0.0 <= float(flag_value(r.flags, "far_y")) <= 1.0
+    assert len({flag_value(r.flags, "far_y") for r in known}) > len(known) // 2
+    assert all(flag_value(r.flags, "far_y") is None for r in rows if r.label == 0)
 
 
 def test_frames_are_deterministic_per_seed_and_index():

@@ -2,6 +2,8 @@
 content window, field-view variants seeded by (seed, field, image), windows cached beside the
 features (issue 12/13)."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -90,6 +92,30 @@ def test_training_frames_are_the_pixels_the_bundle_serves(ds):
         assert np.array_equal(img, letterbox(served.camera_view(frame, CANVAS), CANVAS, PAD_RGB)), row.image
 
 
+def test_field_views_turn_the_goal_at_its_height_in_the_rows_kept(ds, monkeypatch):
+    """far_y is a fraction of the photo's height; a portrait frame loses rows to the view crop, so
+    the roll must get the goal's height in the rows kept (and far_y = 0 is a height, not missing)."""
+    from crossing_assist.data_tools import augment
+
+    seen = {}
+    real = augment.field_view
+
+    def spy(image, far_x, far_y, *args, **kwargs):
+        seen[image.shape] = far_y
+        return real(image, far_x, far_y, *args, **kwargs)
+
+    monkeypatch.setattr(augment, "field_view", spy)
+    portrait = ds.rows[2]                                         # 80 x 60, far_y 0.6
+    top, rows = letterbox_geometry().rows_seen(80, 60, letterbox_geometry().camera_fov(60, 80), CANVAS)
+    assert rows < 80                                              # the view crop removes rows here
+    load_variants(ds, portrait, CANVAS, (Variant(field=0),), 67.0, fit="letterbox")
+    assert seen[(rows, 60, 3)] == pytest.approx((0.6 * 80 - top) / rows)
+    at_top = replace(ds.rows[0], flags=("far_y=0",))
+    seen.clear()
+    load_variants(ds, at_top, CANVAS, (Variant(field=0),), 67.0, fit="letterbox")
+    assert list(seen.values()) == [0.0]
+
+
 def test_field_variants_are_seeded_by_seed_field_and_image(ds):
     fields = tuple(Variant(field=i) for i in range(6))
     row = ds.rows[0]
@@ -121,6 +147,9 @@ def test_windows_are_cached_with_the_features_and_keyed_by_fit_and_seed(ds, tmp_
     assert len(keys) == 4
     ident = make_variants(False)
     assert cache_key(bb, k, CANVAS, ident, 67.0, ds) == cache_key(bb, k, CANVAS, ident, 67.0, ds, "stretch", 5)
+    # a row's flags change its pixels (aspect=4:3) or its field views' goals (far_y): a new key
+    ds2 = replace(ds, rows=[replace(ds.rows[0], flags=("far_y=0.3",)), *ds.rows[1:]])
+    assert cache_key(bb, k, CANVAS, vs, 67.0, ds2, "letterbox") != cache_key(bb, k, CANVAS, vs, 67.0, ds, "letterbox")
 
 
 def test_field_view_features_are_keyed_by_the_field_recipe(ds, monkeypatch):

@@ -33,7 +33,7 @@ from crossing_assist.actions import (
     parse_label, x_to_bin, x_to_heading,
 )
 
-from crossing_assist.geometry import window_fov, window_x
+from crossing_assist.geometry import PAD_RGB, window_fov, window_x
 
 OUT_OF_FRAME_MODES = ("unknown", "edge")
 
@@ -180,8 +180,9 @@ def random_augment(image: np.ndarray, far_x: float | None, label: int, rng: np.r
 #: on 2026-11-29 and did not help portrait frames: docs/models.md.)
 FIELD_ASPECTS = ((3 / 4, 0.45), (9 / 16, 0.15), (1.0, 0.15), (16 / 9, 0.10), (4 / 3, 0.15))
 #: Bump when :func:`field_view` draws differently with the same aspects: cached features of field
-#: views are keyed by :func:`field_recipe`.
-FIELD_VERSION = 1
+#: views are keyed by :func:`field_recipe`. 2 (2026-12-04): rolled corners filled with the pad
+#: colour, as the runtime levels a frame (they were reflected, which could mirror the goal).
+FIELD_VERSION = 2
 #: The steps of a field view, in order; each (or one corruption by name) can be left out for an
 #: ablation (``crossing-train --field-without``).
 FIELD_STEPS = ("mirror", "roll", "aspect", "corruption")
@@ -229,14 +230,16 @@ def _in_window(far_x: float | None, label: int, x0: int, cw: int, w: int) -> tup
 def roll(image: np.ndarray, far_x: float | None, far_y: float, label: int, roll_deg: float,
          ) -> tuple[np.ndarray, float | None, int]:
     """Rotate the frame by ``roll_deg`` about its centre (the phone tilted sideways; positive =
-    counter-clockwise), borders reflected. The goal at (far_x, far_y) rotates with it; a goal
-    rotated out of the frame goes to the edge strip it left by (out of view, inferable)."""
+    counter-clockwise), the corners it uncovers filled with ``PAD_RGB`` as the runtime's levelling
+    (:func:`crossing_assist.geometry.level`) fills them: a reflection could show the goal twice.
+    The goal at (far_x, far_y) rotates with it; a goal rotated out of the frame goes to the edge
+    strip it left by (out of view, inferable)."""
     image = _check_image(image)
     far_x, _ = _goal(far_x, label)
     h, w = image.shape[:2]
     m = cv2.getRotationMatrix2D((w / 2 - 0.5, h / 2 - 0.5), float(roll_deg), 1.0)
     out = cv2.warpAffine(np.ascontiguousarray(image), m, (w, h), flags=cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_REFLECT_101)
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=tuple(int(v) for v in PAD_RGB))
     if far_x is None:
         return out, None, UNKNOWN
     px, py = far_x * w - 0.5, far_y * h - 0.5

@@ -29,7 +29,7 @@ from tqdm import tqdm
 from crossing_assist.actions import DEFAULT_FOV_DEG, format_label
 from crossing_assist.data_tools.images import save_rgb
 from crossing_assist.data_tools.manifest import Row, atomic_write_text, write_manifest
-from crossing_assist.data_tools.synth_scene import Camera, Occluder, Scene, goal_label, render, sample_scene
+from crossing_assist.data_tools.synth_scene import Camera, Occluder, Scene, goal_label, project, render, sample_scene
 from crossing_assist.errors import UserError
 
 
@@ -104,6 +104,8 @@ def synth_frame(seed: int, index: int, cfg: SynthConfig) -> tuple[np.ndarray, Ro
     image = render(scene, cam, cfg.width, cfg.height, rng=rng, supersample=cfg.supersample)
     far_x, label, blocked = goal_label(scene, cam, cfg.width, cfg.height)
     flags = ["synthetic", f"marking={scene.marking if scene.has_road else 'none'}", f"lighting={scene.lighting}"]
+    if far_x is not None:   # the goal's height too, as PTL rows carry it: a rolled training view turns it exactly
+        flags.append(f"far_y={project(cam, scene.goal(), cfg.width, cfg.height)[1]:.4f}")
     if wall:
         flags.append("view=wall")
     elif no_crossing:

@@ -7,7 +7,7 @@ on the canvas), ``row.npy`` (index of the dataset row each sample
 came from), ``variant.npy`` (index into the variant list) and ``meta.json``. The key hashes
 everything that changes the features: backbone name, weights source *and* file fingerprint,
 number of frozen blocks, input size, mean/std, the variants (mirroring, yaw angles, field views, their seed and recipe, FOV), the fit and
-the dataset rows (image paths, labels, file sizes and mtimes). ``meta.json`` is written last
+the dataset rows (image paths, labels, flags, file sizes and mtimes). ``meta.json`` is written last
 (atomically), so a half-written entry is never used. Processes sharing a cache take turns on
 an entry (:func:`entry_lock`): the first computes it, the others wait and read it; a run first
 builds the entries no other process is building (``wait=False``), then waits for the rest.
@@ -56,7 +56,8 @@ def _dataset_fingerprint(ds: Dataset) -> str:
     for r in ds.rows:
         p = ds.image_path(r)
         st = os.stat(p)
-        h.update(f"{r.image}|{r.label}|{r.far_x}|{st.st_size}|{st.st_mtime_ns}\n".encode())
+        # flags change the pixels (aspect=4:3 unsquashes) and field views' goals (far_y)
+        h.update(f"{r.image}|{r.label}|{r.far_x}|{' '.join(r.flags)}|{st.st_size}|{st.st_mtime_ns}\n".encode())
     return h.hexdigest()
 
 

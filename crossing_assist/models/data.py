@@ -105,14 +105,18 @@ def load_variants(ds: Dataset, row: Row, size: tuple[int, int], variants: tuple[
     # Engine.predict crops them, so it is learned at the scale it is served (4:3 keeps them all)
     zoom = max((v.zoom for v in variants if v.field >= 0), default=1.0)
     path = ds.image_path(row)
+    frame = load_frame(path, row.flags)
+    geo, (fh, fw) = letterbox_geometry(fov_deg, view_zoom=zoom), frame.shape[:2]
     try:
-        base = letterbox_geometry(fov_deg, view_zoom=zoom).camera_view(load_frame(path, row.flags), size)
+        top, rows = geo.rows_seen(fh, fw, geo.camera_fov(fw, fh), size)   # as geo.camera_view crops
     except GeometryError as exc:
         raise ImageError(f"{path}: {exc}") from None
+    base = frame[top:top + rows]
+    far_y = flag_value(row.flags, "far_y")   # a fraction of the frame's height: of the rows kept
+    far_y = 0.5 if far_y is None else (float(far_y) * fh - top) / rows
     scale = 2 * max(size) / max(base.shape[:2])
     if scale < 1:  # keep a margin over the canvas for crops, but do not warp megapixels
         base = resize_rgb(base, (max(8, round(base.shape[0] * scale)), max(8, round(base.shape[1] * scale))))
-    far_y = float(flag_value(row.flags, "far_y") or 0.5)
     for v in variants:
         if v.field >= 0:
             img, fx, lab, _ = augment.field_view(base, row.far_x, far_y, row.label, _field_rng(seed, v.field, row.image),
