@@ -85,6 +85,26 @@ def test_confident_frames_guide_toward_their_bin():
     assert out[-1].pan < -0.3
 
 
+@pytest.mark.parametrize("gap_s", [0.6, 1.0, 1.4])
+def test_after_a_stall_no_old_direction_comes_back(gap_s):
+    """Frames stop for longer than the watchdog (no ticks: an offline clip, or a camera that
+    stalls), then come back showing nothing: silence, not the heading from before the stall."""
+    d = Decider(DecisionConfig())
+    before = run(d, [obs_bin(10, 0.95)] * 20)
+    assert not before[-1].stop
+    after = run(d, [FLAT] * 15, t0=19 / FPS + gap_s)
+    assert all(o.stop and o.hold_heading is None for o in after)
+    again = run(d, [obs_bin(4, 0.95)] * 10, t0=19 / FPS + gap_s + 0.5)   # fresh evidence guides again
+    assert not again[-1].stop and abs(again[-1].heading_deg - heading(4)) < 3.0
+
+
+def test_a_gap_shorter_than_the_watchdog_keeps_the_hold():
+    d = Decider(DecisionConfig())
+    run(d, [obs_bin(10, 0.95)] * 20)
+    out = run(d, [FLAT] * 3, t0=19 / FPS + 0.3)
+    assert not out[0].stop and out[0].hold_heading is not None   # still guided: not a stall
+
+
 def test_one_odd_frame_does_not_swing_the_beacon():
     d = Decider(DecisionConfig())
     out = run(d, [obs_bin(3)] * 30 + [obs_bin(11)] + [obs_bin(3)] * 3)

@@ -114,9 +114,21 @@ def test_narrow_camera_vectors_speak_only_at_the_narrow_threshold(stored):
     assert guided == {((1080, 1920), True), ((480, 640), False), ((1920, 1080), False)}
 
 
+def test_no_direction_from_before_a_stall_comes_back(stored):
+    """Version 10, step 4a: guided before a 1 s stall; when frames showing nothing come back,
+    the beacon stays off (the hold and belief from before the stall put the old heading back on
+    for 0.2-0.4 s: a stale direction after the stop cue)."""
+    sc = next(sc for sc in stored["scenarios"] if sc["name"] == "stall_then_nothing")
+    steps = sc["steps"]
+    assert not steps[19]["expect"]["stop"]                        # guided before the stall
+    assert any(r["expect"]["reason"] == "stale" for r in steps)   # the stall was noticed
+    after = [r for r in steps if r["obs"] is not None and r["t"] > steps[19]["t"]]
+    assert after and all(r["expect"]["stop"] and r["expect"]["hold_heading"] is None for r in after)
+
+
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == 9
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == 10
     assert "decision steps" in capsys.readouterr().out
 
 

@@ -173,6 +173,10 @@ class Decider:
         if self.hold_heading is not None:  # 3
             self.hold_heading -= psi
             self.hold_turned += abs(psi)
+        if obs is not None and self.t_last_ok is not None and t - self.t_last_ok > cfg.watchdog_s:
+            # 4a: the first frame after a stall: what was believed before it is stale (the user
+            # may have turned or walked on), so the frame meets a fresh belief and no hold
+            self.belief, self.hold_heading = bf.uniform_belief(), None
         w = self._evidence(t, obs)  # 4
         a_l, h_l = bf.belief_heading(self.belief, self.space, cfg.fov_deg)  # 5
         u_l = cfg.learner_uncertainty(self.belief, self.space) if h_l is not None else math.inf

@@ -74,6 +74,12 @@ Version 9: ``geometry.level``, levelling a rolled camera's frame
 (:func:`crossing_assist.geometry.level_angle`: how far a roll is turned back, clamped, small ones
 left alone) and ``pad_rgb``, what fills the corners the camera did not see. The scenarios are
 those of version 8.
+
+Version 10: step 4a of the decision logic (the first frame after a stall, more than the
+watchdog since the last successful one, meets a fresh belief and no hold): scenario
+``stall_then_nothing``, a steady goal, 1 s of ticks, then frames showing nothing. Before it, the
+hold and the belief from before the stall put the old direction back on for 0.2-0.4 s. The
+scenarios before it are those of version 9.
 """
 
 from __future__ import annotations
@@ -101,7 +107,7 @@ from crossing_assist.runtime.status import STATUS_STOP, status_message
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 9
+VERSION = 10
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -190,6 +196,13 @@ def _scenarios(rng: np.random.Generator) -> list[tuple[str, DecisionConfig, list
     cf = dataclasses.replace(base, measure="far_mass", threshold=0.06)
     out.append(("far_mass_neighbours", cf, [(i / FPS, 0.0, raw(near if i < 30 or i >= 90 else far))
                                             for i in range(120)]))
+    # version 10: the camera stalls for 1 s (ticks keep coming), then frames come back showing
+    # nothing: the direction from before the stall must not come back (step 4a)
+    stall = [(i / FPS, 0.0, _frame(13, 9, 0.95, rng)) for i in range(20)]
+    resume = 20 / FPS + 1.0
+    stall += [(20 / FPS + 0.1 * (j + 1), 0.0, None) for j in range(10)]
+    stall += [(resume + j / FPS, 0.0, flat) for j in range(1, 16)]
+    out.append(("stall_then_nothing", base, stall))
     return out
 
 

@@ -298,6 +298,11 @@ export class Decider {
       this.holdHeading -= psi;
       this.holdTurned += Math.abs(psi);
     }
+    if (obs && this.tLastOk !== null && t - this.tLastOk > cfg.watchdog_s) {
+      // 4a: the first frame after a stall meets a fresh belief and no hold
+      this.belief = uniformBelief();
+      this.holdHeading = null;
+    }
     let w = 0;
     if (obs && obs.ok) {
       w = frameWeight(obs, this.cFrame, cfg.threshold);
