@@ -395,3 +395,23 @@ def test_phone_views_are_what_a_portrait_phone_sees_and_the_view_crop_recovers_t
     assert sets["portrait"][0][4] == 53.0
     assert sets["portrait_window"][0][4] == pytest.approx(window_fov(360 / 640, 67.0)) and sets["portrait_window"][0][0].shape == (480, 360, 3)
     assert window_fov(360 / 640, 67.0) == pytest.approx(40.9, abs=0.1)
+
+
+def test_a_portrait_no_crossing_frame_is_each_portrait_view_once_at_that_views_fov():
+    """crossing-eval's portrait sets of a no-crossing frame already 3:4 (half of PTL's negatives):
+    the frame itself once a set, at the phone's FOV and at a 3:4 window's; cutting it gave the
+    same frame n times at a landscape window's 67 deg (the portrait threshold instead of the
+    narrow camera's)."""
+    from crossing_assist.data_tools.augment import user_views
+    from crossing_assist.geometry import letterbox_geometry, window_fov
+
+    geo = letterbox_geometry()
+    frame = _photo()[:, :90]                                  # 120 x 90: 3:4
+    views = user_views(frame, None, UNKNOWN, 3, geo)
+    assert {k: len(v) for k, v in views.items()} == {"landscape": 1, "portrait": 1, "portrait_window": 1}
+    (p,), (w,) = views["portrait"], views["portrait_window"]
+    assert p[0] is frame and w[0] is frame and p[1:4] == (None, UNKNOWN, False) == w[1:4]
+    assert p[4] == geo.camera_fov_deg[1] and w[4] == pytest.approx(window_fov(9 / 16, geo.train_fov_deg))
+    landscape = user_views(_photo(), None, UNKNOWN, 3, geo)   # a 4:3 one is cut as photos are
+    assert len(landscape["portrait"]) == len(landscape["portrait_window"]) == 3
+    assert user_views(frame, 0.5, 6, 3, geo).keys() == {"landscape"}   # a portrait photo with a crossing

@@ -97,12 +97,15 @@ def test_crossing_eval_bundle_writes_listen_numbers_and_risk_coverage(tmp_path, 
                         "--clip-seconds", "0.5", "--examples", "0", "--out", str(out), "--quiet"],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    assert "landscape (heard, 6 + 3 no-crossing frames)" in r.stdout
-    assert "portrait (heard, 12 + 6 no-crossing frames)" in r.stdout
-    assert "portrait_window (heard, 12 + 6 no-crossing frames)" in r.stdout
+    assert "landscape (6 + 3 no-crossing frames" in r.stdout
+    assert "portrait (12 + 6 no-crossing frames" in r.stdout
+    assert "portrait_window (12 + 6 no-crossing frames" in r.stdout
     m = json.loads((out / "metrics.json").read_text())
     lis = m["listen"]
     land, port, win = lis["landscape"], lis["portrait"], lis["portrait_window"]
+    # the first frame's argmax is the model's figure; what is heard is the last decision's strip
+    assert f"model, first frame: accuracy {land['accuracy']:.3f}" in r.stdout
+    assert f"on the right strip {land['accuracy_heard']:.3f}" in r.stdout
     assert land["frames_with_crossing"] == 6 and land["frames_without_crossing"] == 3
     assert port["frames_with_crossing"] == 12 and port["frames_without_crossing"] == 6
     assert win["frames_with_crossing"] == 12 and win["bundle_threshold"] == port["bundle_threshold"]
@@ -292,7 +295,7 @@ def test_crossing_eval_on_portrait_photos_sweeps_around_the_portrait_threshold(t
                         "--data", str(data), "--split", "val", "--portrait", "0", "--clip-seconds", "0.5",
                         "--examples", "0", "--out", str(out), "--quiet"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    assert "as taken (3 portrait) (heard, 3 + 0 no-crossing frames)" in r.stdout
+    assert "as taken (3 portrait) (3 + 0 no-crossing frames" in r.stdout
     view = json.loads((out / "metrics.json").read_text())["listen"]["landscape"]
     assert view["orientations"] == {"portrait": 3} and view["bundle_threshold"] == pytest.approx(1e-6)
     at_one = next(c for c in view["risk_coverage"] if c["scale"] == 1.0)

@@ -392,10 +392,16 @@ def user_views(image: np.ndarray, far_x: float | None, label: int, n: int,
     bundle's), and with ``n`` > 0 views a photo the :func:`portrait_sets` at the bundle's portrait
     FOV; each view ``(frame, far_x, label, goal in view, FOV)``. Portrait views are cut from
     landscape photos only: they assume the photo spans the training camera's FOV across its width,
-    and a portrait photo with a crossing already is what a phone held upright sees (any cut of a
-    no-crossing frame is still one, so those give their views whatever their shape)."""
+    and a portrait photo with a crossing already is what a phone held upright sees. A no-crossing
+    frame already portrait (or square) is each set's view once, itself, at that set's FOV (its
+    windows would be the frame again, counted ``n`` times at a landscape window's FOV)."""
     views = {"landscape": [(image, far_x, label, label != 0, None)]}
-    if n and (image.shape[1] > image.shape[0] or label == UNKNOWN):
-        views.update(portrait_sets(image, far_x, label, n, portrait_fov_deg=geometry.camera_fov_deg[1],
-                                   train_fov_deg=geometry.train_fov_deg))
+    if not n:
+        return views
+    phone_fov, train_fov = geometry.camera_fov_deg[1], geometry.train_fov_deg
+    if image.shape[1] > image.shape[0]:
+        views.update(portrait_sets(image, far_x, label, n, portrait_fov_deg=phone_fov, train_fov_deg=train_fov))
+    elif label == UNKNOWN:   # a 3:4 window of a 4:3 photo spans 9/16 of its width
+        views.update(portrait=[(image, None, UNKNOWN, False, phone_fov)],
+                     portrait_window=[(image, None, UNKNOWN, False, window_fov(9 / 16, train_fov))])
     return views

@@ -215,10 +215,13 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                 kinds = v.get("orientations") or {}
                 label = name if name != "landscape" or set(kinds) <= {"landscape"} else \
                     "as taken (" + ", ".join(f"{n} {o}" for o, n in sorted(kinds.items())) + ")"
-                print(f"{label:>15} (heard, {v['frames_with_crossing']} + {v['frames_without_crossing']} no-crossing "
-                      f"frames): accuracy {f(v['accuracy'])}, bin MAE {f(v['bin_mae'])}, far-x error "
-                      f"{f(v['far_x_error'], '.4f')}, beacon on {f(v['beacon_on'])} (goal in view "
-                      f"{f(v['beacon_on_goal_in_view'])}), confidently wrong {f(v['confidently_wrong'], '.4f')}, "
+                print(f"{label:>15} ({v['frames_with_crossing']} + {v['frames_without_crossing']} no-crossing "
+                      f"frames, each a still clip through the runtime)")
+                print(f"{'':>15} model, first frame: accuracy {f(v['accuracy'])}, bin MAE {f(v['bin_mae'])}, "
+                      f"far-x error {f(v['far_x_error'], '.4f')} (of the view's width)")
+                print(f"{'':>15} heard, last decision: beacon on {f(v['beacon_on'])} (goal in view "
+                      f"{f(v['beacon_on_goal_in_view'])}), on the right strip {f(v['accuracy_heard'])}, "
+                      f"confidently wrong {f(v['confidently_wrong'], '.4f')} (of frames with a crossing), "
                       f"silence off-crossing {f(v['silence_no_crossing'])}")
                 e = v.get("heading_error_deg") or {}
                 if e.get("n"):
