@@ -189,3 +189,13 @@ def test_a_phone_video_plays_upright_at_its_frames_own_times():
     assert [round(clock.time(0.0), 3) for _ in range(3)] == [0.0, 0.04, 0.08]
     clock = FrameClock(30.0)
     assert [clock.time(m) for m in (0.0, 100.0, 50.0, float("nan"))] == pytest.approx([0.0, 0.1, 0.1 + 1 / 30, 0.1 + 2 / 30])
+
+
+@pytest.mark.parametrize("w, h, want", [(1280, 721, (361, 640)), (1280, 720, (360, 640)), (1920, 1081, (360, 640)),
+                                        (1281, 3, (1, 640)), (640, 480, (480, 640))])
+def test_video_frames_are_downscaled_to_the_apps_size(w, h, want):
+    """Frames wider than 640 px are scaled down as the app scales them (camera.js grab: halves
+    round up), so Python and the phone give the graph the same number of rows."""
+    from crossing_assist.runtime.sources import _to_rgb
+
+    assert _to_rgb(np.zeros((h, w, 3), np.uint8), 640).shape[:2] == want

@@ -6,6 +6,8 @@ the video ends or the camera stops delivering. Tests substitute any iterable of 
 
 from __future__ import annotations
 
+import math
+
 import time
 from pathlib import Path
 from typing import Iterator
@@ -75,6 +77,8 @@ class CameraSource:
 
 def _to_rgb(bgr: np.ndarray, max_width: int | None) -> np.ndarray:
     if max_width and bgr.shape[1] > max_width:
-        h = round(bgr.shape[0] * max_width / bgr.shape[1])
+        # the app's arithmetic (camera.js grab): halves round up, as Math.round does (Python's
+        # round() gave 1280 x 721 360 rows where the app gives 361)
+        h = max(1, math.floor(bgr.shape[0] * (max_width / bgr.shape[1]) + 0.5))
         bgr = cv2.resize(bgr, (max_width, h), interpolation=cv2.INTER_AREA)
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
