@@ -199,3 +199,57 @@ def test_video_frames_are_downscaled_to_the_apps_size(w, h, want):
     from crossing_assist.runtime.sources import _to_rgb
 
     assert _to_rgb(np.zeros((h, w, 3), np.uint8), 640).shape[:2] == want
+
+
+class _QueueingCamera:
+    """A camera driver's queue: a frame every ``period`` s, each stamped in its pixels with its
+    index; ``read()`` blocks for the next one."""
+
+    def __init__(self, period: float, n: int) -> None:
+        import time
+
+        self.period, self.n, self.start, self.i, self.released = period, n, time.monotonic(), 0, False
+
+    def isOpened(self):   # noqa: N802 (OpenCV's name)
+        return True
+
+    def get(self, prop):
+        return 0.0
+
+    def read(self):
+        import time
+
+        if self.i >= self.n:
+            return False, None
+        due = self.start + (self.i + 1) * self.period   # frame i arrives at its period's end
+        time.sleep(max(0.0, due - time.monotonic()))
+        frame = np.full((8, 8, 3), self.i, np.uint8)
+        self.i += 1
+        return True, frame
+
+    def release(self):
+        self.released = True
+
+
+def test_a_slow_loop_gets_the_newest_camera_frame_stamped_when_it_arrived(monkeypatch):
+    """Behind a slow model the loop must get the newest frame, stamped when it arrived, not the
+    oldest queued one stamped when read (it was counted fresh while 4 periods old)."""
+    import time
+
+    import cv2
+
+    from crossing_assist.runtime import sources
+
+    cam = _QueueingCamera(period=0.02, n=40)
+    monkeypatch.setattr(cv2, "VideoCapture", lambda index: cam)
+    src = sources.CameraSource(0)
+    taken = []
+    for t, rgb in src:
+        taken.append((int(rgb[0, 0, 0]), t, time.monotonic()))
+        time.sleep(0.1)                                   # the model: five camera periods a frame
+    indices = [i for i, _, _ in taken]
+    assert indices == sorted(indices) and len(indices) < 20 and src.dropped > 20
+    for i, t, got in taken[1:]:
+        assert abs(t - (cam.start + (i + 1) * cam.period)) < 0.1    # stamped on arrival (a read stamp
+        assert got - t < 0.1                                         # lagged 0.08 s more each frame)
+    assert cam.released

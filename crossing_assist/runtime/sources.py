@@ -7,6 +7,7 @@ the video ends or the camera stops delivering. Tests substitute any iterable of 
 from __future__ import annotations
 
 import math
+import threading
 
 import time
 from pathlib import Path
@@ -53,7 +54,13 @@ class VideoSource:
 
 
 class CameraSource:
-    """Frames from camera ``index``; ``t`` is ``time.monotonic()`` at capture."""
+    """The newest frame of camera ``index`` each time the loop asks; ``t`` is ``time.monotonic()``
+    when the driver handed it over.
+
+    A reader thread takes every frame as it arrives and keeps only the newest: reading in the
+    loop itself returns the oldest of the driver's queued frames (V4L2 keeps about four), so
+    behind a slow model a frame 4 camera periods old (0.8 s at 5 fps in low light) was stamped
+    now and counted fresh. Frames the loop had no time for are dropped, never queued."""
 
     def __init__(self, index: int, *, max_width: int | None = 640) -> None:
         self._cap = cv2.VideoCapture(int(index))
@@ -63,16 +70,45 @@ class CameraSource:
         fps = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
         self.fps = fps if 1.0 <= fps <= 240.0 else 30.0
         self.frame_count = 0
+        self.dropped = 0   # frames the loop never took (a newer one had arrived)
 
     def __iter__(self) -> Iterator[tuple[float, np.ndarray]]:
+        newest: list = [None, 0.0, 0]   # frame (BGR) or None, its time, how many have arrived
+        ended = threading.Event()
+        arrived = threading.Condition()
+
+        def read() -> None:
+            try:
+                while not ended.is_set():
+                    ok, bgr = self._cap.read()
+                    t = time.monotonic()
+                    if not ok or bgr is None:
+                        return
+                    with arrived:
+                        newest[:] = [bgr, t, newest[2] + 1]
+                        arrived.notify()
+            finally:
+                self._cap.release()   # here, never while a read may still be running
+                with arrived:
+                    ended.set()
+                    arrived.notify()
+
+        reader = threading.Thread(target=read, name="camera-reader", daemon=True)
+        reader.start()
+        taken = 0
         try:
             while True:
-                ok, bgr = self._cap.read()
-                if not ok or bgr is None:
-                    return
-                yield time.monotonic(), _to_rgb(bgr, self.max_width)
+                with arrived:
+                    arrived.wait_for(lambda: newest[2] > taken or ended.is_set())
+                    if newest[2] == taken:   # the camera ended with no frame left
+                        return
+                    bgr, t, count = newest
+                self.dropped += count - taken - 1
+                taken = count
+                yield t, _to_rgb(bgr, self.max_width)
         finally:
-            self._cap.release()
+            ended.set()   # the reader stops after its current read (a hung camera: when it returns)
+            reader.join(timeout=2.0)
 
 
 def _to_rgb(bgr: np.ndarray, max_width: int | None) -> np.ndarray:
