@@ -397,6 +397,54 @@ test('speech: a heading hopping over the 7.5 deg boundary is announced once; sto
   assert.equal(q.step(3.0, go(-30))[0], 'Turn left.');
 });
 
+test('speech: an urgent sentence (how to recover) is heard whole; a routine one said meanwhile follows it', async (t) => {
+  const { Speaker, urgentHoldMs } = await import('../www/js/speech.js');
+  // a voice that speaks one utterance at a time: cancel() cuts it (an 'error' event), as in browsers
+  const log = [];
+  let current = null;
+  const synth = {
+    speak(u) { current = u; log.push(`speak ${u.text}`); },
+    cancel() {
+      if (!current) return;
+      const u = current;
+      current = null;
+      log.push(`cut ${u.text}`);
+      u.dispatchEvent(new Event('error'));
+    },
+  };
+  const finish = () => { const u = current; current = null; u.dispatchEvent(new Event('end')); };
+  class Utterance extends EventTarget { constructor(text) { super(); this.text = text; } }
+  globalThis.speechSynthesis = synth;
+  globalThis.SpeechSynthesisUtterance = Utterance;
+  t.after(() => { delete globalThis.speechSynthesis; delete globalThis.SpeechSynthesisUtterance; });
+  t.mock.timers.enable({ apis: ['setTimeout'] });
+  let ms = 0;
+  const s = new Speaker(true, () => ms);
+  const lost = 'The camera stopped (another app took it, or it was switched off). Double tap to end, then tap to start.';
+  s.say(lost, { urgent: true });
+  ms = 440;
+  s.say('Stop. Camera stalled.'); // the watchdog, half a second later: must not cut the instruction
+  s.say('Stop. Not sure: scan slowly.'); // only the latest routine sentence waits
+  assert.deepEqual(log, [`speak ${lost}`]);
+  ms = 6000;
+  finish();
+  assert.deepEqual(log, [`speak ${lost}`, 'speak Stop. Not sure: scan slowly.']);
+  s.say('Turn left.'); // routine sentences cut each other, as before
+  assert.deepEqual(log.slice(2), ['cut Stop. Not sure: scan slowly.', 'speak Turn left.']);
+  // an urgent sentence cuts anything; one whose end never comes holds routine ones back only so long
+  s.say('Audio stopped. Tap to resume.', { urgent: true });
+  ms += 100;
+  s.say('Go straight ahead.');
+  assert.equal(log.at(-1), 'speak Audio stopped. Tap to resume.');
+  const hold = urgentHoldMs('Audio stopped. Tap to resume.');
+  assert.ok(hold > 2000 && hold < 10000, hold);
+  t.mock.timers.tick(hold - 150);
+  assert.equal(log.at(-1), 'speak Audio stopped. Tap to resume.');
+  ms += hold;
+  t.mock.timers.tick(100);
+  assert.deepEqual(log.slice(-2), ['cut Audio stopped. Tap to resume.', 'speak Go straight ahead.']);
+});
+
 test('haptics: a pattern per stop reason, again on each change of reason; the direction code', async () => {
   const { DIRECTION_PATTERNS, Haptics, STOP_PATTERNS } = await import('../www/js/haptics.js');
   const got = [];

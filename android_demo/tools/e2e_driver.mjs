@@ -8,7 +8,9 @@
 //        [--chromium /usr/bin/chromium] [--phases full|short] [--viewport 844x390]
 //
 // Speech (speechSynthesis.speak), vibration (navigator.vibrate) and the screen wake lock are
-// wrapped so their calls are recorded (speech still goes to the real speechSynthesis).
+// wrapped so their calls are recorded. Headless Chromium has no voice (each utterance fails at
+// once), so speechSynthesis is a fake voice: an utterance lasts 60 ms a character and ends
+// ('end'), unless cancel() cuts it ('error'); window.__heard says how each one went.
 //
 // Phases "full": first load (requests counted until the service worker holds the app) ->
 // accessibility tree with the helper view closed and open -> the self-test (shared vectors) ->
@@ -17,6 +19,10 @@
 // tap (must not end) -> AudioContext suspended (must stop, vibrate, speak) and a tap (resumes)
 // -> app hidden (audio suspended there too) and shown again (pause; audio resumed and wake
 // lock asked again on the return) -> camera frozen (watchdog) ->
+// the audio taken and given back by itself (no tap) -> the app hidden and shown while a model run
+// is in flight -> a model run of 450 ms at 10 frames/s (frames wait for the model: their own
+// capture time, logged by the driver's own requestVideoFrameCallback, must decide freshness) ->
+// the camera track ends (the camera-lost instruction must be heard whole) ->
 // double tap ends -> a failed start, then a good one (the error must go) -> the landscape FOV
 // set in the helper view (10 refused, 60 taken) -> long press ends ->
 // server stopped, reload, start again (offline; settings kept: no tutorial).
@@ -121,9 +127,25 @@ function instrument() {
   window.__speech = [];
   window.__wakeLocks = [];
   navigator.vibrate = (p) => { window.__vibrations.push({ t: t(), pattern: Array.isArray(p) ? p : [p] }); return true; };
+  window.__heard = [];
   if (window.speechSynthesis) {
-    const speak = speechSynthesis.speak.bind(speechSynthesis);
-    speechSynthesis.speak = (u) => { window.__speech.push({ t: t(), text: u.text }); speak(u); };
+    let current = null; // {u, heard, timer}
+    const over = (how) => {
+      const c = current;
+      current = null;
+      clearTimeout(c.timer);
+      c.heard.end = t();
+      c.heard.how = how;
+      c.u.dispatchEvent(new Event(how === 'whole' ? 'end' : 'error'));
+    };
+    speechSynthesis.cancel = () => current && over('cut');
+    speechSynthesis.speak = (u) => {
+      window.__speech.push({ t: t(), text: u.text });
+      if (current) over('cut'); // one voice: the app cancels first; a leftover would be cut
+      const heard = { text: u.text, start: t(), end: null, how: null };
+      window.__heard.push(heard);
+      current = { u, heard, timer: setTimeout(() => over('whole'), 60 * u.text.length) };
+    };
   }
   Object.defineProperty(navigator, 'wakeLock', { configurable: true, value: {
     request: async (type) => {
@@ -161,7 +183,7 @@ const screenState = () => {
     label: document.getElementById('control-label').textContent, control: [r.x, r.y, r.width, r.height],
     error: err.hidden ? null : err.textContent, strips_on: document.querySelectorAll('#grid .on, #strips .on').length,
     audio: a.audio ? a.audio.state() : null, audio_failed: a.audioFailed, paused: a.paused,
-    speech: window.__speech.slice(), vibrations: window.__vibrations.slice(), wake_locks: window.__wakeLocks.slice(),
+    speech: window.__speech.slice(), heard: window.__heard.slice(), vibrations: window.__vibrations.slice(), wake_locks: window.__wakeLocks.slice(),
     t: (performance.now() - a.t0) / 1000, now_s: performance.now() / 1000 };
 };
 
@@ -253,6 +275,19 @@ async function fullPhases(page, context, server, args, result) {
   await sleep(1500);
   result.states.audio_resumed = await page.evaluate(screenState);
 
+  // The audio taken again and given back without a tap (the call ended): guidance resumes with a
+  // fresh Decider.
+  await page.evaluate(() => window.crossingAssist.audio.ctx.suspend());
+  await waitFor(page, () => window.crossingAssist.trace.filter((e) => e.kind === 'audio_failed').length >= 2, null, 5000, 'the second audio failure');
+  await sleep(1000);
+  const tGiven = await page.evaluate(async () => {
+    const t = (performance.now() - window.crossingAssist.t0) / 1000;
+    await window.crossingAssist.audio.ctx.resume();
+    return t;
+  });
+  await sleep(1500);
+  result.states.audio_given_back = { ...(await page.evaluate(screenState)), t_given: tGiven };
+
   // The app goes to the background (where the OS also suspends its audio) and comes back.
   await page.evaluate(hideShow, true);
   await sleep(1000);
@@ -296,6 +331,65 @@ async function fullPhases(page, context, server, args, result) {
   await page.evaluate(() => { const a = window.crossingAssist; a.model.run = a.fastRun; });
   result.slow.t_fast = await page.evaluate(() => (performance.now() - window.crossingAssist.t0) / 1000);
   await waitFor(page, () => window.crossingAssist.audio.state().kind === 'beacon', null, 20000, 'a beacon at normal speed again');
+
+  // Hidden and shown again within 150 ms while a model run (300 ms) is in flight: the run's
+  // result belongs to the Decider from before and is dropped; guidance goes on.
+  result.hideshow = await page.evaluate(async () => {
+    const a = window.crossingAssist;
+    a.model.run = async (...args) => { await new Promise((r) => setTimeout(r, 300)); return a.fastRun.apply(a.model, args); };
+    while (a.inflight === null) await new Promise((r) => setTimeout(r, 5));
+    const r = { inflight: a.inflight, t_hide: (performance.now() - a.t0) / 1000 };
+    const hs = (hidden) => {
+      Object.defineProperty(document, 'hidden', { configurable: true, get: () => hidden });
+      Object.defineProperty(document, 'visibilityState', { configurable: true, get: () => (hidden ? 'hidden' : 'visible') });
+      document.dispatchEvent(new Event('visibilitychange'));
+    };
+    hs(true);
+    await new Promise((ok) => setTimeout(ok, 150));
+    hs(false);
+    await new Promise((ok) => setTimeout(ok, 1000));
+    a.model.run = a.fastRun;
+    r.t_fast = (performance.now() - a.t0) / 1000;
+    return r;
+  });
+  await sleep(1500);
+  result.hideshow.state = await page.evaluate(screenState);
+
+  // A model run of 450 ms at 10 frames/s: the frame the app grabs next came while the model ran
+  // and has already waited up to 100 ms. The driver logs every frame the <video> presents
+  // (requestVideoFrameCallback: its capture time, else presentation time; page clock, ms).
+  const tAged = await page.evaluate(() => {
+    const a = window.crossingAssist;
+    const video = document.getElementById('video');
+    window.__presented = [];
+    window.__logFrames = true;
+    const onFrame = (nowMs, m) => {
+      window.__presented.push({ at: performance.now(), capture: m.captureTime ?? m.presentationTime ?? m.expectedDisplayTime ?? nowMs });
+      if (window.__logFrames) video.requestVideoFrameCallback(onFrame);
+    };
+    video.requestVideoFrameCallback(onFrame);
+    a.model.run = async (...args) => { await new Promise((r) => setTimeout(r, 450)); return a.fastRun.apply(a.model, args); };
+    return (performance.now() - a.t0) / 1000;
+  });
+  await sleep(6000);
+  result.aged = await page.evaluate((t) => {
+    const a = window.crossingAssist;
+    a.model.run = a.fastRun;
+    window.__logFrames = false;
+    return { t_start: t, t_end: (performance.now() - a.t0) / 1000, presented: window.__presented };
+  }, tAged);
+  await waitFor(page, () => window.crossingAssist.audio.state().kind === 'beacon', null, 20000, 'a beacon at normal speed again');
+
+  // The camera track ends (another app took the camera) and the video stalls: the instruction
+  // how to recover is said, and the watchdog's stop sentence half a second later must not cut it.
+  result.camera_lost = { t: await page.evaluate(() => {
+    document.getElementById('video').pause();
+    window.crossingAssist.stream.getVideoTracks()[0].dispatchEvent(new Event('ended'));
+    return (performance.now() - window.crossingAssist.t0) / 1000;
+  }) };
+  await sleep(8000);
+  result.camera_lost.state = await page.evaluate(screenState);
+  result.camera_lost.heard = await page.evaluate(() => window.__heard.slice());
 
   // Double tap ends guidance.
   await control(page).dblclick();

@@ -5,13 +5,19 @@
 //
 // Guards (each one a stop: the beacon never plays a direction it cannot vouch for):
 // * a decision plays only if it is fresh (made within the watchdog period of its frame's
-//   capture); a watchdog polled every 20 ms plays the stop cue when no fresh decision arrived
-//   for 0.5 s (frozen or covered camera, a hung model);
+//   capture: the camera's own time for the frame, camera.js, not when the app grabbed it); a
+//   watchdog polled every 20 ms plays the stop cue when no fresh decision arrived for 0.5 s
+//   (frozen or covered camera, a hung model);
 // * audio that cannot play (the AudioContext suspended or interrupted by a call or another
-//   app) is failed guidance: its own vibration and "Audio stopped. Tap to resume."; a tap or
-//   the return to the app resumes it;
+//   app) is failed guidance: its own vibration and "Audio stopped. Tap to resume."; a tap, the
+//   return to the app or the audio given back by itself (after a call) resumes it, with a fresh
+//   Decider (resetDecisions);
 // * in the background guidance pauses (stop cue, no inference); back in front, the Decider
 //   starts afresh (no stale heading) and the screen wake lock is requested again;
+// * a decision state reset (resetDecisions) starts a new generation: a model run still going
+//   from the one before is dropped when it ends (its Decider and frame are gone);
+// * an instruction the user needs to recover (an error: camera lost, ...) is spoken whole, not
+//   cut by a routine stop sentence (speech.js Speaker, urgent);
 // * the field of view comes from the frame's orientation (portrait / landscape): the user's
 //   setting for it, else the bundle's default (geometry.js cameraFov: a crop narrower than the
 //   sensor, e.g. 9:16 video, gets its own with geometry.sensor_aspect); a new FOV starts a fresh Decider,
@@ -65,6 +71,7 @@ const app = {
   ready: false, running: false, mode: 'loading', meta: null, model: null, decider: null, fov: null, audio: null,
   stream: null, grabber: null, watchdog: null, trace: [], frames: [], last: null, error: null, offline: 'not yet',
   inflight: null, // capture time of the frame the model is running on (null: none)
+  generation: 0, // bumped by resetDecisions: a model run from an older generation is dropped
   t0: performance.now(), settings: loadSettings(), policy: new SpeechPolicy(), haptics: new Haptics(),
   speaker: new Speaker(true), audioFailed: false, paused: false, wakeLock: null, wakeLockRequests: 0,
   perf: { frames: 0, busyS: 0, startedS: 0, recentMs: 0 },
@@ -98,7 +105,7 @@ function showError(message) {
   app.error = message;
   $('error').textContent = message;
   $('error').hidden = false;
-  app.speaker.say(message);
+  app.speaker.say(message, { urgent: true }); // how to recover: heard whole
 }
 
 function clearError() {
@@ -216,8 +223,18 @@ function currentFov(width, height) {
 const plain = (o) => ({ probs: Array.from(o.probs), entropy: o.entropy, mutual_info: o.mutual_info,
   variance: Array.from(o.variance), votes: Array.from(o.votes) });
 
-/** One new (not frozen) camera frame, captured at `captured` s, end to end (live.run_live's loop body). */
-async function step(frame, captured, dt) {
+/** A fresh start for the decisions (back from the background, audio back): no stale heading or
+ * belief; a model run still going is dropped when it ends (step compares generations). */
+function resetDecisions() {
+  app.generation += 1;
+  app.decider = null;
+  app.fov = null;
+}
+
+/** One new (not frozen) camera frame, captured at `captured` s and grabbed at `grabbed` s, end to
+ * end (live.run_live's loop body). */
+async function step(frame, captured, grabbed, dt) {
+  const generation = app.generation;
   let cam;
   try {
     cam = currentFov(frame.width, frame.height);
@@ -246,23 +263,26 @@ async function step(frame, captured, dt) {
     ? ', a narrow camera’s gate threshold' : '';
   const levelled = frame.roll_deg ? `, turned ${Math.abs(frame.roll_deg).toFixed(0)}° ${frame.roll_deg > 0 ? 'clockwise' : 'counter-clockwise'} to level` : '';
   view.camera(`${cam.orientation} ${frame.width}×${frame.height}, field of view ${cam.fov.toFixed(1)}° (${cam.source})${crop}${narrow}${levelled}`);
+  const decider = app.decider;
   let outputs = null;
   let obs;
   const t0 = performance.now();
   app.inflight = captured; // a model run holds the decision up: a stall now is the phone's speed, not the camera
   try {
     outputs = await app.model.run(seen.rgb, seen.height, seen.width);
-    obs = observationFromOutputs(outputs, app.decider.cfg.measure);
+    obs = observationFromOutputs(outputs, decider.cfg.measure);
   } catch (err) {
     console.error(err);
     obs = { probs: null, uncertainty: Infinity, ok: false };
   }
   const latencyMs = performance.now() - t0;
   app.inflight = null;
-  if (!app.running || app.paused) return;
+  // paused, ended, or the decisions reset while the model ran (e.g. hidden and shown again): drop it
+  if (!app.running || app.paused || generation !== app.generation) return;
   const yaw = app.yaw ? app.yaw.take(dt) : 0;
-  const d = app.decider.step(captured, obs, yaw);
-  const fresh = isFresh(now(), captured);
+  const d = decider.step(captured, obs, yaw);
+  const decided = now();
+  const fresh = isFresh(decided, captured);
   if (fresh) app.watchdog.beat(captured);
   app.last = d;
   if (!app.audioFailed) {
@@ -271,7 +291,7 @@ async function step(frame, captured, dt) {
     feedback(now(), fresh ? d : { ...d, stop: true, reason: 'slow', heading_deg: null });
   }
   app.frameId = (app.frameId || 0) + 1; // unique over restarts (seq restarts with the camera)
-  record({ kind: 'frame', id: app.frameId, t: captured, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, obs, decision: d,
+  record({ kind: 'frame', id: app.frameId, t: captured, grabbed, decided, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, obs, decision: d,
     fov_deg: cam.fov, width: frame.width, height: frame.height, view_rows: [seen.top, seen.rows], roll_deg: frame.roll_deg ?? 0,
     outputs: outputs && plain(outputs) });
   if (TEST) {
@@ -279,7 +299,7 @@ async function step(frame, captured, dt) {
     if (app.frames.length > MAX_FRAMES) app.frames.shift();
   }
   view.decision(d);
-  if (outputs) view.outputs(outputs, app.meta, app.decider.cfg.threshold);
+  if (outputs) view.outputs(outputs, app.meta, decider.cfg.threshold);
 }
 
 async function runLoop() {
@@ -290,30 +310,34 @@ async function runLoop() {
   let prev = null;
   let prevCaptured = null;
   let lastRun = -Infinity;
+  let generation = app.generation;
   while (app.running) {
-    if (app.paused) {
-      await sleep(FRAME_WAIT_MS);
+    if (app.paused || generation !== app.generation) {
+      if (app.paused) await sleep(FRAME_WAIT_MS);
+      generation = app.generation;
       prev = null;
       prevCaptured = null;
       continue;
     }
     while (now() < lastRun + MIN_FRAME_INTERVAL_S) await sleep(Math.max(1, 1000 * (lastRun + MIN_FRAME_INTERVAL_S - now())));
     if (!(await app.grabber.waitForNewFrame(FRAME_WAIT_MS)) || !app.running || app.paused) continue;
-    const captured = now();
+    const grabbed = now();
     const frame = app.grabber.grab();
     if (!frame) continue;
+    // the frame's own capture time (camera.js), on the app's clock: it may have waited for a model run
+    const captured = Math.min(grabbed, (frame.timeMs - app.t0) / 1000);
     if (sameFrame(prev, frame)) {
       // A frozen camera repeats its last frame: not fresh; let the watchdog act.
       record({ kind: 'frozen', t: captured, seq: frame.seq });
       continue;
     }
     prev = { ...frame, rgb: frame.rgb.slice() };
-    lastRun = captured;
+    lastRun = grabbed;
     const t0 = performance.now();
     // With the motion sensors on, the frame is turned level first (the frozen check above reads
     // the camera's own pixels, which a moving phone's levelling would otherwise keep changing).
-    const levelled = app.grabber.level(frame, app.tilt?.rollDeg(captured) ?? null, app.meta.geometry.pad_rgb ?? PAD_RGB);
-    await step(levelled, captured, prevCaptured === null ? 0 : captured - prevCaptured);
+    const levelled = app.grabber.level(frame, app.tilt?.rollDeg(grabbed) ?? null, app.meta.geometry.pad_rgb ?? PAD_RGB);
+    await step(levelled, captured, grabbed, prevCaptured === null ? 0 : captured - prevCaptured);
     prevCaptured = captured;
     const ms = performance.now() - t0;
     p.busyS += ms / 1000;
@@ -358,13 +382,23 @@ function onAudioLost(state) {
 
 async function resumeAudio(how) {
   if (!app.audio) return;
+  app.resuming = how; // the context's own 'running' event may come first: it is this resume
   try {
     await app.audio.ctx.resume();
   } catch (err) {
     console.warn(`audio resume failed: ${err.message || err}`);
+  } finally {
+    app.resuming = null;
   }
-  if (!app.running || !app.audioFailed || !app.audio.playing()) return;
+  audioBack(how);
+}
+
+/** Audio plays again (a tap, the return to the app, or given back by the OS after a call):
+ * guidance resumes with fresh decisions only; the stop cue until the first one. */
+function audioBack(how) {
+  if (!app.running || !app.audioFailed || !app.audio?.playing()) return;
   app.audioFailed = false;
+  resetDecisions(); // a direction decided before or during the loss never plays
   record({ kind: 'audio_resumed', t: now(), how });
   setControl('End guidance', 'Double tap or hold', 'running');
   app.audio.render(STOP_CUE); // until the next fresh decision
@@ -374,8 +408,8 @@ async function resumeAudio(how) {
 }
 
 function onAudioState(state) {
-  if (state === 'running') return;
-  onAudioLost(state);
+  if (state !== 'running') onAudioLost(state);
+  else if (!app.paused) audioBack(app.resuming || 'os'); // in the background: the return resumes
 }
 
 function onOrientation(e) {
@@ -441,6 +475,7 @@ async function start({ tutorial = !app.settings.tutorialDone } = {}) {
     const ctx = new AudioContext({ latencyHint: 'interactive' });
     await ctx.resume();
     app.audio = new BeaconAudio(ctx);
+    app.speaker.cancel(); // nothing left waiting in the old one
     app.speaker = new Speaker(app.settings.speech);
     app.policy.reset();
     app.haptics = new Haptics({ directions: app.settings.hapticDirections });
@@ -451,8 +486,7 @@ async function start({ tutorial = !app.settings.tutorialDone } = {}) {
       showError('The camera stopped (another app took it, or it was switched off). Double tap to end, then tap to start.');
     });
     app.grabber = new FrameGrabber($('video'));
-    app.decider = null;
-    app.fov = null;
+    resetDecisions();
     app.orientation = null;
     app.sideways = new SidewaysHint(SIDEWAYS_AFTER_S ? { after_s: SIDEWAYS_AFTER_S } : undefined);
     app.audioFailed = false;
@@ -524,8 +558,7 @@ async function onVisibility() {
     return;
   }
   app.paused = false;
-  app.decider = null; // no stale heading or belief from before the pause
-  app.fov = null;
+  resetDecisions(); // no stale heading or belief from before the pause, nor a model run from then
   app.watchdog.beat(now()); // the watchdog's period runs from the return
   record({ kind: 'visible', t: now() });
   if (app.audioFailed || !app.audio.playing()) await resumeAudio('return');

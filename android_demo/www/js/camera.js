@@ -1,6 +1,12 @@
 // The rear camera: getUserMedia into a <video>, and a grabber that hands out each NEW camera
-// frame once as RGB bytes. A camera that stops delivering frames (frozen, unplugged, taken by
-// another app) yields nothing, so no fresh decision arrives and the watchdog stops the beacon.
+// frame once as RGB bytes, with the time the camera captured it. A camera that stops delivering
+// frames (frozen, unplugged, taken by another app) yields nothing, so no fresh decision arrives
+// and the watchdog stops the beacon.
+//
+// A frame's time (performance.now() ms) is its own: requestVideoFrameCallback's captureTime,
+// else its presentationTime, else expectedDisplayTime (never later than when the callback ran).
+// A frame that arrived during a model run waits for the next grab, so the grab's time would
+// make it look younger than it is. Without the API: the time the poll first saw the frame.
 
 import { levelAngle } from './geometry.js';
 import { rgbaToRgb } from './model.js';
@@ -36,7 +42,7 @@ export async function openCamera(video) {
   return stream;
 }
 
-/** Hands out each new video frame once, as {rgb, width, height, seq}. */
+/** Hands out each new video frame once, as {rgb, width, height, seq, timeMs} (timeMs: captured, performance.now() clock). */
 export class FrameGrabber {
   constructor(video, maxWidth = MAX_WIDTH) {
     this.video = video;
@@ -47,10 +53,13 @@ export class FrameGrabber {
     this.taken = 0; // the `presented` count at the last grab
     this.waiters = [];
     this.lastTime = -1;
+    this.frameMs = null; // capture time of the newest frame presented (performance.now() ms)
     this.closed = false;
     if ('requestVideoFrameCallback' in HTMLVideoElement.prototype) {
-      const onFrame = () => {
+      const onFrame = (nowMs, meta) => {
         if (this.closed) return;
+        const t = meta?.captureTime ?? meta?.presentationTime ?? meta?.expectedDisplayTime;
+        this.frameMs = Number.isFinite(t) ? Math.min(t, performance.now()) : performance.now();
         this.presented += 1;
         this.wake();
         this.handle = video.requestVideoFrameCallback(onFrame);
@@ -61,6 +70,7 @@ export class FrameGrabber {
       this.poll = setInterval(() => {
         if (video.currentTime !== this.lastTime) {
           this.lastTime = video.currentTime;
+          this.frameMs = performance.now();
           this.presented += 1;
           this.wake();
         }
@@ -90,7 +100,11 @@ export class FrameGrabber {
     });
   }
 
-  /** The current frame as RGB, {rgb, width, height, seq} (downscaled to width <= maxWidth), or null. */
+  /**
+   * The current frame as RGB, {rgb, width, height, seq, timeMs} (downscaled to width <= maxWidth),
+   * or null. timeMs: when the camera captured it (performance.now() clock; the grab's own time
+   * when no frame was seen presented yet).
+   */
   grab() {
     const { videoWidth: vw, videoHeight: vh } = this.video;
     if (!vw || !vh) return null;
@@ -105,13 +119,13 @@ export class FrameGrabber {
     this.ctx.drawImage(this.video, 0, 0, width, height);
     const rgba = this.ctx.getImageData(0, 0, width, height).data;
     this.taken = this.presented;
-    return { rgb: rgbaToRgb(rgba, this.rgb), width, height, seq: this.taken };
+    return { rgb: rgbaToRgb(rgba, this.rgb), width, height, seq: this.taken, timeMs: this.frameMs ?? performance.now() };
   }
 
   /**
    * The last grabbed frame turned level (geometry.js levelAngle of rollDeg, the camera's roll from
    * the orientation sensor), the corners the camera did not see filled with padRgb (the bundle's
-   * geometry.pad_rgb), as crossing_assist/geometry.py level: {rgb, width, height, seq, roll_deg}.
+   * geometry.pad_rgb), as crossing_assist/geometry.py level: {rgb, width, height, seq, timeMs, roll_deg}.
    * The frame itself (same object) when there is nothing to turn. Call right after grab(): it
    * draws from the grab's canvas.
    */
@@ -135,7 +149,7 @@ export class FrameGrabber {
     ctx.drawImage(this.canvas, -width / 2, -height / 2);
     ctx.setTransform(1, 0, 0, 1, 0, 0);
     const rgba = ctx.getImageData(0, 0, width, height).data;
-    return { rgb: rgbaToRgb(rgba, this.levelRgb), width, height, seq: frame.seq, roll_deg: angle };
+    return { rgb: rgbaToRgb(rgba, this.levelRgb), width, height, seq: frame.seq, timeMs: frame.timeMs, roll_deg: angle };
   }
 
   close() {

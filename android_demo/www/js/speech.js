@@ -10,7 +10,9 @@
 //   the previous announcement;
 // * a stop is announced at once when guidance was going (safety first); a change between stop
 //   reasons waits for `min_gap_s`; `force` announces now (audio lost, app in the background).
-// Speaker sends the sentences to speechSynthesis (cancelling one still being spoken).
+// Speaker sends the sentences to speechSynthesis (cancelling one still being spoken), except
+// that an urgent sentence (how to recover: the camera lost, ...) is heard whole: a routine
+// sentence that comes while it is spoken waits for its end (the latest such sentence only).
 
 import { SLIGHT_DEG, statusMessage, STRAIGHT_DEG } from './view.js';
 
@@ -90,24 +92,61 @@ export class SpeechPolicy {
   }
 }
 
+/** The longest an urgent sentence holds routine ones back (ms), in case its end event never comes. */
+export const urgentHoldMs = (text) => 1000 + 80 * text.length; // ~12 characters a second, and a margin
+
 /** speechSynthesis, when the browser has it and the user wants it. */
 export class Speaker {
-  constructor(enabled = true) {
+  constructor(enabled = true, clock = () => performance.now()) {
     this.enabled = enabled;
     this.synth = globalThis.speechSynthesis || null;
+    this.clock = clock;
+    this.urgent = null; // the urgent utterance being spoken
+    this.urgentUntil = -Infinity; // ... at the latest until then (clock ms)
+    this.waiting = null; // a routine sentence said after it
+    this.timer = null;
   }
 
-  say(text) {
+  /** Speak `text` now, cutting what is being said; with `urgent`, routine sentences cannot cut it. */
+  say(text, { urgent = false } = {}) {
     if (!this.enabled || !this.synth || typeof SpeechSynthesisUtterance === 'undefined') return false;
+    const t = this.clock();
+    if (!urgent && this.urgent && t < this.urgentUntil) {
+      this.waiting = text;
+      clearTimeout(this.timer);
+      this.timer = setTimeout(() => this.release(this.urgent), this.urgentUntil - t);
+      return true;
+    }
+    clearTimeout(this.timer);
+    this.urgent = null;
+    this.waiting = null;
     this.synth.cancel();
     const u = new SpeechSynthesisUtterance(text);
     u.lang = 'en';
     u.rate = 1.1;
+    if (urgent) {
+      this.urgent = u;
+      this.urgentUntil = t + urgentHoldMs(text);
+      for (const ev of ['end', 'error']) u.addEventListener(ev, () => this.release(u));
+    }
     this.synth.speak(u);
     return true;
   }
 
+  /** The urgent utterance `u` is over: say the routine sentence that waited for it, if any. */
+  release(u) {
+    if (this.urgent !== u || !u) return;
+    this.urgent = null;
+    clearTimeout(this.timer);
+    const text = this.waiting;
+    this.waiting = null;
+    if (text !== null) this.say(text);
+  }
+
   cancel() {
+    clearTimeout(this.timer);
+    this.urgent = null;
+    this.waiting = null;
     this.synth?.cancel();
   }
 }
