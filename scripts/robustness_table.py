@@ -60,7 +60,7 @@ def render(condition: str, img: np.ndarray, far_x: float | None, far_y: float, l
     if condition == "clean":
         return img, label, None
     if condition == "roll":
-        view, _, lab = roll(img, far_x, far_y, label, float(rng.choice([-1, 1]) * rng.uniform(10, 15)))
+        view, _, lab = roll(img, far_x, far_y, label, float(rng.choice([-1, 1]) * rng.uniform(10, 15)), fill="reflect")
         return view, lab, None
     if condition in PORTRAIT_SETS:
         views = user_views(img, far_x, label, 3, geometry)[condition]

@@ -88,7 +88,8 @@ def measure(engine: Engine, rows, images, rolls, sensor_error: float, seed: int)
         plays = {name: Listener(engine) for name in ("rolled", "rolled_own", "levelled", "levelled_noisy")}
         for r, img in zip(rows, images):
             deg = float(rng.choice([-1, 1]) * rng.uniform(lo, hi))
-            view, _, own = roll(img, r.far_x, float(flag_value(r.flags, "far_y") or 0.5), r.label, deg)
+            far_y = flag_value(r.flags, "far_y")
+            view, _, own = roll(img, r.far_x, 0.5 if far_y is None else float(far_y), r.label, deg, fill="reflect")
             plays["rolled"].add(view, r.label)
             plays["rolled_own"].clips.append(plays["rolled"].clips[-1])   # the same play, its own strip
             plays["rolled_own"].labels.append(own)

@@ -102,6 +102,11 @@ def test_roll_fills_the_uncovered_corners_with_the_pad_and_never_shows_the_goal_
     np.testing.assert_array_equal(out[-1, -1], PAD_RGB)
     ys, xs = np.nonzero(out[..., 0] > 200)
     assert x == pytest.approx((xs.mean() + 0.5) / W, abs=1.5 / W) and b == x_to_bin(x)
+    # a script simulating a rolled camera asks for the scene reflected in (no pad corners)
+    seen, x2, _ = roll(_photo(), fx, fy, x_to_bin(fx), 15.0, fill="reflect")
+    assert x2 == x and not (seen[0, 0] == PAD_RGB).all()
+    with pytest.raises(ValueError, match="fill"):
+        roll(_photo(), fx, fy, x_to_bin(fx), 15.0, fill="mirror")
 
 
 def test_roll_out_of_frame_goes_to_the_edge_and_unknown_stays_unknown():

@@ -228,18 +228,23 @@ def _in_window(far_x: float | None, label: int, x0: int, cw: int, w: int) -> tup
 
 
 def roll(image: np.ndarray, far_x: float | None, far_y: float, label: int, roll_deg: float,
-         ) -> tuple[np.ndarray, float | None, int]:
+         fill: str = "pad") -> tuple[np.ndarray, float | None, int]:
     """Rotate the frame by ``roll_deg`` about its centre (the phone tilted sideways; positive =
-    counter-clockwise), the corners it uncovers filled with ``PAD_RGB`` as the runtime's levelling
-    (:func:`crossing_assist.geometry.level`) fills them: a reflection could show the goal twice.
-    The goal at (far_x, far_y) rotates with it; a goal rotated out of the frame goes to the edge
-    strip it left by (out of view, inferable)."""
+    counter-clockwise). The corners it uncovers: ``fill="pad"`` (training views) ``PAD_RGB``, as
+    the runtime's levelling (:func:`crossing_assist.geometry.level`) fills them; ``"reflect"``
+    the photo reflected in, standing for the scene a rolled camera would see there (scripts
+    simulating one), which now and then shows a goal near a side edge twice. The goal at
+    (far_x, far_y) rotates with it; a goal rotated out of the frame goes to the edge strip it
+    left by (out of view, inferable)."""
+    if fill not in ("pad", "reflect"):
+        raise ValueError(f"Unknown fill: {fill!r}; valid: pad, reflect")
     image = _check_image(image)
     far_x, _ = _goal(far_x, label)
     h, w = image.shape[:2]
     m = cv2.getRotationMatrix2D((w / 2 - 0.5, h / 2 - 0.5), float(roll_deg), 1.0)
-    out = cv2.warpAffine(np.ascontiguousarray(image), m, (w, h), flags=cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_CONSTANT, borderValue=tuple(int(v) for v in PAD_RGB))
+    border = ({"borderMode": cv2.BORDER_CONSTANT, "borderValue": tuple(int(v) for v in PAD_RGB)} if fill == "pad"
+              else {"borderMode": cv2.BORDER_REFLECT_101})
+    out = cv2.warpAffine(np.ascontiguousarray(image), m, (w, h), flags=cv2.INTER_LINEAR, **border)
     if far_x is None:
         return out, None, UNKNOWN
     px, py = far_x * w - 0.5, far_y * h - 0.5
