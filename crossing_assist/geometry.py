@@ -62,6 +62,12 @@ VIEW_ZOOM_RANGE = (1.0, 4.0)           # geometry.view_zoom (schema 4): 1 = the 
 #: much (the phone's screen turns by a quarter at about 45 deg, so its frames rarely roll more).
 MAX_LEVEL_DEG = 45.0
 MIN_LEVEL_DEG = 0.5   # a smaller roll is left alone
+#: A frame rolled further than this gets no guidance: levelled by MAX_LEVEL_DEG it stays rolled
+#: by more than the 15 deg training views roll. Held out (PTL val, the default bundle, sensor
+#: levelling): rolled 45-60 deg 81.5 % on at 0.5 % confidently wrong; 60-90 deg 74 % on at 4 %
+#: (scripts/roll_levelling.py --rolls 45:60,60:90, 200 photos; a phone turned sideways with the
+#: screen's rotation locked).
+MAX_GUIDED_ROLL_DEG = MAX_LEVEL_DEG + 15.0
 
 
 def view_rows(height: int, width: int, fov_deg: float, canvas: tuple[int, int],
@@ -302,6 +308,12 @@ def letterbox(image: np.ndarray, canvas: tuple[int, int], pad_rgb: tuple[int, in
     out[:] = np.asarray(pad_rgb, np.uint8)
     out[top:top + nh, left:left + nw] = inner
     return out
+
+
+def rolled_too_far(roll_deg: float | None) -> bool:
+    """True when a roll reading (degrees) is beyond ``MAX_GUIDED_ROLL_DEG`` either way: the frame
+    cannot be levelled into what the model learned, so it gets no guidance."""
+    return roll_deg is not None and math.isfinite(roll_deg) and abs(roll_deg) > MAX_GUIDED_ROLL_DEG
 
 
 def level_angle(roll_deg: float | None) -> float:

@@ -387,6 +387,20 @@ def test_engine_levels_a_frame_by_the_sensors_roll(tmp_path):
     assert engine.predict(rolled, roll_deg=-30.0).action <= engine.predict(rolled).action   # the wrong way: further off
     step = Pipeline(engine).step(rolled, 0.0, roll_deg=30.0)
     assert step.prediction.action in (6, 7)
+    # rolled beyond what levelling can bring back (45 deg turned back, 15 trained): no guidance
+    for r in (60.5, -75.0, 90.0):
+        p = engine.predict(rolled, roll_deg=r)
+        assert not p.ok and "hold the phone level" in p.error
+    assert engine.predict(rolled, roll_deg=60.0).ok
+    assert Pipeline(engine).step(rolled, 0.0, roll_deg=80.0).decision.stop
+
+
+def test_rolled_too_far_is_beyond_the_levelled_and_trained_roll():
+    from crossing_assist.geometry import MAX_GUIDED_ROLL_DEG, MAX_LEVEL_DEG, rolled_too_far
+
+    assert MAX_GUIDED_ROLL_DEG == MAX_LEVEL_DEG + 15
+    assert [rolled_too_far(r) for r in (None, float("nan"), 0.0, 45.0, 60.0, 60.01, -61.0, 180.0)] == \
+        [False, False, False, False, False, True, True, True]
 
 
 def test_photo_clip_reads_each_photos_fov_from_its_shape_or_photo_fov(tmp_path, capsys):

@@ -460,6 +460,18 @@ async function rollPhase(page, result, deg) {
   await page.evaluate(() => clearInterval(window.__roll));
   result.roll = { deg, t_start: t0, screen_angle: await page.evaluate(() => screen.orientation?.angle ?? null),
     camera_text: await page.textContent('#camera') };
+  // then turned 75 deg: beyond what can be levelled (rolledTooFar): stop, and say to hold it level
+  const tFar = await page.evaluate(() => {
+    window.__roll = setInterval(() => window.dispatchEvent(new DeviceOrientationEvent('deviceorientation',
+      { alpha: 0, beta: 90 + 75, gamma: -90 })), 50);
+    return (performance.now() - window.crossingAssist.t0) / 1000;
+  });
+  const tSaid = await waitFor(page, () => window.crossingAssist.trace.find((e) => e.kind === 'speech' && e.text.includes('hold it level'))?.t ?? null,
+    null, 60000, 'the hold-it-level stop');
+  await waitFor(page, (t) => window.crossingAssist.trace.filter((e) => e.kind === 'frame' && e.t > t + 0.3).length >= 5,
+    tFar, 60000, 'frames rolled beyond levelling');
+  const tEnd = await page.evaluate(() => { clearInterval(window.__roll); return (performance.now() - window.crossingAssist.t0) / 1000; });
+  result.roll.too_far = { deg: 75, t_start: tFar, t_spoken: tSaid, t_end: tEnd };
 }
 
 /** Waits until a "not sure" stop held upright says to hold the phone sideways. */

@@ -18,7 +18,8 @@ import numpy as np
 
 from crossing_assist import inference
 from crossing_assist.bundle import UNCERTAINTY_MEASURES, Bundle, BundleError
-from crossing_assist.geometry import ORIENTATIONS, GeometryError, check_fov, check_frame_shape, level, orientation
+from crossing_assist.geometry import (MAX_GUIDED_ROLL_DEG, ORIENTATIONS, GeometryError, check_fov, check_frame_shape, level,
+                                      orientation, rolled_too_far)
 from crossing_assist.runtime import belief as bf
 from crossing_assist.runtime.decide import DecisionConfig, Observation
 
@@ -128,6 +129,9 @@ class Engine:
         try:
             x = self._check_frame(frame_rgb)
             fov = self.camera_fov(frame_rgb.shape[1], frame_rgb.shape[0], fov_deg)
+            if rolled_too_far(roll_deg):
+                raise ValueError(f"the camera is rolled {roll_deg:+.0f} deg, more than {MAX_GUIDED_ROLL_DEG:g} "
+                                 "can be levelled: hold the phone level")
             if roll_deg is not None:
                 x = level(x, roll_deg, self.bundle.geometry.pad_rgb)
             outs = inference.run(self.session, self.bundle.view(x, fov)[None])

@@ -25,6 +25,9 @@ STATUS_STOP = {
     # (android_demo/www/js/live.js, TiltWatch); the decision itself is the Decider's
     "tilt_down": "Stop. The phone points at the ground: raise it.",
     "tilt_up": "Stop. The phone points too high: lower it.",
+    # the app's stop while its orientation sensor says the camera is rolled beyond what can be
+    # levelled (geometry.MAX_GUIDED_ROLL_DEG; the frame is not given to the model)
+    "rolled": "Stop. The phone is turned sideways: hold it level.",
     # the app's "not sure" that has lasted 5 s with the phone upright (live.js, SidewaysHint):
     # on held-out photographers the beacon plays twice as often with the phone held sideways
     "sideways": "Stop. Not sure: hold the phone sideways, it guides better.",

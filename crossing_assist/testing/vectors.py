@@ -79,7 +79,9 @@ Version 10: step 4a of the decision logic (the first frame after a stall, more t
 watchdog since the last successful one, meets a fresh belief and no hold): scenario
 ``stall_then_nothing``, a steady goal, 1 s of ticks, then frames showing nothing. Before it, the
 hold and the belief from before the stall put the old direction back on for 0.2-0.4 s. The
-scenarios before it are those of version 9.
+scenarios before it are those of version 9. Also in version 10: each ``geometry.level`` case says
+whether the roll is ``too_far`` (:func:`crossing_assist.geometry.rolled_too_far`: beyond
+``MAX_GUIDED_ROLL_DEG``, no guidance), and the ``status`` section has the ``rolled`` stop.
 """
 
 from __future__ import annotations
@@ -96,7 +98,7 @@ import numpy as np
 
 from crossing_assist.actions import DEFAULT_FOV_DEG, get_space, heading_to_pan
 from crossing_assist.fileio import atomic_write_text
-from crossing_assist.geometry import FOV_RANGE_DEG, PAD_RGB, level_angle, orientation, view_rows
+from crossing_assist.geometry import FOV_RANGE_DEG, PAD_RGB, level_angle, orientation, rolled_too_far, view_rows
 from crossing_assist.runtime.beacon import BeaconConfig, itd_seconds, pan_gains
 from crossing_assist.runtime.belief import entropy
 from crossing_assist.runtime.camera import camera_fov, gate_threshold, geometry_of
@@ -458,8 +460,10 @@ def build_vectors(seed: int = 20240601) -> dict:
                      "view_rows_sensor": {"geometry": GEOMETRY_V3_SENSOR, "cases": _view_rows_sensor()},
                      "view_rows_zoom": {"geometry": GEOMETRY_V4, "cases": _view_rows_zoom()},
                      # how far a rolled camera's frame is turned back (geometry.level_angle), and the fill
-                     "level": {"pad_rgb": list(PAD_RGB), "cases": [{"roll_deg": r, "angle_deg": level_angle(r)} for r in
-                                                                    (None, 0.0, 0.3, -0.49, 0.5, 7.25, -12.0, 44.9, 45.0, 60.0, -90.0)]}},
+                     "level": {"pad_rgb": list(PAD_RGB), "cases": [{"roll_deg": r, "angle_deg": level_angle(r),
+                                                                     "too_far": rolled_too_far(r)} for r in
+                                                                    (None, 0.0, 0.3, -0.49, 0.5, 7.25, -12.0, 44.9, 45.0,
+                                                                     60.0, 60.5, -60.5, -90.0)]}},
     }
 
 

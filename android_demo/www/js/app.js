@@ -42,7 +42,7 @@
 
 import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
-import { cameraFov, defaultFovText, FovError, frameView, gateKind, gateThreshold, orientation, PAD_RGB, zoomedFov } from './geometry.js';
+import { cameraFov, defaultFovText, FovError, frameView, gateKind, gateThreshold, orientation, PAD_RGB, rolledTooFar, zoomedFov } from './geometry.js';
 import { Haptics } from './haptics.js';
 import { isFresh, sameFrame, SidewaysHint, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
 import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN } from './logic.js';
@@ -232,8 +232,9 @@ function resetDecisions() {
 }
 
 /** One new (not frozen) camera frame, captured at `captured` s and grabbed at `grabbed` s, end to
- * end (live.run_live's loop body). */
-async function step(frame, captured, grabbed, dt) {
+ * end (live.run_live's loop body). `tooRolled`: the sensor says the camera is rolled beyond what
+ * can be levelled (rolledTooFar): the model is not asked, the frame fails, the stop says why. */
+async function step(frame, captured, grabbed, dt, tooRolled = false) {
   const generation = app.generation;
   let cam;
   try {
@@ -268,12 +269,16 @@ async function step(frame, captured, grabbed, dt) {
   let obs;
   const t0 = performance.now();
   app.inflight = captured; // a model run holds the decision up: a stall now is the phone's speed, not the camera
-  try {
-    outputs = await app.model.run(seen.rgb, seen.height, seen.width);
-    obs = observationFromOutputs(outputs, decider.cfg.measure);
-  } catch (err) {
-    console.error(err);
-    obs = { probs: null, uncertainty: Infinity, ok: false };
+  if (tooRolled) {
+    obs = { probs: null, uncertainty: Infinity, ok: false }; // not levelled into what the model learned
+  } else {
+    try {
+      outputs = await app.model.run(seen.rgb, seen.height, seen.width);
+      obs = observationFromOutputs(outputs, decider.cfg.measure);
+    } catch (err) {
+      console.error(err);
+      obs = { probs: null, uncertainty: Infinity, ok: false };
+    }
   }
   const latencyMs = performance.now() - t0;
   app.inflight = null;
@@ -288,7 +293,7 @@ async function step(frame, captured, grabbed, dt) {
   if (!app.audioFailed) {
     app.audio.render(fresh ? cueFor(d) : STOP_CUE);
     // a frame the camera gave but the model answered too late for: the phone is too slow
-    feedback(now(), fresh ? d : { ...d, stop: true, reason: 'slow', heading_deg: null });
+    feedback(now(), !fresh ? { ...d, stop: true, reason: 'slow', heading_deg: null } : tooRolled ? { ...d, reason: 'rolled' } : d);
   }
   app.frameId = (app.frameId || 0) + 1; // unique over restarts (seq restarts with the camera)
   record({ kind: 'frame', id: app.frameId, t: captured, grabbed, decided, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, obs, decision: d,
@@ -336,8 +341,9 @@ async function runLoop() {
     const t0 = performance.now();
     // With the motion sensors on, the frame is turned level first (the frozen check above reads
     // the camera's own pixels, which a moving phone's levelling would otherwise keep changing).
-    const levelled = app.grabber.level(frame, app.tilt?.rollDeg(grabbed) ?? null, app.meta.geometry.pad_rgb ?? PAD_RGB);
-    await step(levelled, captured, grabbed, prevCaptured === null ? 0 : captured - prevCaptured);
+    const roll = app.tilt?.rollDeg(grabbed) ?? null;
+    const levelled = app.grabber.level(frame, roll, app.meta.geometry.pad_rgb ?? PAD_RGB);
+    await step(levelled, captured, grabbed, prevCaptured === null ? 0 : captured - prevCaptured, rolledTooFar(roll));
     prevCaptured = captured;
     const ms = performance.now() - t0;
     p.busyS += ms / 1000;

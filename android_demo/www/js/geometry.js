@@ -28,8 +28,9 @@
 export const ORIENTATIONS = ['landscape', 'portrait'];
 export const FOV_RANGE_DEG = [20, 170];
 /** Levelling (geometry.MAX_LEVEL_DEG and level in Python): a roll is turned back by at most
- * max_deg; one under min_deg is left alone. */
-export const LEVEL = Object.freeze({ max_deg: 45, min_deg: 0.5 });
+ * max_deg; one under min_deg is left alone; beyond guided_max_deg (geometry.MAX_GUIDED_ROLL_DEG)
+ * the frame gets no guidance (levelled, it stays rolled more than the training views were). */
+export const LEVEL = Object.freeze({ max_deg: 45, min_deg: 0.5, guided_max_deg: 60 });
 /** What fills what a camera did not see when the bundle names nothing (schema 1): geometry.PAD_RGB. */
 export const PAD_RGB = Object.freeze([124, 116, 104]);
 
@@ -38,6 +39,11 @@ export const PAD_RGB = Object.freeze([124, 116, 104]);
 export function levelAngle(rollDeg) {
   if (!Number.isFinite(rollDeg) || Math.abs(rollDeg) < LEVEL.min_deg) return 0;
   return Math.max(-LEVEL.max_deg, Math.min(LEVEL.max_deg, rollDeg));
+}
+
+/** True when a roll reading (degrees) is beyond LEVEL.guided_max_deg either way (geometry.rolled_too_far). */
+export function rolledTooFar(rollDeg) {
+  return Number.isFinite(rollDeg) && Math.abs(rollDeg) > LEVEL.guided_max_deg;
 }
 
 export class FovError extends RangeError {

@@ -16,6 +16,7 @@ export const STOP_PATTERNS = Object.freeze({
   fov: [100, 60, 600],
   tilt_down: [400, 100, 80], // the phone points at the ground (long, short)
   tilt_up: [80, 100, 400], // the phone points too high (short, long)
+  rolled: [400, 100, 400], // the phone is turned sideways (long, long)
   sideways: [80, 100, 80, 100, 400], // hold the phone sideways (short, short, long)
 });
 export const DIRECTION_PATTERNS = Object.freeze({ left: [120], ahead: [450], right: [120, 150, 120] });

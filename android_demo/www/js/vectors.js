@@ -7,7 +7,7 @@
 // max(1, |expected|); the belief element by element.
 
 import { headingToPan, spaceGroups } from './actions.js';
-import { cameraFov, FovError, gateThreshold, levelAngle, orientation, PAD_RGB, viewRows } from './geometry.js';
+import { cameraFov, FovError, gateThreshold, levelAngle, orientation, PAD_RGB, rolledTooFar, viewRows } from './geometry.js';
 import { isFresh, sameFrame, Watchdog } from './live.js';
 import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains } from './logic.js';
 import { statusMessage } from './view.js';
@@ -195,6 +195,10 @@ export function replayVectors(vectors) {
     checks += 1;
     const got = levelAngle(v.roll_deg);
     if (!close(got, v.angle_deg, tol)) fail({ scenario: 'geometry.level', field: `roll ${v.roll_deg}`, got, expected: v.angle_deg });
+    // version 10: beyond what can be levelled, no guidance
+    if ('too_far' in v && rolledTooFar(v.roll_deg) !== v.too_far) {
+      fail({ scenario: 'geometry.level', field: `too_far ${v.roll_deg}`, got: rolledTooFar(v.roll_deg), expected: v.too_far });
+    }
   }
   return { version: vectors.version, scenarios: vectors.scenarios.length, steps, checks, failures, nFailures, maxRelDiff };
 }

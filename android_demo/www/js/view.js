@@ -17,6 +17,7 @@ export const STATUS_STOP = Object.freeze({
   fov: 'Stop. The camera field of view setting is invalid.',
   tilt_down: 'Stop. The phone points at the ground: raise it.',
   tilt_up: 'Stop. The phone points too high: lower it.',
+  rolled: 'Stop. The phone is turned sideways: hold it level.',
   sideways: 'Stop. Not sure: hold the phone sideways, it guides better.',
 });
 export const STRAIGHT_DEG = 7.5;
