@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -31,10 +32,47 @@ from crossing_assist.bundle import BundleError
 from crossing_assist.data_tools.images import ImageError, load_frame
 from crossing_assist.geometry import orientation
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
-from crossing_assist.runtime.engine import Engine
-from crossing_assist.runtime.listen import Listener, summarise
+from crossing_assist.runtime.engine import Engine, Prediction
+from crossing_assist.runtime.listen import Heard, Listener, summarise
 
 SUFFIXES = (".png", ".jpg", ".jpeg")
+
+
+def open_engine(bundle: Path, *, threads: int = 2, seed: int = 0) -> Engine:
+    """The bundle's engine (onnxruntime ``threads``, MC-dropout ``seed``); a bundle that cannot be
+    used raises SystemExit (one line)."""
+    try:
+        return Engine(bundle, threads=threads, seed=seed)
+    except BundleError as exc:
+        raise SystemExit(f"error: {exc}") from None
+
+
+@dataclass(frozen=True)
+class Play:
+    """One frame with no crossing, played as a still clip: what the user heard at the end, the
+    clip's last prediction and the gate threshold for its camera (orientation and FOV)."""
+
+    heard: Heard
+    last: Prediction
+    threshold: float
+
+    @property
+    def margin(self) -> float:
+        """The last frame's uncertainty minus the gate threshold when that frame names a strip
+        (how near the gate came to speaking); NaN when it failed or says unknown."""
+        return self.last.uncertainty - self.threshold if self.last.ok and self.last.action != UNKNOWN else float("nan")
+
+
+def play(lis: Listener, frame: np.ndarray, fov_deg: float | None = None) -> Play:
+    """Play ``frame`` (camera FOV ``fov_deg``, None = the bundle's for its orientation) through
+    ``lis`` as a still clip (1 s at 10 fps by default: engine + filter + gate, ``runtime/listen.py``),
+    labelled no crossing (the label feeds only ``summarise``, never the decisions); the clip stays
+    in ``lis``."""
+    lis.add(frame, UNKNOWN, fov_deg)
+    i = len(lis.clips) - 1
+    last = lis.clips[i][-1]
+    threshold = lis.engine.decision_config(last.orientation or "landscape", last.fov_deg).threshold
+    return Play(lis.heard(idx=[i])[0], last, threshold)
 
 
 def photos(folders: list[Path]) -> list[Path]:
@@ -58,12 +96,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fov", type=float, metavar="DEG", help="play every image as seen by a camera DEG across (e.g. 41: "
                     "9:16 video, whose portrait frames take a narrow camera's gate threshold); default: the bundle's")
     a = ap.parse_args(argv)
-    try:
-        engine = Engine(a.bundle, threads=2)
-    except BundleError as exc:
-        raise SystemExit(f"error: {exc}") from None
+    engine = open_engine(a.bundle)
     lis = Listener(engine)
-    names = []
+    names, plays = [], []
     for path in photos(a.folders):
         try:
             frame = load_frame(path)
@@ -71,30 +106,26 @@ def main(argv: list[str] | None = None) -> int:
             print(f"skipped: {exc}")
             continue
         for turn, view in (("as taken", frame), ("turned", np.ascontiguousarray(np.rot90(frame)))):
-            lis.add(view, UNKNOWN, a.fov)
+            plays.append(play(lis, view, a.fov))
             names.append(f"{path.name} ({turn}, {orientation(view.shape[1], view.shape[0])})")
-    if not lis.clips:
+    if not plays:
         raise SystemExit("error: no image could be read")
-    heard = lis.heard()
-    margins = []   # a strip's play: the last frame's uncertainty minus the gate threshold; else NaN
     print("| image | beacon | the model's last frame | uncertainty - gate threshold |\n|---|---|---|---:|")
-    for name, clip, h in zip(names, lis.clips, heard):
-        last = clip[-1]
+    for name, p in zip(names, plays):
+        h, last = p.heard, p.last
         if not last.ok:
-            margins.append(float("nan"))
             print(f"| {name} | {'ON' if h.on else 'off'} | failed: {last.error} | |")
             continue
         says = f"unknown (p {last.probs[UNKNOWN]:.2f})" if last.action == UNKNOWN else f"strip {last.action}"
-        thr = engine.decision_config(last.orientation or "landscape", last.fov_deg).threshold
-        margins.append(float("nan") if last.action == UNKNOWN else last.uncertainty - thr)
         print(f"| {name} | {'ON, strip ' + str(h.strip) if h.on else 'off'} | {says}, {engine.measure} "
-              f"{last.uncertainty:.3f} | {'' if np.isnan(margins[-1]) else format(margins[-1], '+.3f')} |")
+              f"{last.uncertainty:.3f} | {'' if np.isnan(p.margin) else format(p.margin, '+.3f')} |")
+    heard = [p.heard for p in plays]
     s = summarise(heard)
-    strips = [i for i, m in enumerate(margins) if not np.isnan(m)]
-    least = min(strips, key=margins.__getitem__) if strips else None
+    strips = [i for i, p in enumerate(plays) if not np.isnan(p.margin)]
+    least = min(strips, key=lambda i: plays[i].margin) if strips else None
     print(f"\nsilent on {s['silence_no_crossing']:.1%} of {len(heard)} plays ({len(heard) // 2} images, each both ways); "
           f"beacon on for {sum(h.on for h in heard)}; the model names a strip on {len(strips)}"
-          + (f", least margin {margins[least]:+.3f} ({names[least]})" if least is not None else ""))
+          + (f", least margin {plays[least].margin:+.3f} ({names[least]})" if least is not None else ""))
     return 0
 
 
