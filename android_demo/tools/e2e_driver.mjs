@@ -298,6 +298,18 @@ async function fullPhases(page, context, server, args, result) {
   await sleep(1500);
   result.states.visible = await page.evaluate(screenState);
 
+  // A fault outside the model on one frame (a bug, injected): the stop cue, then guidance goes on.
+  const tFault = await page.evaluate(() => {
+    const g = window.crossingAssist.grabber;
+    const level = g.level.bind(g);
+    let left = 1;
+    g.level = (...a) => { if (left-- > 0) throw new Error('injected fault'); return level(...a); };
+    return (performance.now() - window.crossingAssist.t0) / 1000;
+  });
+  await waitFor(page, (t) => window.crossingAssist.trace.filter((e) => e.kind === 'frame' && e.t > t).length >= 5,
+    tFault, 30000, 'frames after the injected fault');
+  result.fault = { t: tFault, state: await page.evaluate(screenState) };
+
   // Freeze the camera: the video element stops presenting new frames (after a live beacon).
   await waitFor(page, () => window.crossingAssist.audio.state().kind === 'beacon', null, 20000, 'a beacon before the freeze');
   const tFreeze = await page.evaluate(() => {

@@ -18,6 +18,9 @@
 //   from the one before is dropped when it ends (its Decider and frame are gone);
 // * an instruction the user needs to recover (an error: camera lost, ...) is spoken whole, not
 //   cut by a routine stop sentence (speech.js Speaker, urgent);
+// * a frame whose handling throws outside the model (a bug) plays the stop cue and starts the
+//   decisions afresh; guidance goes on, and ends with the error's message only when
+//   MAX_LOOP_ERRORS frames in a row throw;
 // * the field of view comes from the frame's orientation (portrait / landscape): the user's
 //   setting for it, else the bundle's default (geometry.js cameraFov: a crop narrower than the
 //   sensor, e.g. 9:16 video, gets its own with geometry.sensor_aspect); a new FOV starts a fresh Decider,
@@ -55,6 +58,7 @@ import { HelperView } from './view.js';
 
 const POLL_MS = 20;
 const FRAME_WAIT_MS = 100;
+const MAX_LOOP_ERRORS = 5; // frames in a row that may throw outside the model before guidance ends
 export const MIN_FRAME_INTERVAL_S = 0.1; // inference at most 10 times a second
 export const DOUBLE_TAP_MS = 500;
 export const LONG_PRESS_MS = 700;
@@ -316,6 +320,7 @@ async function runLoop() {
   let prevCaptured = null;
   let lastRun = -Infinity;
   let generation = app.generation;
+  let errors = 0; // frames in a row whose step threw outside the model
   while (app.running) {
     if (app.paused || generation !== app.generation) {
       if (app.paused) await sleep(FRAME_WAIT_MS);
@@ -326,31 +331,43 @@ async function runLoop() {
     }
     while (now() < lastRun + MIN_FRAME_INTERVAL_S) await sleep(Math.max(1, 1000 * (lastRun + MIN_FRAME_INTERVAL_S - now())));
     if (!(await app.grabber.waitForNewFrame(FRAME_WAIT_MS)) || !app.running || app.paused) continue;
-    const grabbed = now();
-    const frame = app.grabber.grab();
-    if (!frame) continue;
-    // the frame's own capture time (camera.js), on the app's clock: it may have waited for a model run
-    const captured = Math.min(grabbed, (frame.timeMs - app.t0) / 1000);
-    if (sameFrame(prev, frame)) {
-      // A frozen camera repeats its last frame: not fresh; let the watchdog act.
-      record({ kind: 'frozen', t: captured, seq: frame.seq });
-      continue;
+    try {
+      const grabbed = now();
+      const frame = app.grabber.grab();
+      if (!frame) continue;
+      // the frame's own capture time (camera.js), on the app's clock: it may have waited for a model run
+      const captured = Math.min(grabbed, (frame.timeMs - app.t0) / 1000);
+      if (sameFrame(prev, frame)) {
+        // A frozen camera repeats its last frame: not fresh; let the watchdog act.
+        record({ kind: 'frozen', t: captured, seq: frame.seq });
+        continue;
+      }
+      prev = { ...frame, rgb: frame.rgb.slice() };
+      lastRun = grabbed;
+      const t0 = performance.now();
+      // With the motion sensors on, the frame is turned level first (the frozen check above reads
+      // the camera's own pixels, which a moving phone's levelling would otherwise keep changing).
+      const roll = app.tilt?.rollDeg(grabbed) ?? null;
+      const levelled = app.grabber.level(frame, roll, app.meta.geometry.pad_rgb ?? PAD_RGB);
+      await step(levelled, captured, grabbed, prevCaptured === null ? 0 : captured - prevCaptured, rolledTooFar(roll));
+      prevCaptured = captured;
+      const ms = performance.now() - t0;
+      p.busyS += ms / 1000;
+      p.frames += 1;
+      p.recentMs = p.frames === 1 ? ms : 0.5 * (p.recentMs + ms); // the last two or three frames' time
+      const elapsed = Math.max(1e-3, now() - p.startedS);
+      view.speed(p.frames / elapsed, (1000 * p.busyS) / p.frames, p.busyS / elapsed, 1000 * WATCHDOG_S, p.recentMs);
+      errors = 0;
+    } catch (err) {
+      // a fault outside the model (the model's own are failed frames): stop, start the decisions
+      // afresh and go on; the same fault frame after frame ends guidance with its message (fail)
+      if (++errors > MAX_LOOP_ERRORS) throw err;
+      console.error(err);
+      record({ kind: 'loop_error', t: now(), error: String(err?.message || err) });
+      resetDecisions();
+      if (!app.audioFailed) app.audio.render(STOP_CUE);
+      await sleep(FRAME_WAIT_MS);
     }
-    prev = { ...frame, rgb: frame.rgb.slice() };
-    lastRun = grabbed;
-    const t0 = performance.now();
-    // With the motion sensors on, the frame is turned level first (the frozen check above reads
-    // the camera's own pixels, which a moving phone's levelling would otherwise keep changing).
-    const roll = app.tilt?.rollDeg(grabbed) ?? null;
-    const levelled = app.grabber.level(frame, roll, app.meta.geometry.pad_rgb ?? PAD_RGB);
-    await step(levelled, captured, grabbed, prevCaptured === null ? 0 : captured - prevCaptured, rolledTooFar(roll));
-    prevCaptured = captured;
-    const ms = performance.now() - t0;
-    p.busyS += ms / 1000;
-    p.frames += 1;
-    p.recentMs = p.frames === 1 ? ms : 0.5 * (p.recentMs + ms); // the last two or three frames' time
-    const elapsed = Math.max(1e-3, now() - p.startedS);
-    view.speed(p.frames / elapsed, (1000 * p.busyS) / p.frames, p.busyS / elapsed, 1000 * WATCHDOG_S, p.recentMs);
   }
 }
 
