@@ -501,6 +501,10 @@ def _check_model_file(path: Path, size: int, sha: str, *, verify_hash: bool) -> 
                                   "copy the bundle again or re-export it")
 
 
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not JSON (the phone app cannot parse it)")
+
+
 def read_bundle(bundle_dir: str | os.PathLike, *, verify_hash: bool = True) -> Bundle:
     """Read and validate a bundle folder; raises :class:`BundleError` (one line) when unusable.
 
@@ -517,7 +521,7 @@ def read_bundle(bundle_dir: str | os.PathLike, *, verify_hash: bool = True) -> B
         raise BundleError(f"bundle: {jpath} is {jpath.stat().st_size} bytes (at most {MAX_JSON_BYTES}); "
                           "re-export the bundle")
     try:
-        meta = json.loads(jpath.read_text(encoding="utf-8"))
+        meta = json.loads(jpath.read_text(encoding="utf-8"), parse_constant=_no_constant)   # the app's JSON.parse
     except (UnicodeDecodeError, ValueError) as exc:  # JSONDecodeError, or an int over the digit limit
         raise BundleError(f"bundle: {jpath} is not valid JSON ({exc.__class__.__name__}: "
                           f"{_short(str(exc).splitlines()[0] if str(exc) else '', 120)}); re-export the bundle") from None

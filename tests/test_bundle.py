@@ -204,6 +204,14 @@ def test_invalid_json_text(bundle_dir):
     _one_line_error(bundle_dir, "not valid JSON")
 
 
+def test_nan_in_bundle_json_is_refused_as_the_app_refuses_it(bundle_dir):
+    """Python's json reads NaN; the app's JSON.parse does not: a hand-edited NaN is one line here too."""
+    path = bundle_dir / "bundle.json"
+    path.write_text(path.read_text().replace('"metrics": {', '"metrics": {"x": NaN, ', 1))
+    assert "NaN" in path.read_text()
+    _one_line_error(bundle_dir, "NaN is not JSON")
+
+
 @pytest.mark.parametrize(
     "edit, match",
     [

@@ -224,6 +224,10 @@ def test_config_rejects_bad_options():
         ExportConfig(run="r", out="o", gate_scale_portrait=0.0)
     with pytest.raises(ExportError, match="--int8 needs --calib-data"):
         ExportConfig(run="r", out="o", int8=True)
+    with pytest.raises(ExportError, match="--gate-scale / --gate-scale-portrait need --calib-data"):
+        ExportConfig(run="r", out="o", gate_scale=2.0)   # was ignored: the threshold as if not given
+    with pytest.raises(ExportError, match="need --calib-data"):
+        ExportConfig(run="r", out="o", gate_scale_portrait=1.5)
     with pytest.raises(ExportError, match="--p 1.0"):
         ExportConfig(run="r", out="o", p=1.0)
     with pytest.raises(ExportError, match="--view-zoom 0.5; valid: 1..4"):
@@ -378,13 +382,14 @@ def test_calibration_frames_are_what_the_runtime_gives_the_graph(tmp_path):
     from crossing_assist.export.exporter import ExportError, load_labelled
     from crossing_assist.geometry import Geometry, view_rows
 
-    def dataset(shapes):
+    def dataset(shapes, label=6):
         root = tmp_path / f"d{len(list(tmp_path.iterdir()))}"
         (root / "images").mkdir(parents=True)
         rows = []
         for i, (h, w) in enumerate(shapes):
             save_rgb(root / "images" / f"{i}.png", np.full((h, w, 3), 90, np.uint8))
-            rows.append(Row(image=f"images/{i}.png", label=6, far_x=0.45, source=f"s:{i}", split="val"))
+            rows.append(Row(image=f"images/{i}.png", label=label, far_x=0.45 if label else None, source=f"s:{i}",
+                            split="val"))
         write_manifest(root, rows)
         return str(root)
 
@@ -396,6 +401,9 @@ def test_calibration_frames_are_what_the_runtime_gives_the_graph(tmp_path):
     assert raw.images[0].shape == (128, 96, 3)
     with pytest.raises(ExportError, match="calib-data"):
         load_labelled(dataset([(160, 32), (96, 128)]), "val", 13, progress=False, geometry=geo, canvas=(36, 48))
+    # negatives only (crossing-data negatives' output): calibrated silently before, temperature at its clip
+    with pytest.raises(ExportError, match="no frame with a crossing label"):
+        load_labelled(dataset([(96, 128)] * 3, label=0), "val", 13, progress=False)
 
 
 def test_the_calibration_log_says_when_its_folds_are_not_held_out_by_source(work, tmp_path):

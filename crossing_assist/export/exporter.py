@@ -108,6 +108,8 @@ class ExportConfig:
             (self.measure in EXPORT_MEASURES, f"--measure {self.measure!r}; valid: {', '.join(EXPORT_MEASURES)}"),
             (self.int8_mode in INT8_MODES, f"--int8-mode {self.int8_mode!r}; valid: {', '.join(INT8_MODES)}"),
             (not self.int8 or self.calib_data, "--int8 needs --calib-data (real frames to calibrate the int8 ranges)"),
+            ((self.gate_scale == 1.0 and self.gate_scale_portrait is None) or self.calib_data,
+             "--gate-scale / --gate-scale-portrait need --calib-data (they scale the threshold fitted on it)"),
             (inference.is_seed(self.seed), f"--seed {self.seed!r}; valid: {inference.SEED_RANGE}"),
         ]
         for ok, msg in checks:
@@ -162,6 +164,9 @@ def load_labelled(data_dir: str, split: str, n_actions: int, progress: bool = Tr
         except GeometryError as exc:
             raise ExportError(f"Invalid --calib-data {data_dir}: {exc}") from None
     actions = get_space(n_actions).bins_to_actions(ds.labels())
+    if not (actions != 0).any():
+        raise ExportError(f"Invalid --calib-data {data_dir}: split {split!r} has no frame with a crossing label "
+                          f"(all {len(actions)} unknown); calibration needs labelled crossings")
     return Labelled(images, actions, ds.far_x(), np.asarray([r.source for r in ds.rows]))
 
 
