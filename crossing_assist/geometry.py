@@ -205,7 +205,13 @@ class Geometry:
         """:meth:`view` at the frame's camera FOV (:meth:`camera_fov`): what a consumer gives the
         graph for a frame of any orientation, as ``Engine.predict`` does. GeometryError for a
         frame too narrow for any camera."""
-        return self.view(frame, self.camera_fov(frame.shape[1], frame.shape[0], fov_deg), canvas)
+        top, rows = self.camera_rows(frame.shape[0], frame.shape[1], canvas, fov_deg)
+        return frame[top:top + rows]
+
+    def camera_rows(self, height: int, width: int, canvas: tuple[int, int],
+                    fov_deg: float | None = None) -> tuple[int, int]:
+        """``(top, rows)`` :meth:`camera_view` keeps of a ``height x width`` frame."""
+        return self.rows_seen(height, width, self.camera_fov(width, height, fov_deg), canvas)
 
     def camera_fov(self, width: int, height: int, override: float | None = None) -> float:
         """Horizontal FOV (degrees) for a ``width x height`` frame: ``override`` (the user's or the
