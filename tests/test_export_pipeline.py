@@ -222,9 +222,9 @@ def test_mirror_export_writes_the_flag_and_its_graph_is_mirror_equivariant(work,
 def test_config_rejects_bad_options():
     with pytest.raises(ExportError, match="--gate-scale-portrait 0.0"):
         ExportConfig(run="r", out="o", gate_scale_portrait=0.0)
-    with pytest.raises(ExportError, match="--int8 needs --calib-data"):
+    with pytest.raises(ExportError, match="^--int8 needs --calib-data"):
         ExportConfig(run="r", out="o", int8=True)
-    with pytest.raises(ExportError, match="--gate-scale / --gate-scale-portrait need --calib-data"):
+    with pytest.raises(ExportError, match="^--gate-scale / --gate-scale-portrait need --calib-data"):
         ExportConfig(run="r", out="o", gate_scale=2.0)   # was ignored: the threshold as if not given
     with pytest.raises(ExportError, match="need --calib-data"):
         ExportConfig(run="r", out="o", gate_scale_portrait=1.5)

@@ -1,6 +1,7 @@
 """crossing-eval on a tiny run: metrics.json fields and plots; clear errors."""
 
 import json
+import shutil
 import subprocess
 import sys
 
@@ -47,6 +48,15 @@ def test_eval_cli_errors_are_one_line(tiny_run, tmp_path):
     assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr
     r = subprocess.run([*EVAL, "--data", str(data), "--run", str(run), "--split", "test"], capture_output=True, text=True)
     assert r.returncode == 2 and "no test rows" in r.stderr
+    killed = tmp_path / "killed"        # a run killed before an epoch was selected: only last.pt
+    (killed / "weights").mkdir(parents=True)
+    shutil.copy(run / "weights" / "last.pt", killed / "weights" / "last.pt")
+    r = subprocess.run([*EVAL, "--data", str(data), "--run", str(killed)], capture_output=True, text=True)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert f"--run {killed / 'weights' / 'last.pt'}" in r.stderr and "resume" in r.stderr
+    r = subprocess.run([*EVAL, "--data", str(data), "--run", str(killed / "weights" / "last.pt"), "--out",
+                        str(tmp_path / "ev")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
     r = subprocess.run([*EVAL, "--data", str(data), "--bundle", str(tmp_path)], capture_output=True, text=True)
     assert r.returncode == 2 and r.stderr.startswith("error:") and "Traceback" not in r.stderr
 

@@ -107,14 +107,17 @@ class ExportConfig:
              f"--view-zoom {self.view_zoom}; valid: {VIEW_ZOOM_RANGE[0]:g}..{VIEW_ZOOM_RANGE[1]:g}"),
             (self.measure in EXPORT_MEASURES, f"--measure {self.measure!r}; valid: {', '.join(EXPORT_MEASURES)}"),
             (self.int8_mode in INT8_MODES, f"--int8-mode {self.int8_mode!r}; valid: {', '.join(INT8_MODES)}"),
-            (not self.int8 or self.calib_data, "--int8 needs --calib-data (real frames to calibrate the int8 ranges)"),
-            ((self.gate_scale == 1.0 and self.gate_scale_portrait is None) or self.calib_data,
-             "--gate-scale / --gate-scale-portrait need --calib-data (they scale the threshold fitted on it)"),
+
             (inference.is_seed(self.seed), f"--seed {self.seed!r}; valid: {inference.SEED_RANGE}"),
         ]
         for ok, msg in checks:
             if not ok:
                 raise ExportError(f"Invalid {msg}")
+        if self.int8 and not self.calib_data:
+            raise ExportError("--int8 needs --calib-data (real frames to calibrate the int8 ranges)")
+        if (self.gate_scale != 1.0 or self.gate_scale_portrait is not None) and not self.calib_data:
+            raise ExportError("--gate-scale / --gate-scale-portrait need --calib-data (they scale the threshold "
+                              "fitted on it)")
 
 
 @dataclass(frozen=True)
@@ -195,11 +198,10 @@ def torch_logits(graph: BundleGraph, images: Sequence[np.ndarray], batch: int, p
 
 
 def _load_policy(run: str):
-    from crossing_assist.models.checkpoint import CheckpointError, load_policy
+    from crossing_assist.models.checkpoint import CheckpointError, load_policy, run_checkpoint
 
-    path = Path(run)
-    ckpt = path if path.suffix == ".pt" else path / "weights" / "best.pt"
     try:
+        ckpt = run_checkpoint(run)
         return load_policy(ckpt), ckpt
     except CheckpointError as exc:
         raise ExportError(str(exc)) from None

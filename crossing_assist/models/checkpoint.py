@@ -53,6 +53,25 @@ def save_checkpoint(path: str | os.PathLike, policy: Policy, extra: dict | None 
     return path
 
 
+def run_checkpoint(run: str | os.PathLike) -> Path:
+    """The checkpoint a ``--run`` names: a ``.pt`` file as given, a run folder's ``weights/best.pt``.
+    CheckpointError when it is missing, saying so when the folder has only ``weights/last.pt``
+    (a run killed or still in its first epoch) and how to use that one."""
+    path = Path(run)
+    if path.suffix == ".pt" or not path.is_dir():
+        ckpt = path
+    else:
+        ckpt = path / "weights" / "best.pt"
+        last = path / "weights" / "last.pt"
+        if not ckpt.is_file() and last.is_file():
+            raise CheckpointError(f"{ckpt}: not found; the run has only {last} (no epoch was selected yet: "
+                                  f"resume the training, or pass --run {last} to use the latest weights)")
+    if not ckpt.is_file():
+        raise CheckpointError(f"{ckpt}: checkpoint not found (expected a run folder with weights/best.pt "
+                              "or a .pt file)")
+    return ckpt
+
+
 def load_checkpoint(path: str | os.PathLike) -> dict:
     """The raw checkpoint dict; CheckpointError when missing, corrupt or of another format."""
     path = Path(path)

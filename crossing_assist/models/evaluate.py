@@ -24,7 +24,7 @@ from ..data_tools.manifest import Dataset, atomic_write_text, read_manifest
 from ..geometry import GeometryError, content_window, letterbox
 from ..inference import SEED_RANGE, is_seed
 from .cache import compute_features
-from .checkpoint import load_checkpoint, load_policy
+from .checkpoint import load_checkpoint, load_policy, run_checkpoint
 from .config import ConfigError
 from .data import make_variants, normalise, resize_rgb
 from .plots import plot_confusion, plot_examples, plot_reliability
@@ -71,15 +71,6 @@ class EvalConfig:
             raise ConfigError(f"Invalid seed {self.seed!r}; valid: {SEED_RANGE}")
 
 
-def _checkpoint_path(run: str) -> Path:
-    p = Path(run)
-    if p.is_dir():
-        p = p / "weights" / "best.pt"
-    if not p.is_file():
-        raise ConfigError(f"Invalid --run: {p} not found (expected a run folder with weights/best.pt or a .pt file)")
-    return p
-
-
 def _split(cfg: EvalConfig) -> Dataset:
     ds = read_manifest(cfg.data)
     part = ds.split(cfg.split)
@@ -115,7 +106,7 @@ def activation_maps(policy: Policy, images: list[np.ndarray], actions: np.ndarra
 
 
 def _eval_checkpoint(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, Policy]:
-    path = _checkpoint_path(cfg.run)
+    path = run_checkpoint(cfg.run)
     policy = load_policy(path)
     ck = load_checkpoint(path)
     c = policy.config
@@ -248,7 +239,7 @@ def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
     if cfg.run is not None:
         probs, info, policy = _eval_checkpoint(cfg, part)
         n_actions, majority = policy.n_actions, policy.config.majority_action
-        default_out = _checkpoint_path(cfg.run).parent.parent / f"eval_{cfg.split}"
+        default_out = run_checkpoint(cfg.run).parent.parent / f"eval_{cfg.split}"
     else:
         probs, info, bundle = _eval_bundle(cfg, part)
         n_actions, majority = int(bundle.actions.n), bundle.training.get("majority_action")
