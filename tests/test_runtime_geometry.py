@@ -86,6 +86,25 @@ def test_pipeline_resets_the_belief_when_the_orientation_flips(toy2):
     assert x_to_bin(heading_to_x(d.heading_deg, PORTRAIT_FOV)) == STRIP
 
 
+def test_a_failed_frame_at_a_new_fov_or_a_refused_size_starts_the_belief_afresh(toy2):
+    """As the app (app.js step): the FOV is the frame's size's, known before the model runs, so a
+    portrait frame rolled too far to level already starts the portrait belief; a frame whose FOV
+    cannot be known makes the next good frame start afresh, as a first frame would."""
+    eng = Engine(toy2)
+    pipe = Pipeline(eng)
+    _run(pipe, [_landscape()] * 10)
+    rolled = pipe.step(_portrait(), 1.0, roll_deg=80.0)
+    assert not rolled.prediction.ok and rolled.prediction.fov_deg == PORTRAIT_FOV
+    assert pipe.decider.cfg.fov_deg == PORTRAIT_FOV and rolled.cue.kind == KIND_STOP
+    assert max(rolled.decision.belief) < 0.2
+    first = _run(Pipeline(eng), [_landscape()])[0].decision.belief
+    _run(pipe, [_landscape()] * 10, t0=2.0)
+    refused = pipe.step(np.full((1, 96, 3), 128, np.uint8), 3.0)
+    assert not refused.prediction.ok and refused.prediction.fov_deg is None
+    again = _run(pipe, [_landscape()], t0=3.05)[0].decision.belief
+    np.testing.assert_allclose(again, first)
+
+
 @pytest.mark.parametrize("shape", [(1, 96), (96, 1), (20, 200), (200, 20)])
 def test_frames_the_model_cannot_see_give_not_ok_and_the_stop_cue(toy2, shape):
     eng = Engine(toy2)

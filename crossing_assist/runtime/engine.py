@@ -33,7 +33,8 @@ class Prediction:
     bundle's conformal threshold; ``action`` the argmax (0 = unknown); ``heading_deg`` its
     heading (None for unknown) with ``fov_deg``, the camera FOV of the frame's ``orientation``
     (``landscape`` / ``portrait``); ``uncertainty`` the gate's measure; ``latency_s`` inference time.
-    ``ok=False`` (with ``error``) when inference failed; the arrays are then None.
+    ``ok=False`` (with ``error``) when inference failed; the arrays are then None, and
+    ``fov_deg`` / ``orientation`` are the frame's when they were known before it failed.
     """
 
     ok: bool
@@ -126,9 +127,11 @@ class Engine:
         says so, :meth:`Bundle.view`); failures come back as ``Prediction(ok=False)``.
         ``fov_deg``: this frame's camera FOV (:meth:`camera_fov`)."""
         t0 = self._clock()
+        fov = orient = None   # a frame that fails after its FOV is known still says it (Pipeline)
         try:
             x = self._check_frame(frame_rgb)
             fov = self.camera_fov(frame_rgb.shape[1], frame_rgb.shape[0], fov_deg)
+            orient = orientation(frame_rgb.shape[1], frame_rgb.shape[0])
             if rolled_too_far(roll_deg):
                 raise ValueError(f"the camera is rolled {roll_deg:+.0f} deg, more than {MAX_GUIDED_ROLL_DEG:g} "
                                  "can be levelled: hold the phone level")
@@ -150,9 +153,8 @@ class Engine:
                 conformal_set=tuple(int(a) for a in np.flatnonzero(probs >= self.conformal_threshold)),
                 action=action,
                 heading_deg=None if action == 0 else self.space.action_heading(action, fov), fov_deg=fov,
-                orientation=orientation(frame_rgb.shape[1], frame_rgb.shape[0]),
-                uncertainty=unc, latency_s=self._clock() - t0,
+                orientation=orient, uncertainty=unc, latency_s=self._clock() - t0,
             )
         except Exception as exc:  # never raise into the audio path
             return Prediction(ok=False, error=f"{type(exc).__name__}: {str(exc).splitlines()[0][:300] if str(exc) else ''}",
-                              latency_s=self._clock() - t0)
+                              fov_deg=fov, orientation=orient, latency_s=self._clock() - t0)

@@ -44,10 +44,12 @@ def cached_loop(cue: Cue, cfg: BeaconConfig) -> np.ndarray:
 class Pipeline:
     """Engine + decision logic + beacon synthesis for one stream of frames.
 
-    Headings follow the camera: each successful frame's field of view (its orientation's, or
-    the user's setting) and the gate threshold of its orientation and FOV become the decision logic's; when
-    either changes (the phone turned between portrait and landscape) the belief starts afresh,
-    since old strips no longer mean the same directions. ``decision_cfg``'s other fields
+    Headings follow the camera: each frame's field of view (its orientation's, or the user's
+    setting; known from its size, so also for a frame the model then fails on, as the app does)
+    and the gate threshold of its orientation and FOV become the decision logic's; when either
+    changes (the phone turned between portrait and landscape) the belief starts afresh, since old
+    strips no longer mean the same directions. A frame whose FOV cannot be known (a refused
+    size) makes the next one with a FOV start afresh too. ``decision_cfg``'s other fields
     (watchdog, filter, gate, pulse rates) are kept."""
 
     def __init__(self, engine: Engine, decision_cfg: DecisionConfig | None = None,
@@ -55,6 +57,7 @@ class Pipeline:
         self.engine = engine
         self.decider = Decider(decision_cfg or engine.decision_config())
         self.beacon_cfg = beacon_cfg or BeaconConfig()
+        self._fov_lost = False   # a frame's FOV could not be known: the next known one starts afresh
 
     def step(self, frame_rgb: np.ndarray | None, t: float, yaw_rate_dps: float = 0.0,
              roll_deg: float | None = None) -> Step:
@@ -64,11 +67,14 @@ class Pipeline:
         pred = (self.engine.predict(frame_rgb, roll_deg=roll_deg) if frame_rgb is not None
                 else Prediction(ok=False, error="no frame"))
         obs = pred.observation() if frame_rgb is not None else None
-        if pred.ok and pred.fov_deg is not None:
+        if pred.fov_deg is not None:
             threshold = self.engine.bundle.calibration.uncertainty.threshold_for(pred.orientation, pred.fov_deg)
             cfg = self.decider.cfg
-            if (pred.fov_deg, threshold) != (cfg.fov_deg, cfg.threshold):
+            if self._fov_lost or (pred.fov_deg, threshold) != (cfg.fov_deg, cfg.threshold):
                 self.decider = Decider(replace(cfg, fov_deg=pred.fov_deg, threshold=threshold))
+                self._fov_lost = False
+        elif frame_rgb is not None:
+            self._fov_lost = True
         decision = self.decider.step(t, obs, yaw_rate_dps)
         cue = cue_for(decision)
         return Step(pred, decision, cue, cached_loop(cue, self.beacon_cfg))
