@@ -58,6 +58,8 @@ MIN_ONNX_BYTES = 64
 MAX_ONNX_BYTES = 1 << 40  # 1 TiB: any larger model_size is a corrupt bundle.json
 MAX_NAME = 200          # longest model_file accepted (file systems stop at 255 bytes)
 MAX_JSON_BYTES = 1 << 22  # a bundle.json is a few kB; refuse anything absurd before parsing it
+#: The bundle.json keys check_session compares with the graph's embedded copy (the app: bundle.js EMBEDDED_KEYS).
+EMBEDDED_KEYS = ("schema_version", "actions", "fov_deg", "input", "geometry", "mc", "calibration", "precision")
 
 
 class BundleError(UserError):
@@ -664,12 +666,37 @@ def write_bundle(bundle_dir: str | os.PathLike, onnx_bytes: bytes, meta: Mapping
 # ----------------------------------------------------------------------------- graph vs json
 
 
+_ABSENT = object()
+
+
+def _first_difference(a: Any, b: Any, path: str) -> tuple[str, Any, Any] | None:
+    """The first leaf (in ``a``'s key order, then ``b``'s other keys; list items in order) where two JSON
+    values differ under ``==``: ``(path, a, b)`` with ``_ABSENT`` for a missing key or item, or None.
+    The app's bundle.js ``firstDifference`` is the same walk."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        pairs = ((f"{path}.{k}", a.get(k, _ABSENT), b.get(k, _ABSENT)) for k in [*a, *(k for k in b if k not in a)])
+    elif isinstance(a, list) and isinstance(b, list):
+        pairs = ((f"{path}[{i}]", a[i] if i < len(a) else _ABSENT, b[i] if i < len(b) else _ABSENT)
+                 for i in range(max(len(a), len(b))))
+    else:
+        return None if a == b else (path, a, b)
+    return next(filter(None, (_first_difference(x, y, p) for p, x, y in pairs)), None)
+
+
+def _show(value: Any) -> str:
+    """A JSON value for an error line, cut to 60 characters (``absent`` for a missing one)."""
+    text = "absent" if value is _ABSENT else json.dumps(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 def check_session(bundle: Bundle, session: Any) -> None:
     """Check an onnxruntime ``InferenceSession`` of ``bundle.model_path`` against the json.
 
     Compares the input name/dtype, output names, the action dimension where the graph states
-    it, and the bundle facts embedded in the model's metadata (actions, input size/mean/std,
-    fov_deg, mc, calibration). Raises :class:`BundleError` with one line on the first mismatch.
+    it, and the bundle facts embedded in the model's metadata (:data:`EMBEDDED_KEYS`). Raises
+    :class:`BundleError` with one line on the first mismatch; a fact that differs is named down to
+    its first differing leaf, with both values (``bundle.json: calibration.uncertainty.threshold =
+    0.05 disagrees with the model's 0.0135; re-export the bundle``).
     """
     inputs = session.get_inputs()
     if len(inputs) != 1 or inputs[0].name != INPUT_NAME or inputs[0].type != "tensor(uint8)":
@@ -690,9 +717,14 @@ def check_session(bundle: Bundle, session: Any) -> None:
     try:
         graph_meta = json.loads(props["bundle_json"])
     except json.JSONDecodeError:
-        raise BundleError("bundle: the graph's 'bundle_json' metadata is not JSON; re-export the bundle") from None
+        graph_meta = None
+    if not isinstance(graph_meta, dict):
+        raise BundleError("bundle: the graph's 'bundle_json' metadata is not a JSON object; re-export the bundle")
     mine = embedded_meta(bundle.raw)
-    for key in ("schema_version", "actions", "fov_deg", "input", "geometry", "mc", "calibration", "precision"):
+    for key in EMBEDDED_KEYS:
         if graph_meta.get(key) != mine.get(key):
-            raise BundleError(f"bundle: bundle.json '{key}' = {json.dumps(mine.get(key))} disagrees with the "
-                              f"graph's {json.dumps(graph_meta.get(key))}; re-export the bundle")
+            path, ours, theirs = (_first_difference(mine.get(key), graph_meta.get(key), key)
+                                  or (key, mine.get(key), graph_meta.get(key)))  # (a safety net)
+            raise BundleError(f"bundle.json: {path} = {_show(ours)} disagrees with the model's {_show(theirs)}; "
+                              "re-export the bundle")
+

@@ -6,12 +6,16 @@ built copy of the app on 127.0.0.1:
 * landscape (844 x 390 screen, 160 x 120 camera), a tiny test bundle whose bundle.json is
   schema 2 (FOV 67 deg landscape, 53 portrait): first load (requests counted), accessibility
   tree, self-test (the shared test vectors, in the page), first-run sound tutorial, guidance on
-  a clip (goal left, sweep, right, hopping at the 7.5 deg boundary, grey, frozen), a single
+  a clip (goal left, sweep, right, hopping at the 7.5 deg boundary, grey, frozen) with no tilt
+  sensor at all (no deviceorientation event: "No tilt sensor" said once per start), a single
   tap, audio suspended and resumed, app hidden and shown, camera stalled, double tap, a failed
   then a good start, long press, and a reload with the server stopped (offline);
 * portrait (390 x 844 screen, 180 x 240 camera): the real default bundle with its MC-dropout
   noise made constant (so onnxruntime-web 1.30 and Python's onnxruntime must agree number for
-  number) on the sample clip cut to portrait;
+  number) on the sample clip cut to portrait; no URL flag and no sensor setting stored (the
+  app's defaults), a synthetic tilt sensor reporting the phone level, then rolled 12 deg
+  (levelled), 75 deg (stop), silent while still at 75 deg (no stale roll; "No tilt sensor"),
+  then pointed down;
 * portrait with the view crop (bundle schema 3, ``geometry.view_crop``): a tiny test bundle
   whose letterbox geometry crops the frame's rows to the training camera's view, on a clip whose
   kept rows and cut-off rows point to different strips (the app must crop as Engine.predict).
@@ -61,6 +65,9 @@ FLIP_S = 6
 SPEECH_GAP_S = 2.0  # speech.js SPEECH.min_gap_s: a change between stop sentences waits this long
 SIDEWAYS_AFTER_S = 1.0  # the portrait run's wait for the hold-it-sideways advice (the app's: 5 s)
 ROLL_DEG = 12.0  # the portrait run turns the phone this far clockwise about the camera axis
+NO_TILT = "No tilt sensor: hold the phone level."  # live.js NO_TILT_TEXT
+NO_TILT_AFTER_S = 2.0  # live.js TiltSilence: said when the tilt sensor gave nothing for this long
+ROLL_FRESH_S = 0.5  # live.js TILT.roll_fresh_s: an older roll reading is no roll known
 RUN_S = 18.0  # longer than the 17 s clip: every segment, the frozen one included, is seen
 WATCHDOG_S = 0.5
 BAR_PX = 80  # the helper bar under the control (4rem of 20 px)
@@ -161,7 +168,8 @@ def portrait(tmp_path_factory) -> dict:
         frames.append(cv2.cvtColor(bgr[: h // 2 * 2, x0:x0 + pw], cv2.COLOR_BGR2RGB))
     clip.write_y4m(tmp / "clip.y4m", frames, 10)
     result = _drive(tmp, www, tmp / "clip.y4m", 8.0, "--phases", "short", "--viewport", "390x844", "--tilt", "1",
-                    "--sideways-after", str(SIDEWAYS_AFTER_S), "--roll", str(ROLL_DEG))
+                    "--sideways-after", str(SIDEWAYS_AFTER_S), "--roll", str(ROLL_DEG), "--level", "1",
+                    "--sensor-stops", "1")
     meta = json.loads((det / "bundle.json").read_text())
     return {"result": result, "engine": Engine(det), "geometry": meta["geometry"], "clip": np.stack(frames)}
 
@@ -293,6 +301,34 @@ def test_gyroscope_turn_reaches_the_decider(run: dict) -> None:
     frames = [e for e in run["result"]["trace"] if e["kind"] == "frame"]
     yaws = [e["yaw_rate_dps"] for e in frames[1:] if e["t"] < run["result"]["samples"][-1]["t"]]
     assert 2.5 <= float(np.median(yaws)) <= 3.5, np.percentile(yaws, [10, 50, 90])
+
+
+def test_no_tilt_sensor_is_said_once_per_start_and_guidance_goes_on(run: dict) -> None:
+    """The landscape run sends no deviceorientation event at all (headless Chromium has no
+    sensor): NO_TILT_AFTER_S after each start the user hears and sees "No tilt sensor: hold the
+    phone level." once (spoken whole; shown in a line kept until guidance ends), and guidance goes
+    on unlevelled: fresh decisions after it, no frame turned, no roll stop."""
+    trace = run["result"]["trace"]
+    starts = [i for i, e in enumerate(trace) if e["kind"] == "start"]
+    assert len(starts) >= 2, "the landscape run starts guidance twice"
+    for n, i in enumerate(starts):
+        end = next((j for j in range(i + 1, len(trace)) if trace[j]["kind"] in ("stopped", "start")), len(trace))
+        session = trace[i:end]
+        said = [e for e in session if e["kind"] == "speech" and e["text"] == NO_TILT]
+        long_enough = end == len(trace) or trace[end]["t"] - trace[i]["t"] > NO_TILT_AFTER_S + 1.0
+        assert len(said) == (1 if long_enough else len(said[:1])), (n, [e["t"] - trace[i]["t"] for e in said])
+        if not said:
+            continue
+        assert NO_TILT_AFTER_S <= said[0]["t"] - trace[i]["t"] <= NO_TILT_AFTER_S + 1.0, (n, said[0]["t"] - trace[i]["t"])
+        assert any(e["kind"] == "frame" and e["fresh"] and e["t"] > said[0]["t"] for e in session), n
+        assert all(e["roll_deg"] == 0 for e in session if e["kind"] == "frame")
+        assert [e["permission"] for e in session if e["kind"] == "no_tilt"] == ["granted"]
+    st = run["result"]["states"]
+    assert st["running"]["notice"] == NO_TILT and st["running"]["running"], st["running"]["notice"]
+    assert st["running"]["tilt_text"].startswith("no reading yet"), st["running"]["tilt_text"]
+    heard = [h for h in st["running"]["heard"] if h["text"] == NO_TILT]
+    assert len(heard) == 1 and heard[0]["how"] == "whole", heard
+    assert st["ended_double"]["notice"] is None   # gone with the guidance
 
 
 PAN_GLIDE_WINDOW_S = 0.25   # >> the app's pan glide time constant (GLIDE_S = 0.02 s, android_demo/www/js/audio.js)
@@ -570,7 +606,7 @@ def test_speech_has_hysteresis_at_a_boundary(run: dict) -> None:
     assert len(spoken) <= 1, [s["text"] for s in spoken]
     end = next(e["t"] for e in trace if e["kind"] == "audio_failed")
     directions = [e for e in trace if e["kind"] == "speech" and start <= e["t"] < end
-                  and not e["text"].startswith(("Stop", "Audio", "Double"))]
+                  and not e["text"].startswith(("Stop", "Audio", "Double", "No tilt"))]
     gaps = [b["t"] - a["t"] for a, b in zip(directions, directions[1:])]
     assert directions and min(gaps, default=9) >= SPEECH_GAP_S - 1e-9, gaps
 
@@ -624,8 +660,10 @@ def test_a_phone_pointed_at_the_ground_is_told_to_raise_it(portrait: dict) -> No
     before = [e for e in trace if e["kind"] == "frame" and e["t"] <= t]
     assert before[-1]["decision"]["stop"] and before[-1]["decision"]["reason"] == "uncertain"
     assert {e["decision"]["reason"] for e in trace if e["kind"] == "frame"} <= {"ok", "uncertain", "stale", "failed"}
-    t_tilt = portrait["result"]["tilt"]["t_tilt"]   # no advice before the sensor said anything
-    assert t >= t_tilt and not any(e["kind"] in ("speech", "vibrate") and "tilt" in e.get("reason", e.get("text", ""))
+    t_tilt = portrait["result"]["tilt"]["t_tilt"]   # no advice before the sensor said anything (held level)
+    advice = {STATUS_STOP["tilt_down"], STATUS_STOP["tilt_up"]}
+    assert t >= t_tilt and not any(e["kind"] == "speech" and e["text"] in advice
+                                   or e["kind"] == "vibrate" and e["reason"].startswith("tilt")
                                    for e in trace if e["t"] < t_tilt)
 
 
@@ -711,7 +749,8 @@ def test_screen_reader_sees_one_control_and_the_helper_only_when_opened(run: dic
     assert '- button "Helper view"' in lines, aria
     opened = run["result"]["aria_helper_open"]
     assert 'region "View for a sighted helper"' in opened, opened
-    assert 'checkbox "Use the motion sensors: turns' in opened and '- button "Check the decision logic"' in opened
+    assert 'checkbox "Level the camera with the tilt sensor' in opened and '- button "Check the decision logic"' in opened
+    assert 'checkbox "Follow turns with the gyroscope' in opened, opened
 
 
 def test_app_is_installable(run: dict) -> None:
@@ -788,7 +827,8 @@ def test_a_phone_rolled_beyond_what_can_be_levelled_stops_and_says_so(portrait: 
     4 % confidently wrong held out. The model is not asked; the beacon stops; the user hears to
     hold the phone level."""
     far = portrait["result"]["roll"]["too_far"]
-    frames = [e for e in portrait["result"]["trace"] if e["kind"] == "frame" and far["t_start"] + 0.3 < e["t"] < far["t_end"]]
+    frames = [e for e in portrait["result"]["trace"] if e["kind"] == "frame" and far["t_start"] + 0.3 < e["t"]
+              and e["grabbed"] < far["t_end"]]   # the roll is read when the frame is grabbed
     assert len(frames) >= 5, far
     assert all(e["decision"]["stop"] and not e["obs"]["ok"] and e["outputs"] is None for e in frames)
     assert far["t_spoken"] - far["t_start"] < 3.0
@@ -806,10 +846,11 @@ def test_a_rolled_phone_s_frames_are_levelled_as_python_levels_them(portrait: di
     clip = portrait["clip"].astype(np.int16)
     steps = _app_steps(portrait, least=10)
     too_far = portrait["result"]["roll"]["too_far"]["t_start"]   # then turned beyond levelling (test above)
-    rolled = [(e, rgb) for e, rgb in steps if e["roll_deg"] != 0 and e["t"] < too_far]
+    # the roll is read when a frame is grabbed, which may be after its capture (a model run was going)
+    rolled = [(e, rgb) for e, rgb in steps if e["roll_deg"] != 0 and e["grabbed"] < too_far]
     assert len(rolled) >= 8 and all(abs(e["roll_deg"] - ROLL_DEG) < 0.01 for e, _ in rolled), \
         [e["roll_deg"] for e, _ in rolled]
-    assert all(e["roll_deg"] == 0 for e, _ in steps if e["t"] < portrait["result"]["roll"]["t_start"])
+    assert all(e["roll_deg"] == 0 for e, _ in steps if e["grabbed"] < portrait["result"]["roll"]["t_start"])
 
     def nearest(frames, rgb):
         return float(np.abs(frames - rgb.astype(np.int16)[None]).mean(axis=(1, 2, 3)).min())
@@ -820,6 +861,44 @@ def test_a_rolled_phone_s_frames_are_levelled_as_python_levels_them(portrait: di
         same, raw, other = nearest(levelled, rgb), nearest(clip, rgb), nearest(wrong_way, rgb)
         assert same <= 2.0 and raw >= 5 * same and other >= 5 * same, (entry["t"], same, raw, other)
     assert "to level" in portrait["result"]["roll"]["camera_text"], portrait["result"]["roll"]["camera_text"]
+
+
+def test_the_tilt_sensor_is_on_without_any_url_flag_or_setting(portrait: dict) -> None:
+    """The portrait run loads the app with no URL flag for the sensors and no sensor setting
+    stored (a user who never opened the settings): the tilt sensor is used all the same, so the
+    levelling and the roll stop above are the app's defaults; the gyroscope stays off."""
+    r = portrait["result"]
+    query = r["page_url"].split("?", 1)[-1]
+    assert "gyro" not in query and "tilt" not in query, r["page_url"]
+    stored = json.loads(r["stored_settings"])
+    assert "gyro" not in stored and "tilt" not in stored, stored
+    frames = [e for e in r["trace"] if e["kind"] == "frame"]
+    assert any(e["roll_deg"] != 0 for e in frames), "nothing levelled with the defaults"
+    assert all(e["yaw_rate_dps"] == 0 for e in frames)   # no gyroscope unless turned on
+    assert "rolled" in r["roll"]["tilt_text"] and "too far" in r["roll"]["tilt_text"], r["roll"]["tilt_text"]
+
+
+def test_a_tilt_sensor_that_stops_leaves_no_stale_roll_and_is_said_once(portrait: dict) -> None:
+    """The sensor falls silent while its last reading says 75 deg (beyond levelling): frames
+    grabbed more than ROLL_FRESH_S after that reading are neither turned nor stopped as rolled
+    (the model is asked again); NO_TILT_AFTER_S later the user hears and sees "No tilt sensor"
+    once, and guidance goes on. With the sensor working before, it was never said."""
+    r = portrait["result"]
+    silent = r["sensor_stopped"]
+    t0 = silent["t_start"]
+    frames = [e for e in r["trace"] if e["kind"] == "frame" and e["grabbed"] > t0 + ROLL_FRESH_S + 0.05
+              and e["t"] < silent["t_end"]]
+    assert len(frames) >= 5, silent
+    assert all(e["roll_deg"] == 0 and e["outputs"] is not None and e["obs"]["ok"] for e in frames), \
+        [(e["t"] - t0, e["roll_deg"], e["obs"]["ok"]) for e in frames]
+    said = [e for e in r["trace"] if e["kind"] == "speech" and e["text"] == NO_TILT]
+    assert len(said) == 1 and NO_TILT_AFTER_S - 0.06 <= said[0]["t"] - t0 <= NO_TILT_AFTER_S + 1.0, \
+        ([e["t"] - t0 for e in said], t0)
+    st = silent["state"]
+    assert st["notice"] == NO_TILT and st["running"] and st["mode"] == "running", st
+    heard = [h for h in st["heard"] if h["text"] == NO_TILT]
+    assert len(heard) == 1 and heard[0]["how"] in ("whole", None), heard   # None: still being spoken
+    assert any(e["kind"] == "frame" and e["fresh"] and e["t"] > said[0]["t"] for e in r["trace"])
 
 
 def test_portrait_screen_control_fills_the_screen(portrait: dict) -> None:
@@ -986,3 +1065,74 @@ def test_default_bundle_on_the_sample_clip_agrees_with_python(tmp_path: Path) ->
     assert top_in >= 0.9 * total, f"the app's top action is among onnxruntime's on {top_in}/{total} frames"
     assert float(np.median(dent)) <= 0.15
     assert agree >= 0.8 * total, f"{agree}/{total} decisions agree"
+
+
+# ----------------------------------------------------------------------------- a hand-edited bundle
+
+#: Opens the app at ?bundle=NAME/ for each NAME (argv: www, chromium, names...), clicks the control
+#: of a page that did not get ready, and prints what each page showed, said and did as JSON.
+_LOAD_SCRIPT = r"""
+import { spawn } from 'node:child_process';
+import { chromium } from 'playwright-core';
+const [www, executablePath, ...names] = process.argv.slice(1);
+const server = spawn(process.execPath, ['tools/serve.mjs', '--port', '0', '--root', www], { stdio: ['ignore', 'pipe', 'inherit'] });
+const url = await new Promise((ok) => server.stdout.on('data', (c) => { const m = /serving (\S+)/.exec(String(c)); if (m) ok(m[1]); }));
+const browser = await chromium.launch({ executablePath, args: ['--headless=new', '--no-sandbox', '--disable-gpu',
+  '--use-fake-device-for-media-stream', '--use-fake-ui-for-media-stream'] });
+const out = {};
+try {
+  for (const name of names) {
+    const page = await browser.newPage();
+    await page.addInitScript(() => {
+      window.__said = [];
+      if (window.speechSynthesis) window.speechSynthesis.speak = (u) => window.__said.push(u.text);
+    });
+    await page.goto(`${url}?test=1&bundle=${name}/`);
+    await page.waitForFunction(() => window.crossingAssist && (window.crossingAssist.ready || window.crossingAssist.error),
+      null, { timeout: 60000 });
+    const ready = await page.evaluate(() => window.crossingAssist.ready);
+    if (!ready) await page.locator('#control').click({ force: true, timeout: 2000 }).catch(() => null);
+    await page.waitForTimeout(500);
+    out[name] = await page.evaluate(() => {
+      const a = window.crossingAssist;
+      const err = document.getElementById('error');
+      return { ready: a.ready, mode: a.mode, running: Boolean(a.running), error: a.error, shown: err.hidden ? null : err.textContent,
+        disabled: document.getElementById('control').disabled, label: document.getElementById('control-label').textContent,
+        said: window.__said };
+    });
+    await page.close();
+  }
+} finally {
+  await browser.close();
+  server.kill();
+}
+console.log(JSON.stringify(out));
+"""
+
+
+def test_a_hand_edited_bundle_json_is_refused_and_nothing_guides(tmp_path: Path) -> None:
+    """The default bundle copied beside the app twice, one with bundle.json's gate threshold
+    edited by hand, loaded with ?bundle=: the edited one is refused with one line naming the leaf
+    and both values (shown and spoken; the control stays disabled and a tap starts nothing), the
+    unedited copy gets ready."""
+    if not (DEFAULT_BUNDLE / "bundle.json").is_file():
+        pytest.skip("the default bundle is not in crossing_assist/assets")
+    www = _build(tmp_path, DEFAULT_BUNDLE)
+    for name in ("edited", "same"):
+        shutil.copytree(DEFAULT_BUNDLE, www / name)
+    meta = json.loads((www / "edited" / "bundle.json").read_text())
+    was = meta["calibration"]["uncertainty"]["threshold"]
+    meta["calibration"]["uncertainty"]["threshold"] = 0.05
+    (www / "edited" / "bundle.json").write_text(json.dumps(meta, indent=2))
+    proc = subprocess.run([NODE, "--input-type=module", "-e", _LOAD_SCRIPT, str(www), CHROMIUM, "edited", "same"],
+                          cwd=DEMO, capture_output=True, text=True, timeout=180)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    pages = json.loads(proc.stdout.strip().splitlines()[-1])
+    line = (f"bundle.json: calibration.uncertainty.threshold = 0.05 disagrees with the model's {was!r}; "
+            "re-export the bundle")
+    edited = pages["edited"]
+    assert edited["error"].endswith(line) and edited["shown"] == edited["error"], edited
+    assert line in " ".join(edited["said"])
+    assert not edited["ready"] and not edited["running"] and edited["mode"] != "running"
+    assert edited["disabled"] and edited["label"] == "Not ready"
+    assert pages["same"]["ready"] and pages["same"]["error"] is None and not pages["same"]["disabled"]

@@ -209,9 +209,10 @@ def test_build_copies_only_the_wasm_runtime_and_lists_the_cache(tmp_path: Path) 
             "vendor/ort-wasm-simd-threaded.wasm", "manifest.webmanifest"} <= urls
     assert "sw.js" not in urls and len(pre["version"]) == 16
     assert ("test_vectors.json" in urls) == (DEMO / "test_vectors.json").is_file()  # the self-test's data
-    # a different bundle gives a different cache version (phones pick up the swap)
+    # a different bundle gives a different cache version (phones pick up the swap); metrics are
+    # not checked against the graph's copy (an edited threshold is refused: below)
     meta = json.loads((bundle / "bundle.json").read_text())
-    meta["calibration"]["uncertainty"]["threshold"] = 0.9
+    meta["metrics"] = {"edited": 1}
     (bundle / "bundle.json").write_text(json.dumps(meta))
     subprocess.run([NODE, "tools/build.mjs", "--bundle", str(bundle), "--www", str(www)],
                    capture_output=True, text=True, timeout=120, cwd=DEMO, check=True)
@@ -219,7 +220,7 @@ def test_build_copies_only_the_wasm_runtime_and_lists_the_cache(tmp_path: Path) 
 
 
 @needs_npm
-@pytest.mark.parametrize("damage", ["model", "json", "missing"])
+@pytest.mark.parametrize("damage", ["model", "json", "missing", "edited"])
 def test_build_refuses_a_bad_bundle_with_one_line(tmp_path: Path, damage: str) -> None:
     bundle = _make_bundle(tmp_path / "bundle")
     if damage == "model":
@@ -230,6 +231,10 @@ def test_build_refuses_a_bad_bundle_with_one_line(tmp_path: Path, damage: str) -
         meta = json.loads((bundle / "bundle.json").read_text())
         meta["actions"]["n"] = 5
         (bundle / "bundle.json").write_text(json.dumps(meta))
+    elif damage == "edited":  # valid on its own, but no longer what the graph embeds
+        meta = json.loads((bundle / "bundle.json").read_text())
+        meta["calibration"]["uncertainty"]["threshold"] = 0.9
+        (bundle / "bundle.json").write_text(json.dumps(meta))
     else:
         bundle = tmp_path / "nowhere"
     proc = subprocess.run([NODE, "tools/build.mjs", "--bundle", str(bundle), "--www", str(tmp_path / "www")],
@@ -237,7 +242,36 @@ def test_build_refuses_a_bad_bundle_with_one_line(tmp_path: Path, damage: str) -
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
-    assert {"model": "SHA-256", "json": "actions.n", "missing": "no bundle"}[damage] in lines[0]
+    assert {"model": "SHA-256", "json": "actions.n", "missing": "no bundle",
+            "edited": "calibration.uncertainty.threshold = 0.9 disagrees with the model's"}[damage] in lines[0]
+
+
+@needs_npm
+def test_build_into_a_new_folder_writes_a_whole_app_and_refuses_a_foreign_one(tmp_path: Path) -> None:
+    bundle = _make_bundle(tmp_path / "bundle")
+
+    def build(www: Path) -> subprocess.CompletedProcess:
+        return subprocess.run([NODE, "tools/build.mjs", "--bundle", str(bundle), "--www", str(www)],
+                              capture_output=True, text=True, timeout=120, cwd=DEMO)
+
+    www = tmp_path / "new" / "www"
+    assert build(www).returncode == 0
+    sources = {p.relative_to(DEMO / "www") for p in (DEMO / "www").rglob("*") if p.is_file()
+               and p.parts[len(DEMO.parts) + 1] not in ("vendor", "bundle") and p.suffix != ".gz"
+               and p.name not in ("precache.json", "test_vectors.json")}
+    assert {"index.html", "js/app.js", "sw.js", "manifest.webmanifest"} <= {str(p) for p in sources}
+    for rel in sources:
+        assert (www / rel).read_bytes() == (DEMO / "www" / rel).read_bytes(), rel
+    urls = {f["url"] for f in json.loads((www / "precache.json").read_text())["files"]}
+    assert {"index.html", "js/app.js", "bundle/model.onnx"} <= urls
+    assert build(www).returncode == 0  # a folder built before is rebuilt
+    foreign = tmp_path / "notes"
+    foreign.mkdir()
+    (foreign / "todo.txt").write_text("keep")
+    proc = build(foreign)
+    assert proc.returncode == 2 and proc.stderr.strip().splitlines() == [
+        f"error: --www {foreign} exists and is not an app folder (no index.html); pass a new or empty folder"]
+    assert sorted(p.name for p in foreign.iterdir()) == ["todo.txt"]
 
 
 def test_server_serves_wasm_and_modules_and_stays_inside_its_root(tmp_path: Path) -> None:

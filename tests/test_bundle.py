@@ -281,8 +281,48 @@ def test_check_session_refuses_mismatches(bundle_dir):
         check_session(b, fake_session(make_meta(), outputs=["probs"]))
     other = make_meta()
     other["input"] = dict(other["input"], size=[160, 160])
-    with pytest.raises(BundleError, match="'input'.*disagrees with the graph") as info:
+    with pytest.raises(BundleError, match=r"^bundle\.json: input\.size\[0\] = 224 disagrees with the model's 160; "
+                                          "re-export the bundle$"):
         check_session(b, fake_session(other))
-    assert "\n" not in str(info.value)
-    with pytest.raises(BundleError, match="'actions'"):
+    with pytest.raises(BundleError, match=r"^bundle\.json: actions\.n = 13 disagrees with the model's 4;"):
         check_session(b, fake_session(make_meta(n=4)))
+
+
+def _edited(edit) -> dict:
+    meta = json.loads(json.dumps(make_meta()))
+    edit(meta)
+    return meta
+
+
+@pytest.mark.parametrize("edit, line", [
+    (lambda m: m["calibration"]["uncertainty"].update(threshold=0.05),
+     "calibration.uncertainty.threshold = 0.05 disagrees with the model's 1.2"),
+    (lambda m: m["calibration"]["uncertainty"].update(portrait_threshold=2.0),
+     "calibration.uncertainty.portrait_threshold = 2.0 disagrees with the model's absent"),
+    (lambda m: m["input"]["size"].__setitem__(1, 160), "input.size[1] = 160 disagrees with the model's 224"),
+    (lambda m: m.update(fov_deg=100), "fov_deg = 100 disagrees with the model's 90.0"),
+    (lambda m: m["mc"].update(mirror=True), "mc.mirror = true disagrees with the model's absent"),
+])
+def test_check_session_names_the_first_differing_leaf_in_one_short_line(bundle_dir, edit, line):
+    """bundle.json hand-edited after export: the line names the leaf and both values (the graph's
+    copy holds make_meta()); the app's bundle.js checkEmbedded words it alike."""
+    folder = bundle_dir.parent / "edited"
+    write_bundle(folder, FAKE_ONNX, _edited(edit))
+    with pytest.raises(BundleError) as info:
+        check_session(read_bundle(folder), fake_session(make_meta()))
+    msg = str(info.value)
+    assert msg == f"bundle.json: {line}; re-export the bundle" and len(msg) < 120
+
+
+def test_check_session_compares_as_python_equality(bundle_dir):
+    """1 == 1.0 and key order does not matter: a graph copy written with floats and keys reversed agrees."""
+    meta = make_meta()
+    graph = json.loads(json.dumps(embedded_meta(meta)), object_pairs_hook=lambda kv: dict(reversed(kv)))
+    graph["mc"]["samples"] = 16.0
+    graph["input"]["size"] = [224.0, 224.0]
+    session = fake_session(meta)
+    session.get_modelmeta = lambda: SimpleNamespace(custom_metadata_map={"bundle_json": json.dumps(graph)})
+    check_session(read_bundle(bundle_dir), session)
+    session.get_modelmeta = lambda: SimpleNamespace(custom_metadata_map={"bundle_json": "[1, 2]"})
+    with pytest.raises(BundleError, match="'bundle_json' metadata is not a JSON object"):
+        check_session(read_bundle(bundle_dir), session)

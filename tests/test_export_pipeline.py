@@ -146,7 +146,7 @@ def test_json_disagreeing_with_graph_input_size(work):
     root, _ = work
     d = _copy(root, "wrong_size")
     _edit(d, lambda m: m["input"].update(size=[224, 224]))
-    with pytest.raises(BundleError, match="'input'.*disagrees with the graph") as info:
+    with pytest.raises(BundleError, match=r"bundle\.json: input\.size\[\d\] = 224 disagrees with the model's") as info:
         predict_bundle(d, [np.zeros((32, 32, 3), np.uint8)])
     _one_line(info)
 

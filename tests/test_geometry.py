@@ -166,7 +166,7 @@ def test_edited_geometry_in_bundle_json_is_caught_against_the_graph(tmp_path, ed
     with pytest.raises(BundleError) as e:
         Engine(folder)
     msg = str(e.value)
-    assert "\n" not in msg and f"'{key}'" in msg and "re-export" in msg
+    assert "\n" not in msg and msg.startswith(f"bundle.json: {key}") and "re-export" in msg
 
 
 # ----------------------------------------------------------------------------- the view crop (schema 3)

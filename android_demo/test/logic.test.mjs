@@ -10,8 +10,9 @@ import { fileURLToPath } from 'node:url';
 
 import { actionHeading, headingToPan, spaceGroups, spaceNames } from '../www/js/actions.js';
 import { BundleError, parseBundleMeta } from '../www/js/bundle.js';
-import { gateKind, gateThreshold, LEVEL, levelAngle } from '../www/js/geometry.js';
-import { cameraElevationDeg, cameraRollDeg, sameFrame, SIDEWAYS, SidewaysHint, TILT, TiltWatch, Watchdog, YawIntegrator, yawRateFromRotation } from '../www/js/live.js';
+import { gateKind, gateThreshold, LEVEL, levelAngle, rolledTooFar } from '../www/js/geometry.js';
+import { cameraElevationDeg, cameraRollDeg, NO_TILT_TEXT, sameFrame, SIDEWAYS, SidewaysHint, TILT, TiltSilence, TiltWatch, Watchdog, YawIntegrator,
+  yawRateFromRotation } from '../www/js/live.js';
 import { cueFor, Decider, decisionConfig, observationFromOutputs } from '../www/js/logic.js';
 import { rgbaToRgb } from '../www/js/model.js';
 import { replayVectors } from '../www/js/vectors.js';
@@ -480,6 +481,44 @@ test('settings persist and a damaged entry falls back to the defaults', async ()
   assert.equal(loadSettings(storage).tutorialDone, false);
 });
 
+test('the tilt sensor is on by default, the gyroscope off; old settings migrate', async () => {
+  const { DEFAULT_SETTINGS, loadSettings, saveSettings } = await import('../www/js/settings.js');
+  assert.equal(DEFAULT_SETTINGS.tilt, true); // levelling, the roll limit, tilt advice
+  assert.equal(DEFAULT_SETTINGS.gyro, false); // turns: its sign needs a sighted check
+  const store = new Map();
+  const storage = { getItem: (k) => store.get(k) ?? null, setItem: (k, v) => store.set(k, v) };
+  const load = (stored) => {
+    store.set('crossing-assist-settings', JSON.stringify(stored));
+    return loadSettings(storage);
+  };
+  // the old single "Use the motion sensors" setting
+  assert.deepEqual([load({ tutorialDone: true, gyro: true }).tilt, load({ gyro: true }).gyro], [true, true]);
+  const old = load({ tutorialDone: true, speech: true, hapticDirections: false, gyro: false });
+  assert.deepEqual([old.tilt, old.gyro, old.tutorialDone], [true, false, true]); // false was just the default
+  // the new key, written explicitly, is kept either way
+  assert.equal(load({ gyro: false, tilt: false }).tilt, false);
+  assert.deepEqual([load({ gyro: true, tilt: false }).tilt, load({ gyro: true, tilt: false }).gyro], [false, true]);
+  const s = loadSettings(storage);
+  s.tilt = false;
+  saveSettings(s, storage);
+  assert.equal(loadSettings(storage).tilt, false);
+  // damaged values fall back to the defaults
+  assert.deepEqual([load({ tilt: 'no', gyro: 1 }).tilt, load({ tilt: 'no', gyro: 1 }).gyro], [true, false]);
+  assert.equal(load([1, 2]).tilt, true);
+  assert.equal(load(null).tilt, true);
+});
+
+test('URL flags: ?gyro=1 turns on both sensors, ?tilt=0 the tilt sensor off, for the visit only', async () => {
+  const { urlOverrides } = await import('../www/js/settings.js');
+  const u = (q) => urlOverrides(new URLSearchParams(q));
+  assert.deepEqual(u(''), {});
+  assert.deepEqual(u('?gyro=1'), { gyro: true, tilt: true });
+  assert.deepEqual(u('?tilt=0'), { tilt: false });
+  assert.deepEqual(u('?gyro=1&tilt=0'), { gyro: true, tilt: false });
+  assert.deepEqual(u('?tilt=1'), { tilt: true });
+  assert.deepEqual(u('?gyro=0'), {});
+});
+
 test('WASM threads: cores - 1 (at most 4) when cross-origin isolated, else one', async () => {
   const { wasmThreads } = await import('../www/js/model.js');
   assert.equal(wasmThreads(false, 8), 1);
@@ -529,9 +568,40 @@ test('levelling turns a roll back by at most LEVEL.max_deg and leaves small ones
   assert.equal(w.rollDeg(0), null); // no sample yet
   w.add(90 + 12, -90, 0, 0);
   assert.ok(Math.abs(w.rollDeg(0.5) - 12) < 1e-9);
-  assert.equal(w.rollDeg(TILT.fresh_s + 0.01), null); // the sensor stopped: no levelling on an old reading
+  assert.equal(w.rollDeg(0.6), null); // the sensor stopped: no levelling on a reading over 0.5 s old
+  assert.equal(w.rollDeg(TILT.fresh_s + 0.01), null);
   w.add(0, 0, 2, 0); // flat
   assert.equal(w.rollDeg(2), null);
+});
+
+test('a stale roll is no roll: neither levelled nor stopped as rolled too far', () => {
+  assert.equal(TILT.roll_fresh_s, 0.5);
+  const w = new TiltWatch();
+  w.add(90 + 75, -90, 10, 0); // turned 75 deg: beyond levelling
+  assert.ok(rolledTooFar(w.rollDeg(10.5)));
+  const stale = w.rollDeg(10.5 + 1e-6);
+  assert.equal(stale, null);
+  assert.equal(rolledTooFar(stale), false);
+  assert.equal(levelAngle(stale), 0);
+  assert.equal(w.reason(10.9), null); // the tilt advice keeps its own 1 s (camera level here)
+});
+
+test('no tilt sensor is told once: nothing within 2 s of the start, or 2 s after the last reading', () => {
+  const quiet = new TiltSilence(5);
+  assert.equal(quiet.due(6.9, null), false);
+  assert.equal(quiet.due(7.0, null), true);
+  assert.equal(quiet.due(9, null), false); // once
+  const stopped = new TiltSilence(0);
+  assert.equal(stopped.due(1.5, 1.0), false); // readings come
+  assert.equal(stopped.due(2.9, 1.0), false);
+  assert.equal(stopped.due(3.0, 1.0), true); // the sensor stopped 2 s ago
+  assert.equal(stopped.due(30, 1.0), false);
+  const paused = new TiltSilence(0);
+  assert.equal(paused.due(1.9, null), false);
+  paused.restart(10); // back from the background: its own 2 s
+  assert.equal(paused.due(11.9, null), false);
+  assert.equal(paused.due(12, null), true);
+  assert.equal(NO_TILT_TEXT, 'No tilt sensor: hold the phone level.');
 });
 
 test('a phone pointed far down or up names its stop reason, with hysteresis and only while fresh', () => {

@@ -12,16 +12,19 @@
 //
 //   node tools/build.mjs [--bundle DIR] [--www DIR]
 //
-// DIR defaults: ../crossing_assist/assets/default_bundle, www (relative to android_demo/).
+// DIR defaults: ../crossing_assist/assets/default_bundle, www (relative to android_demo/). Another
+// --www folder (new, empty, or built before) first gets the app's own files from www/ (pages,
+// scripts, icons), so it is a whole app; a folder holding anything else is refused.
 
 import { createHash } from 'node:crypto';
 import { copyFileSync, existsSync, mkdirSync, readdirSync, readFileSync, renameSync, rmSync, statSync, writeFileSync } from 'node:fs';
 import { dirname, extname, join, relative, resolve, sep } from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { gzipSync } from 'node:zlib';
-import { BundleError, parseBundleMeta } from '../www/js/bundle.js';
+import { BundleError, checkEmbedded, parseBundleMeta } from '../www/js/bundle.js';
 
 const HERE = dirname(dirname(fileURLToPath(import.meta.url)));
+const SOURCE_WWW = join(HERE, 'www');
 export const ORT_FILES = ['ort.wasm.min.mjs', 'ort-wasm-simd-threaded.mjs', 'ort-wasm-simd-threaded.wasm'];
 export const ORT_WEBGPU_FILES = ['ort.webgpu.min.mjs', 'ort-wasm-simd-threaded.asyncify.mjs', 'ort-wasm-simd-threaded.asyncify.wasm'];
 const NOT_CACHED = new Set(['precache.json', 'sw.js', ...ORT_WEBGPU_FILES.map((f) => `vendor/${f}`)]);
@@ -71,14 +74,34 @@ export function copyBundle(bundleDir, www) {
   }
   const modelPath = join(bundleDir, meta.model_file);
   if (!existsSync(modelPath)) throw new BuildError(`${modelPath} is missing; copy the whole bundle folder`);
-  if (statSync(modelPath).size !== meta.model_size || sha256(modelPath) !== meta.model_sha256) {
+  const model = readFileSync(modelPath);
+  if (model.length !== meta.model_size || createHash('sha256').update(model).digest('hex') !== meta.model_sha256) {
     throw new BuildError(`${modelPath} differs from bundle.json (size or SHA-256); copy the bundle again or re-export it`);
   }
+  checkEmbedded(meta.raw, model); // as the app will: a hand-edited bundle.json is refused here already
   const out = join(www, 'bundle');
   rmSync(out, { recursive: true, force: true });
   copyAtomic(modelPath, join(out, meta.model_file));
   copyAtomic(jsonPath, join(out, 'bundle.json'));
   return meta;
+}
+
+/** The app's own files in www/ (pages, scripts, icons): everything but what the build writes. */
+function appFiles() {
+  const built = (p) => ['vendor/', 'bundle/'].some((d) => p.startsWith(d)) || ['precache.json', 'test_vectors.json'].includes(p);
+  return listFiles(SOURCE_WWW).filter((p) => !built(p));
+}
+
+/**
+ * Copy the app's files into another --www folder (new, empty, or an app folder built before), so
+ * that it is a whole app; refuse a folder that holds other things (the build would delete its bundle/).
+ */
+function copyPages(www) {
+  if (www === SOURCE_WWW) return;
+  if (existsSync(www) && (!statSync(www).isDirectory() || (readdirSync(www).length && !existsSync(join(www, 'index.html'))))) {
+    throw new BuildError(`--www ${www} exists and is not an app folder (no index.html); pass a new or empty folder`);
+  }
+  for (const rel of appFiles()) copyAtomic(join(SOURCE_WWW, rel), join(www, rel));
 }
 
 /** Write FILE.gz next to every compressible file where gzip saves >= 10% (kept when up to date); returns the twins. */
@@ -134,7 +157,7 @@ export function writePrecache(www) {
 }
 
 function parseArgs(argv) {
-  const args = { bundle: resolve(HERE, '..', 'crossing_assist', 'assets', 'default_bundle'), www: join(HERE, 'www') };
+  const args = { bundle: resolve(HERE, '..', 'crossing_assist', 'assets', 'default_bundle'), www: SOURCE_WWW };
   for (let i = 0; i < argv.length; i += 1) {
     const key = argv[i];
     if ((key === '--bundle' || key === '--www') && i + 1 < argv.length) args[key.slice(2)] = resolve(argv[++i]);
@@ -151,6 +174,7 @@ function main() {
       console.log('usage: node tools/build.mjs [--bundle DIR] [--www DIR]');
       return 0;
     }
+    copyPages(args.www);
     copyOrt(args.www);
     const meta = copyBundle(args.bundle, args.www);
     copyVectors(args.www);

@@ -26,11 +26,16 @@
 // double tap ends -> a failed start, then a good one (the error must go) -> the landscape FOV
 // set in the helper view (10 refused, 60 taken) -> long press ends ->
 // server stopped, reload, start again (offline; settings kept: no tutorial).
-// Phases "short": load with the tutorial marked done and the direction vibration on, start,
-// run, (--sideways-after S: the hold-it-sideways advice after S s of a "not sure" stop, waited
-// for), (--tilt 1: the gyroscope on, then the phone tilted down until a "not sure" stop says to
-// raise it; --roll DEG before it: the phone held level but turned DEG clockwise about the
-// camera's axis until 8 frames were levelled), collect, double tap.
+// Phases "short": load with the tutorial marked done and the direction vibration on (no URL flag,
+// no sensor setting stored: the app's defaults), (--level 1: a tilt sensor reporting the phone
+// upright and level every 50 ms from the load on), start, run, (--sideways-after S: the
+// hold-it-sideways advice after S s of a "not sure" stop, waited for), (--roll DEG: the phone
+// turned DEG clockwise about the camera's axis until 8 frames were levelled, then 75 deg until the
+// stop says to hold it level; --sensor-stops 1 after it: the sensor falls silent while the phone
+// is still turned 75 deg, until the app says it has no tilt sensor and 5 frames came more than
+// 0.6 s after the last reading, then reports level again), (--tilt 1: the phone tilted down until
+// a "not sure" stop says to raise it), collect, double tap.
+// Landscape "full" phases dispatch no deviceorientation event at all: no tilt sensor.
 // The driver asserts nothing; it exits non-zero only when it could not run.
 
 import { spawn } from 'node:child_process';
@@ -59,6 +64,8 @@ function parseArgs(argv) {
     else if (k === '--viewport') args.viewport = v;
     else if (k === '--tilt') args.tilt = v === '1';
     else if (k === '--roll') args.roll = Number(v);
+    else if (k === '--level') args.level = v === '1';
+    else if (k === '--sensor-stops') args.sensorStops = v === '1';
     else if (k === '--sideways-after') args.sidewaysAfter = Number(v);
     else throw new Error(`unknown argument ${k}`);
   }
@@ -179,7 +186,8 @@ const screenState = () => {
   const a = window.crossingAssist;
   const r = document.getElementById('control').getBoundingClientRect();
   const err = document.getElementById('error');
-  return { mode: a.mode, running: a.running, status: document.getElementById('status').textContent,
+  const notice = document.getElementById('notice');
+  return { notice: !notice || notice.hidden ? null : notice.textContent, tilt_text: document.getElementById('tilt')?.textContent ?? null, mode: a.mode, running: a.running, status: document.getElementById('status').textContent,
     label: document.getElementById('control-label').textContent, control: [r.x, r.y, r.width, r.height],
     error: err.hidden ? null : err.textContent, strips_on: document.querySelectorAll('#grid .on, #strips .on').length,
     audio: a.audio ? a.audio.state() : null, audio_failed: a.audioFailed, paused: a.paused,
@@ -444,16 +452,27 @@ async function fullPhases(page, context, server, args, result) {
   Object.assign(result, await collect(page));
 }
 
+/**
+ * The synthetic tilt sensor: one deviceorientation event every 50 ms with window.__orient's
+ * angles ({beta, gamma}; null: none sent, a sensor that is missing or stopped). Returns the app's
+ * clock at the change.
+ */
+const orient = (page, angles) => page.evaluate((o) => {
+  window.__orient = o;
+  if (!window.__orientTimer) {
+    window.__orientTimer = setInterval(() => window.__orient && window.dispatchEvent(new DeviceOrientationEvent('deviceorientation',
+      { alpha: 0, beta: window.__orient.beta, gamma: window.__orient.gamma })), 50);
+  }
+  return (performance.now() - (window.crossingAssist?.t0 ?? 0)) / 1000;
+}, angles);
+const LEVEL_PORTRAIT = { beta: 90, gamma: 0 }; // upright portrait, camera at the horizon, not rolled
+
 /** The phone pointed at the ground (camera 50 deg down) until a "not sure" stop says to raise it. */
-async function tiltPhase(page, result) {
-  const tTilt = await page.evaluate(() => {
-    window.__tilt = setInterval(() => window.dispatchEvent(new DeviceOrientationEvent('deviceorientation',
-      { alpha: 0, beta: 40, gamma: 0 })), 50);
-    return (performance.now() - window.crossingAssist.t0) / 1000;
-  });
+async function tiltPhase(page, result, base) {
+  const tTilt = await orient(page, { beta: 40, gamma: 0 });
   const tSpoken = await waitFor(page, () => window.crossingAssist.trace.find((e) => e.kind === 'speech' && e.text.includes('raise it'))?.t ?? null,
     null, 60000, 'the tilt advice');
-  await page.evaluate(() => clearInterval(window.__tilt));
+  await orient(page, base);
   result.tilt = { t_tilt: tTilt, t_spoken: tSpoken };
 }
 
@@ -461,29 +480,32 @@ async function tiltPhase(page, result) {
  * The phone upright, camera level, turned `deg` clockwise about the camera's axis (the W3C angles
  * beta = 90 + deg, gamma = -90 give that rotation) until 8 frames were levelled.
  */
-async function rollPhase(page, result, deg) {
-  const t0 = await page.evaluate((d) => {
-    window.__roll = setInterval(() => window.dispatchEvent(new DeviceOrientationEvent('deviceorientation',
-      { alpha: 0, beta: 90 + d, gamma: -90 })), 50);
-    return (performance.now() - window.crossingAssist.t0) / 1000;
-  }, deg);
+async function rollPhase(page, result, deg, base, sensorStops) {
+  const t0 = await orient(page, { beta: 90 + deg, gamma: -90 });
   await waitFor(page, () => window.crossingAssist.trace.filter((e) => e.kind === 'frame' && e.roll_deg !== 0).length >= 8,
     null, 60000, 'levelled frames');
-  await page.evaluate(() => clearInterval(window.__roll));
   result.roll = { deg, t_start: t0, screen_angle: await page.evaluate(() => screen.orientation?.angle ?? null),
     camera_text: await page.textContent('#camera') };
   // then turned 75 deg: beyond what can be levelled (rolledTooFar): stop, and say to hold it level
-  const tFar = await page.evaluate(() => {
-    window.__roll = setInterval(() => window.dispatchEvent(new DeviceOrientationEvent('deviceorientation',
-      { alpha: 0, beta: 90 + 75, gamma: -90 })), 50);
-    return (performance.now() - window.crossingAssist.t0) / 1000;
-  });
-  const tSaid = await waitFor(page, () => window.crossingAssist.trace.find((e) => e.kind === 'speech' && e.text.includes('hold it level'))?.t ?? null,
-    null, 60000, 'the hold-it-level stop');
+  const tFar = await orient(page, { beta: 90 + 75, gamma: -90 });
+  const tSaid = await waitFor(page, (t) => window.crossingAssist.trace.find((e) => e.kind === 'speech' && e.t >= t && e.text.includes('hold it level'))?.t ?? null,
+    tFar, 60000, 'the hold-it-level stop');
   await waitFor(page, (t) => window.crossingAssist.trace.filter((e) => e.kind === 'frame' && e.t > t + 0.3).length >= 5,
     tFar, 60000, 'frames rolled beyond levelling');
-  const tEnd = await page.evaluate(() => { clearInterval(window.__roll); return (performance.now() - window.crossingAssist.t0) / 1000; });
-  result.roll.too_far = { deg: 75, t_start: tFar, t_spoken: tSaid, t_end: tEnd };
+  result.roll.tilt_text = await page.evaluate(() => document.getElementById('tilt')?.textContent ?? null);
+  if (!sensorStops) {
+    result.roll.too_far = { deg: 75, t_start: tFar, t_spoken: tSaid, t_end: await orient(page, base) };
+    return;
+  }
+  // the sensor falls silent, the phone still turned 75 deg: its last reading must not be used
+  const tSilent = await orient(page, null);
+  result.roll.too_far = { deg: 75, t_start: tFar, t_spoken: tSaid, t_end: tSilent };
+  const tTold = await waitFor(page, (t) => window.crossingAssist.trace.find((e) => e.kind === 'speech' && e.t >= t && e.text.startsWith('No tilt sensor'))?.t ?? null,
+    tSilent, 20000, 'no tilt sensor said');
+  await waitFor(page, (t) => window.crossingAssist.trace.filter((e) => e.kind === 'frame' && e.t > t + 0.6).length >= 5,
+    tSilent, 60000, 'frames after the sensor stopped');
+  const state = await page.evaluate(screenState);
+  result.sensor_stopped = { t_start: tSilent, t_told: tTold, t_end: await orient(page, base), state };
 }
 
 /** Waits until a "not sure" stop held upright says to hold the phone sideways. */
@@ -494,9 +516,14 @@ async function sidewaysPhase(page, result) {
 }
 
 async function shortPhases(page, server, args, result) {
-  await page.addInitScript((gyro) => localStorage.setItem('crossing-assist-settings',
-    JSON.stringify({ tutorialDone: true, hapticDirections: true, gyro })), !!args.tilt);
+  // no sensor setting stored and no URL flag for them: the app's defaults (tilt sensor on)
+  await page.addInitScript(() => localStorage.setItem('crossing-assist-settings',
+    JSON.stringify({ tutorialDone: true, hapticDirections: true })));
   await page.goto(`${server.url}?test=1${args.sidewaysAfter ? `&sideways_after_s=${args.sidewaysAfter}` : ''}`);
+  result.page_url = page.url();
+  result.stored_settings = await page.evaluate(() => localStorage.getItem('crossing-assist-settings'));
+  const base = args.level ? LEVEL_PORTRAIT : null;
+  await orient(page, base);
   await waitFor(page, () => window.crossingAssist?.ready && window.crossingAssist.offline === 'ready', null, 120000, 'the app and its service worker');
   result.first_load = server.requests.slice();
   result.states = { ready: await page.evaluate(screenState) };
@@ -507,8 +534,8 @@ async function shortPhases(page, server, args, result) {
   result.samples = samples;
   result.states.running = await page.evaluate(screenState);
   if (args.sidewaysAfter) await sidewaysPhase(page, result);
-  if (args.roll !== undefined) await rollPhase(page, result, args.roll);
-  if (args.tilt) await tiltPhase(page, result);
+  if (args.roll !== undefined) await rollPhase(page, result, args.roll, base, args.sensorStops);
+  if (args.tilt) await tiltPhase(page, result, base);
   Object.assign(result, await collect(page));
   await control(page).dblclick();
   await waitFor(page, () => window.crossingAssist.mode === 'ready', null, 10000, 'the end of guidance');

@@ -27,19 +27,30 @@
 //   and an invalid one stops;
 // * a bundle with geometry.view_crop (schema 3) sees only the frame's middle rows at the training
 //   camera's angular scale (geometry.js viewRows, from the whole frame's FOV), as Engine.predict;
-// * with the motion sensors on, a frame from a camera rolled about its axis is turned level
-//   first (camera.js FrameGrabber.level, the roll from TiltWatch), as Engine.predict(roll_deg).
+// * with the tilt sensor on (the DEFAULT: settings.js `tilt`), a frame from a camera rolled about
+//   its axis is turned level first (camera.js FrameGrabber.level, the roll from TiltWatch), as
+//   Engine.predict(roll_deg), and a camera rolled beyond levelling (rolledTooFar, over 60 deg) is
+//   not given to the model: stop, "hold it level". It is on by default because a blind user will
+//   not tick a box, and unlevelled a camera rolled 35-45 deg was confidently wrong on 9.5 % of 200
+//   real photos (0.5 % levelled). Only a fresh roll counts (TILT.roll_fresh_s, 0.5 s): an older
+//   reading is no roll known (no levelling, no roll stop);
+// * a tilt sensor refused (iOS asks inside the start tap) or silent for 2 s while guiding is said
+//   and shown once per guidance, "No tilt sensor: hold the phone level." (TiltSilence); guidance
+//   goes on unlevelled.
 //
 // Advice on a "not sure" stop (the decision is unchanged, only the sentence and the vibration):
-// with the motion sensors on, a phone pointed far down or up is told which way to tilt (TiltWatch);
+// with the tilt sensor on, a phone pointed far down or up is told which way to tilt (TiltWatch);
 // a phone held upright and unsure for 5 s is told to hold it sideways (SidewaysHint).
+// The gyroscope (following turns: the Decider's yaw rate) is OFF by default (settings.js `gyro`):
+// its sign on a given phone needs a sighted check first.
 //
 // The whole screen above the helper bar is one control: tap to start; while guiding, a double
 // tap or a long press ends guidance (a single tap only says how), and a tap resumes lost audio.
 //
 // URL flags: ?test=1 keeps a trace of every step (and copies of the camera frames, levelled,
 // before any view crop) in window.crossingAssist for the end-to-end test; ?bundle=URL loads another bundle
-// folder; ?gyro=1 ticks "Use the motion sensors"; ?threads=N sets the WASM threads;
+// folder; ?gyro=1 turns on the gyroscope and the tilt sensor, ?tilt=0 turns the tilt sensor off
+// (?tilt=1 on), for this visit only (never saved); ?threads=N sets the WASM threads;
 // ?tutorial_speed=K plays the tutorial K times faster; ?sideways_after_s=S gives the hold-it-sideways
 // advice after S s instead of 5.
 
@@ -47,10 +58,11 @@ import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
 import { cameraFov, defaultFovText, FovError, frameView, gateKind, gateThreshold, orientation, PAD_RGB, rolledTooFar, zoomedFov } from './geometry.js';
 import { Haptics } from './haptics.js';
-import { isFresh, sameFrame, SidewaysHint, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator, yawRateFromRotation } from './live.js';
+import { isFresh, NO_TILT_TEXT, sameFrame, SidewaysHint, TiltSilence, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator,
+  yawRateFromRotation } from './live.js';
 import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN } from './logic.js';
 import { fetchBundle, openBest } from './model.js';
-import { loadSettings, saveSettings } from './settings.js';
+import { loadSettings, saveSettings, urlOverrides } from './settings.js';
 import { Speaker, SpeechPolicy } from './speech.js';
 import { playTutorial } from './tutorial.js';
 import { replayVectors } from './vectors.js';
@@ -67,6 +79,7 @@ const params = new URLSearchParams(location.search);
 const TEST = params.get('test') === '1';
 const TUTORIAL_SPEED = Math.max(1, Number(params.get('tutorial_speed')) || 1);
 const SIDEWAYS_AFTER_S = Number(params.get('sideways_after_s')) || undefined; // tests: a shorter wait
+const OVERRIDES = urlOverrides(params); // ?gyro=1, ?tilt=0|1: this visit only
 const MAX_TRACE = 5000;
 const MAX_FRAMES = 600;
 
@@ -387,11 +400,36 @@ function poll() {
       feedback(t, { stop: true, reason, heading_deg: null });
     }
   }
+  // no tilt sensor (refused, missing, or silent): said once, held back while the audio is out
+  if (!app.audioFailed && app.tiltSilence?.due(t, app.tilt?.lastT ?? null)) noTiltSensor(t);
   app.polls = (app.polls || 0) + 1;
   if (app.polls % 10 === 0) {
     view.levels(app.audio.levels());
     view.turning(app.yaw ? app.turnRate || 0 : null);
+    view.tilt(tiltText(t));
   }
+}
+
+/** The tilt sensor gives nothing: guidance goes on unlevelled, and the user is told, in words
+ * spoken (whole: routine sentences wait for it) and shown (a line kept until guidance ends). */
+function noTiltSensor(t) {
+  record({ kind: 'no_tilt', t, permission: app.sensors?.tilt ?? null });
+  view.status(NO_TILT_TEXT, '');
+  $('notice').textContent = NO_TILT_TEXT;
+  $('notice').hidden = false;
+  app.speaker.say(NO_TILT_TEXT, { urgent: true });
+  record({ kind: 'speech', t, text: NO_TILT_TEXT });
+}
+
+/** The helper view's tilt sensor line. */
+function tiltText(t) {
+  if (!sensorOn('tilt')) return 'off (setting): frames are not levelled';
+  if (!app.tilt) return `${app.sensors?.tilt === 'denied' ? 'not allowed' : 'none'}: frames are not levelled`;
+  if (app.tilt.lastT === null) return 'no reading yet: frames are not levelled';
+  if (!app.tilt.fresh(t, app.tilt.cfg.roll_fresh_s)) return 'silent: frames are not levelled';
+  const roll = app.tilt.rollDeg(t);
+  if (roll === null) return 'pointed down or up: no horizon to level';
+  return `camera rolled ${Math.abs(roll).toFixed(0)}°${rolledTooFar(roll) ? ': too far, stop' : ''}`;
 }
 
 /** The AudioContext stopped (suspended, interrupted, closed): guidance has failed until it plays again. */
@@ -445,18 +483,51 @@ function onMotion(e) {
   app.turnRate = rate;
 }
 
-/** Gyroscope on: ask for it (iOS asks the user; must run inside the tap) and listen. */
-async function startGyro() {
-  if (!app.settings.gyro || typeof DeviceMotionEvent === 'undefined') return null;
-  if (typeof DeviceMotionEvent.requestPermission === 'function'
-      && (await DeviceMotionEvent.requestPermission().catch(() => 'denied')) !== 'granted') {
-    showError('Motion sensors were not allowed: turns are not followed (gyroscope off).');
-    return null;
+/** A motion sensor setting for this visit: the URL flag's (?gyro=1, ?tilt=0) else the kept setting. */
+function sensorOn(key) {
+  return OVERRIDES[key] ?? app.settings[key];
+}
+
+/**
+ * Ask for the motion sensors the settings want: 'granted', 'denied', 'unavailable' (no such
+ * sensor API) or 'off' (not wanted), each a promise. iOS asks the user only from inside the tap's
+ * own handler, so both requests are made here, synchronously, before start() awaits anything.
+ */
+function askSensors() {
+  const ask = (E) => {
+    if (typeof E?.requestPermission === 'function') {
+      try {
+        return E.requestPermission().catch(() => 'denied');
+      } catch {
+        return Promise.resolve('denied');
+      }
+    }
+    return Promise.resolve(E ? 'granted' : 'unavailable');
+  };
+  return {
+    tilt: sensorOn('tilt') ? ask(globalThis.DeviceOrientationEvent) : Promise.resolve('off'),
+    motion: sensorOn('gyro') ? ask(globalThis.DeviceMotionEvent) : Promise.resolve('off'),
+  };
+}
+
+/** Listen to the sensors that were allowed: tilt (TiltWatch: levelling, the roll limit, tilt
+ * advice) and the gyroscope (the turn rate, YawIntegrator). A tilt sensor refused or missing is
+ * told by the poll's TiltSilence check, as one that sends nothing. */
+async function startSensors(asked) {
+  const [tilt, motion] = await Promise.all([asked.tilt, asked.motion]);
+  app.sensors = { tilt, motion };
+  app.tilt = null;
+  app.yaw = null;
+  if (tilt === 'granted') {
+    app.tilt = new TiltWatch();
+    window.addEventListener('deviceorientation', onOrientation);
   }
-  window.addEventListener('devicemotion', onMotion);
-  app.tilt = new TiltWatch();
-  window.addEventListener('deviceorientation', onOrientation);
-  return new YawIntegrator();
+  if (motion === 'granted') {
+    window.addEventListener('devicemotion', onMotion);
+    app.yaw = new YawIntegrator();
+  } else if (motion === 'denied') {
+    showError('The gyroscope was not allowed: turns are not followed.');
+  }
 }
 
 /** Keep the screen on while guiding (a sleeping phone stops its camera); asked again on every return. */
@@ -493,10 +564,13 @@ async function start({ tutorial = !app.settings.tutorialDone } = {}) {
   app.mode = 'starting';
   $('control').disabled = true;
   try {
-    app.yaw = await startGyro(); // first: iOS only asks inside the tap itself
-    // The AudioContext must be created/resumed inside the tap (browsers' autoplay rules).
+    // Inside the tap itself, before anything is awaited: iOS asks for the motion sensors only
+    // there, and the AudioContext must be created and resumed there (browsers' autoplay rules).
+    const asked = askSensors();
     const ctx = new AudioContext({ latencyHint: 'interactive' });
-    await ctx.resume();
+    const resumed = ctx.resume();
+    await startSensors(asked);
+    await resumed;
     app.audio = new BeaconAudio(ctx);
     app.speaker.cancel(); // nothing left waiting in the old one
     app.speaker = new Speaker(app.settings.speech);
@@ -521,6 +595,7 @@ async function start({ tutorial = !app.settings.tutorialDone } = {}) {
     record({ kind: 'start', t: now() });
     app.audio.render(STOP_CUE); // nothing known yet: scan
     app.watchdog = new Watchdog(WATCHDOG_S, now());
+    app.tiltSilence = sensorOn('tilt') ? new TiltSilence(now()) : null;
     app.tick = setInterval(poll, POLL_MS);
     app.loop = runLoop().catch((err) => fail(err));
     setControl('End guidance', 'Double tap or hold', 'running');
@@ -544,6 +619,9 @@ async function stop({ quiet = false } = {}) {
   window.removeEventListener('deviceorientation', onOrientation);
   app.yaw = null;
   app.tilt = null;
+  app.tiltSilence = null;
+  $('notice').hidden = true;
+  $('notice').textContent = '';
   app.grabber?.close();
   app.stream?.getTracks().forEach((t) => t.stop());
   app.stream = null;
@@ -583,6 +661,7 @@ async function onVisibility() {
   app.paused = false;
   resetDecisions(); // no stale heading or belief from before the pause, nor a model run from then
   app.watchdog.beat(now()); // the watchdog's period runs from the return
+  app.tiltSilence?.restart(now()); // the sensor's events paused in the background too
   record({ kind: 'visible', t: now() });
   if (app.audioFailed || !app.audio.playing()) await resumeAudio('return');
   app.policy.reset();
@@ -647,17 +726,18 @@ async function selfTest() {
 
 function bindSettings() {
   const s = app.settings;
-  if (params.get('gyro') === '1') s.gyro = true;
-  const boxes = { speech: 'speech', 'haptic-dir': 'hapticDirections', gyro: 'gyro' };
+  const boxes = { speech: 'speech', 'haptic-dir': 'hapticDirections', 'tilt-sensor': 'tilt', gyro: 'gyro' };
   for (const [id, key] of Object.entries(boxes)) {
-    $(id).checked = s[key];
+    $(id).checked = OVERRIDES[key] ?? s[key]; // a URL flag shows (this visit only)
     $(id).addEventListener('change', () => {
       s[key] = $(id).checked;
+      delete OVERRIDES[key]; // the user's choice wins over the URL flag from now on
       saveSettings(s);
       if (key === 'speech') app.speaker.enabled = s.speech;
       if (key === 'hapticDirections') app.haptics.directions = s.hapticDirections;
     });
   }
+  view.tilt(sensorOn('tilt') ? 'on: read from the start of guidance' : 'off (setting): frames are not levelled');
   for (const o of ['landscape', 'portrait']) {
     const input = $(`fov-${o}`);
     input.value = s.fov[o] ?? '';

@@ -1,10 +1,11 @@
-// bundle.json (schemas 1, 2 and 3, docs/contracts.md section 3) validation, ported from
+// bundle.json (schemas 1 to 4, docs/contracts.md section 3) validation, ported from
 // crossing_assist/bundle.py: the phone refuses a bundle the Python runtime would refuse, with
-// one line naming the field and the fix. Pure (no DOM): runs in Node (build step, tests) and
+// one line naming the field and the fix; checkEmbedded compares it with the graph's own copy. Pure (no DOM): runs in Node (build step, tests) and
 // in the browser.
 
 import { DEFAULT_FOV_DEG, spaceGroups, spaceNames } from './actions.js';
 import { FOV_RANGE_DEG } from './geometry.js';
+import { onnxMetadata } from './onnxmeta.js';
 
 export const SCHEMA_VERSION = 4;
 export const SCHEMA_VERSIONS = [1, 2, 3, 4];
@@ -12,6 +13,8 @@ export const FITS = ['letterbox', 'stretch'];
 export const INPUT_NAME = 'frames';
 export const OUTPUT_NAMES = ['probs', 'entropy', 'mutual_info', 'variance', 'votes'];
 export const UNCERTAINTY_MEASURES = ['entropy', 'mutual_info', 'variance', 'far_mass'];
+/** The bundle.json keys checked against the graph's embedded copy (bundle.py check_session). */
+export const EMBEDDED_KEYS = ['schema_version', 'actions', 'fov_deg', 'input', 'geometry', 'mc', 'calibration', 'precision'];
 
 export class BundleError extends Error {
   constructor(message) {
@@ -205,6 +208,72 @@ export function parseBundleMeta(meta) {
     model_size: int(get(meta, 'model_size', ''), 'model_size', 64),
     raw: meta,
   };
+}
+
+// ----------------------------------------------------------------------------- bundle.json vs the graph
+
+/** Non-finite numbers become null, recursively (bundle.py _strict: the exporter's copy is strict JSON). */
+const strict = (v) => (typeof v === 'number' ? (Number.isFinite(v) ? v : null)
+  : Array.isArray(v) ? v.map(strict)
+    : v !== null && typeof v === 'object' ? Object.fromEntries(Object.entries(v).map(([k, x]) => [k, strict(x)])) : v);
+
+const kind = (v) => (v === undefined ? 'absent' : v === null ? 'null' : Array.isArray(v) ? 'list'
+  : typeof v === 'boolean' ? 'number' : typeof v); // Python: True == 1, 1 == 1.0
+const own = (o, k) => (Object.hasOwn(o, k) ? o[k] : undefined);
+
+/**
+ * The first leaf (a's keys in order, then b's others; list items in order) where two JSON values
+ * differ as Python's == sees them (1 == 1.0, true == 1, key order ignored): [path, a, b]
+ * (undefined: absent), or null when equal. bundle.py _first_difference is the same walk.
+ */
+export function firstDifference(a, b, path = '') {
+  const k = kind(a);
+  if (k !== kind(b)) return [path, a, b];
+  if (k === 'list') {
+    for (let i = 0; i < Math.max(a.length, b.length); i += 1) {
+      const d = firstDifference(a[i], b[i], `${path}[${i}]`);
+      if (d) return d;
+    }
+    return null;
+  }
+  if (k === 'object') {
+    for (const key of new Set([...Object.keys(a), ...Object.keys(b)])) {
+      const d = firstDifference(own(a, key), own(b, key), path ? `${path}.${key}` : key);
+      if (d) return d;
+    }
+    return null;
+  }
+  return (k === 'number' ? Number(a) === Number(b) : a === b) ? null : [path, a, b];
+}
+
+const show = (v) => {
+  const s = v === undefined ? 'absent' : JSON.stringify(v);
+  return s.length <= 60 ? s : `${s.slice(0, 57)}...`;
+};
+
+/**
+ * Refuse a bundle.json (parsed, `raw`) that disagrees with the copy the exporter embedded in the
+ * model's metadata (`bundle_json`) on any of EMBEDDED_KEYS, as bundle.py check_session does: a
+ * hand-edited threshold, label list or field of view would guide the wrong way. Throws
+ * BundleError naming the first differing leaf and both values.
+ */
+export function checkEmbedded(raw, modelBytes) {
+  let props;
+  try {
+    props = onnxMetadata(modelBytes);
+  } catch (err) {
+    throw new BundleError(`bundle: ${raw.model_file} is not a valid ONNX model (${err.message}); re-export the bundle`);
+  }
+  if (!props.has('bundle_json')) throw new BundleError("bundle: the graph has no 'bundle_json' metadata; re-export the bundle");
+  let graph = null;
+  try {
+    graph = JSON.parse(props.get('bundle_json'));
+  } catch { /* refused below */ }
+  if (kind(graph) !== 'object') throw new BundleError("bundle: the graph's 'bundle_json' metadata is not a JSON object; re-export the bundle");
+  for (const key of EMBEDDED_KEYS) {
+    const d = firstDifference(strict(own(raw, key)) ?? null, own(graph, key) ?? null, key); // absent = null, as dict.get
+    if (d) throw new BundleError(`bundle.json: ${d[0]} = ${show(d[1])} disagrees with the model's ${show(d[2])}; re-export the bundle`);
+  }
 }
 
 export { DEFAULT_FOV_DEG };

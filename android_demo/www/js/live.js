@@ -124,7 +124,7 @@ export class YawIntegrator {
  * further down than they held theirs) or above `up_deg` of camera elevation, a stop for "not
  * sure" says which way to tilt (TiltWatch). Guidance itself is never changed by the tilt.
  */
-export const TILT = Object.freeze({ down_deg: -25, up_deg: 20, margin_deg: 5, fresh_s: 1.0 });
+export const TILT = Object.freeze({ down_deg: -25, up_deg: 20, margin_deg: 5, fresh_s: 1.0, roll_fresh_s: 0.5 });
 
 /**
  * The back camera's elevation (degrees above the horizon; -90 straight down) from
@@ -167,6 +167,9 @@ export function cameraRollDeg(beta, gamma, screenAngleDeg = 0) {
  * the camera comes back cfg.margin_deg inside the limit (a phone hovering at a limit does not
  * switch reasons, and so buzz, on every sample); null when held well enough, or when no sample
  * is fresher than cfg.fresh_s (the sensor stopped: no advice rather than stale advice).
+ * The roll for levelling is held to a tighter cfg.roll_fresh_s: an older reading is no roll
+ * known (rollDeg null: the frame is not turned, nor stopped for being rolled too far), since a
+ * phone turned since then would be levelled by the wrong angle.
  */
 export class TiltWatch {
   constructor(cfg = TILT) {
@@ -193,13 +196,43 @@ export class TiltWatch {
     return this.fresh(now) ? this.state : null;
   }
 
-  /** The camera's roll at time `now` (s), degrees (cameraRollDeg), or null: none, or no sample fresher than cfg.fresh_s. */
+  /** The camera's roll at time `now` (s), degrees (cameraRollDeg), or null: none, or no sample fresher than cfg.roll_fresh_s. */
   rollDeg(now) {
-    return this.fresh(now) ? this.roll : null;
+    return this.fresh(now, this.cfg.roll_fresh_s) ? this.roll : null;
   }
 
-  fresh(now) {
-    return this.lastT !== null && now - this.lastT <= this.cfg.fresh_s;
+  fresh(now, within_s = this.cfg.fresh_s) {
+    return this.lastT !== null && now - this.lastT <= within_s;
+  }
+}
+
+/** Said and shown once per guidance when the tilt sensor gives nothing (TiltSilence). */
+export const NO_TILT_TEXT = 'No tilt sensor: hold the phone level.';
+
+/**
+ * Notices a tilt sensor that is missing, refused or silent, so that guidance without levelling is
+ * never a silent failure: `due(t, lastSampleT)` is true once (per object: one per guidance) when
+ * no sample came for `after_s` since guidance started or came back from the background
+ * (`restart`), or since the last sample (a sensor that stopped). Pure; the clock is passed in.
+ */
+export class TiltSilence {
+  constructor(t, after_s = 2.0) {
+    this.after_s = after_s;
+    this.from = t;
+    this.told = false;
+  }
+
+  /** Guidance goes on again at t (back from the background: events stop there). */
+  restart(t) {
+    this.from = t;
+  }
+
+  due(t, lastSampleT = null) {
+    if (this.told) return false;
+    const since = lastSampleT === null || lastSampleT === undefined ? this.from : Math.max(this.from, lastSampleT);
+    if (t - since < this.after_s) return false;
+    this.told = true;
+    return true;
   }
 }
 

@@ -1,5 +1,6 @@
 // The bundle on the phone: fetch bundle.json + model.onnx, check the model's SHA-256 against
-// the json, open an onnxruntime-web session and run one RGB frame through it.
+// the json and the json against the model's embedded copy, open an onnxruntime-web session and
+// run one RGB frame through it.
 //
 // Backend: WebGPU where the browser has an adapter (vendor/ort.webgpu.min.mjs, loaded only
 // then, not cached for offline use), else WASM with SIMD, on several threads when the page is
@@ -10,12 +11,13 @@
 // section 3), so the app only turns the camera's RGBA pixels into RGB (and, for a schema-3
 // view-crop bundle, hands over the frame's middle rows: geometry.js frameView).
 
-import { BundleError, INPUT_NAME, OUTPUT_NAMES, parseBundleMeta } from './bundle.js';
+import { BundleError, INPUT_NAME, OUTPUT_NAMES, checkEmbedded, parseBundleMeta } from './bundle.js';
 
 const hex = (buf) => Array.from(new Uint8Array(buf), (b) => b.toString(16).padStart(2, '0')).join('');
 
 /**
- * Fetch and validate a bundle folder (URL ending in '/').
+ * Fetch and validate a bundle folder (URL ending in '/'): bundle.json, the model's size and
+ * SHA-256, and bundle.json against the copy embedded in the model (bundle.js checkEmbedded).
  * @returns {Promise<{meta: object, modelBytes: Uint8Array}>}
  */
 export async function fetchBundle(baseUrl) {
@@ -40,6 +42,7 @@ export async function fetchBundle(baseUrl) {
       throw new BundleError(`bundle: ${meta.model_file} SHA-256 differs from bundle.json (corrupt or replaced); copy the bundle again`);
     }
   }
+  checkEmbedded(raw, buf);
   return { meta, modelBytes: new Uint8Array(buf) };
 }
 

@@ -155,6 +155,11 @@ export class HelperView {
     this.el('turning').textContent = rateDps === null ? 'gyroscope off' : `${fmt(Math.abs(rateDps), 0)}°/s ${side}`;
   }
 
+  /** What the tilt sensor says now (levelling, roll limit): one line for the helper. */
+  tilt(text) {
+    this.el('tilt').textContent = text;
+  }
+
   /**
    * Frames per second, model ms per frame and the duty cycle (share of the time spent in the
    * model); when the last frames' time `recentMs` is over `limitMs` (the watchdog period), a
