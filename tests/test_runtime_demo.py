@@ -96,6 +96,29 @@ def test_failing_inference_stops_the_beacon_for_those_frames(tmp_path, toy_bundl
     assert not trace[-1]["stop"]  # recovers
 
 
+def test_a_gap_between_frames_plays_the_stop_cue_from_the_watchdogs_moment(tmp_path, toy_bundle, monkeypatch):  # noqa: F811
+    """A variable-frame-rate video whose frames stop for 0.9 s: as the live loop's watchdog, the
+    direction stops 0.5 s after the last frame and the stop cue plays until the next one (the
+    tone went on through the whole gap); the frames after it guide again."""
+    from crossing_assist.runtime import sources
+
+    class Gappy(sources.VideoSource):    # frames 20.. come 0.9 s late
+        def __iter__(self):
+            for i, (t, frame) in enumerate(super().__iter__()):
+                yield (t + 0.9 if i >= 20 else t), frame
+
+    monkeypatch.setattr(sources, "VideoSource", Gappy)
+    summary, audio, _, trace = run(tmp_path, toy_bundle, [0.8] * 40, "gap")
+    assert summary.frames == len(trace) == 40
+    assert trace[19]["cue"] == "beacon" and trace[-1]["cue"] == "beacon"
+    last, back = 19 / 30, 20 / 30 + 0.9
+    gap = audio[round((last + 0.5) * SR) + 400:round(back * SR)].sum(1)    # after the fade
+    assert band_energy(gap, BEACON.tone_hz) < 1e-3
+    assert band_energy(gap, BEACON.stop_hz) + band_energy(gap, 0.75 * BEACON.stop_hz) > 0.5
+    before = audio[round(last * SR):round((last + 0.45) * SR)].sum(1)     # within the watchdog: still guided
+    assert band_energy(before, BEACON.tone_hz) > 0.5
+
+
 def test_cli_runs_and_says_where_the_outputs_are(tmp_path, toy_bundle):  # noqa: F811
     clip = write_clip(tmp_path / "c.mp4", np.linspace(0.2, 0.8, 20))
     out = tmp_path / "o"

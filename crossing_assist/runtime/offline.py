@@ -105,13 +105,20 @@ class Summary:
         return out
 
 
-def run_frames(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, *, sink) -> int:
+def run_frames(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, *, sink, on_watchdog=None) -> int:
     """Drive ``pipeline`` over ``(t, frame)`` pairs, calling ``sink(i, t, frame, step)``; returns
-    the number of frames."""
-    n = 0
+    the number of frames. With ``on_watchdog``: where the frames stop for longer than the
+    watchdog (a gap in a variable-frame-rate video), the pipeline is stepped without a frame at
+    the watchdog's moment, as the live loop's watchdog does, and ``on_watchdog(step)`` (a stop)
+    is called, so the stop cue plays through the rest of the gap."""
+    n, prev = 0, None
     for i, (t, frame) in enumerate(frames):
+        if on_watchdog is not None and prev is not None:
+            at = prev + pipeline.decider.cfg.watchdog_s * (1 + 1e-6)
+            if t > at:
+                on_watchdog(pipeline.step(None, at))
         sink(i, t, frame, pipeline.step(frame, t))
-        n = i + 1
+        n, prev = i + 1, t
     return n
 
 
@@ -200,12 +207,17 @@ class _Recorder:
         Path(self.trace.name).unlink(missing_ok=True)
         self.tmp_video.unlink(missing_ok=True)
 
+    def watchdog(self, step: Step) -> None:
+        """The watchdog's stop in a gap between frames: the last cue plays until ``step.decision.t``,
+        then ``step``'s (the stop cue) until the next frame. Not a frame: no trace line, not counted."""
+        self.audio_until(step.decision.t)
+        self.player.set_loop(step.loop)
+
     def stop_tail(self, i: int, step: Step, tail_s: float = STOP_TAIL_S) -> float:
         """End on a stop: the last cue plays until ``step.decision.t`` (the watchdog's moment),
         then ``step`` (a stop) is recorded as trace line ``i`` and its cue plays for ``tail_s``.
         Returns the end of the audio (s)."""
-        self.audio_until(step.decision.t)
-        self.player.set_loop(step.loop)
+        self.watchdog(step)
         self.gates[step.decision.gate] += 1
         self.reasons[step.decision.reason] += 1
         self.trace.write(json.dumps(trace_record(i, step)) + "\n")
@@ -250,7 +262,7 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
             bar.update(1)
 
         try:
-            n = run_frames(source, pipeline, sink=sink)
+            n = run_frames(source, pipeline, sink=sink, on_watchdog=rec.watchdog)
         except BaseException:
             rec.abort()
             raise
