@@ -77,6 +77,22 @@ def test_existing_run_refused_without_resume(tiny, tmp_path):
         train(_cfg(tiny, tmp_path / "run", epochs=1))
 
 
+def test_a_second_run_on_a_folder_being_written_is_refused(tiny, tmp_path):
+    """Two crossing-train on one --out both exited 0, leaving args.yaml and best.pt of one run with
+    results.csv and last.pt of the other. While one holds the folder, the other is refused; once it
+    ends, the folder is free (the lock is not left behind)."""
+    from crossing_assist.models.cache import entry_lock
+    from crossing_assist.models.config import ConfigError
+    out = tmp_path / "run"
+    with entry_lock(out, ".run", wait=False) as held:      # the first run, still training
+        assert held
+        with pytest.raises(ConfigError, match="another crossing-train is writing"):
+            train(_cfg(tiny, out, epochs=1))
+        assert not (out / "weights").exists() and not (out / "args.yaml").exists()
+    train(_cfg(tiny, out, epochs=1))
+    assert (out / "weights" / "best.pt").is_file() and not (out / ".run.lock").exists()
+
+
 def test_corrupt_checkpoint_gives_clear_error(tiny, tmp_path):
     out = train(_cfg(tiny, tmp_path / "run", epochs=1))
     best = out / "weights" / "best.pt"

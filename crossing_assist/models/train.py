@@ -34,7 +34,7 @@ from ..actions import N_BINS, UNKNOWN, get_space
 from ..data_tools.manifest import Dataset, atomic_write_text, read_manifest
 from ..fileio import sweep_orphans
 from .backbones import create_backbone
-from .cache import FeatureSet, compute_features
+from .cache import FeatureSet, compute_features, entry_lock
 from .checkpoint import load_checkpoint, save_checkpoint
 from .config import CLASS_WEIGHT_POWER, ConfigError, TrainConfig
 from . import distributed
@@ -255,7 +255,20 @@ def _fmt(v: float | None) -> str:
 
 def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     """Train per ``cfg`` into ``cfg.out``; returns the run folder. Raises ConfigError /
-    ManifestError / CheckpointError / BackboneError with one clear line on bad input."""
+    ManifestError / CheckpointError / BackboneError with one clear line on bad input. One run
+    writes a folder at a time: a second one started on the same ``--out`` (both would exit 0
+    with the files of two runs mixed) is refused while the first runs (an advisory lock,
+    ``OUT/.run.lock``, released by the system if the first is killed)."""
+    if not distributed.setup().main:   # torchrun: rank 0 holds the lock for all ranks
+        return _train(cfg, resume=resume)
+    with entry_lock(cfg.out, ".run", wait=False) as held:
+        if not held:
+            raise ConfigError(f"Invalid --out: another crossing-train is writing {cfg.out}; wait for it to end "
+                              "or pick a new --out")
+        return _train(cfg, resume=resume)
+
+
+def _train(cfg: TrainConfig, *, resume: bool) -> Path:
     torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)     # head initialisation (the run's own generator state)
     ctx = distributed.setup()       # rank 0 of 1 unless launched by torchrun
