@@ -259,19 +259,19 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> Path:
     writes a folder at a time: a second one started on the same ``--out`` (both would exit 0
     with the files of two runs mixed) is refused while the first runs (an advisory lock,
     ``OUT/.run.lock``, released by the system if the first is killed)."""
-    if not distributed.setup().main:   # torchrun: rank 0 holds the lock for all ranks
-        return _train(cfg, resume=resume)
+    ctx = distributed.setup()       # rank 0 of 1 unless launched by torchrun
+    if not ctx.main:                # torchrun: rank 0 holds the lock for all ranks
+        return _train(cfg, ctx, resume=resume)
     with entry_lock(cfg.out, ".run", wait=False) as held:
         if not held:
             raise ConfigError(f"Invalid --out: another crossing-train is writing {cfg.out}; wait for it to end "
                               "or pick a new --out")
-        return _train(cfg, resume=resume)
+        return _train(cfg, ctx, resume=resume)
 
 
-def _train(cfg: TrainConfig, *, resume: bool) -> Path:
+def _train(cfg: TrainConfig, ctx: distributed.Context, *, resume: bool) -> Path:
     torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)     # head initialisation (the run's own generator state)
-    ctx = distributed.setup()       # rank 0 of 1 unless launched by torchrun
     out = Path(cfg.out)
     last_path, best_path = out / "weights" / "last.pt", out / "weights" / "best.pt"
     for folder in (out, out / "weights") if ctx.main else ():  # temporary files of a killed run
