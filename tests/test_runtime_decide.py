@@ -154,6 +154,36 @@ def test_the_hold_takes_over_then_fades_to_stop():
     assert out[-1].stop and out[-1].reason == "uncertain"  # 3 s later: nothing to trust
 
 
+def test_unsure_frames_that_see_the_goal_elsewhere_drop_the_hold():
+    """Step 4b: the camera turned with no yaw input; frames too unsure to carry evidence see the
+    goal 6 strips away. The hold must not play the old direction (it did for 1.5 s); unsure frames
+    within a strip of it, or the same turn reported by the yaw input, keep it."""
+    unsure = lambda k: obs_bin(k, 0.3)  # noqa: E731  (entropy above the threshold: no evidence)
+    assert unsure(3).uncertainty > DecisionConfig().threshold
+
+    d = Decider(DecisionConfig())
+    run(d, [obs_bin(9)] * 30)
+    out = run(d, [unsure(3)] * 30, t0=30 / FPS)
+    assert not any(o.gate == GATE_HOLD for o in out)
+    assert all(o.stop or abs(o.heading_deg - heading(9)) < 2.5 for o in out)  # the belief's own fade
+    assert out[-1].stop and out[-1].hold_heading is None
+
+    kept = Decider(DecisionConfig())
+    run(kept, [obs_bin(9)] * 30)
+    near = run(kept, [unsure(10)] * 30, t0=30 / FPS)
+    assert any(o.gate == GATE_HOLD and abs(o.heading_deg - heading(9)) < 2.5 for o in near)
+
+    turned = Decider(DecisionConfig())   # the turn reported: the hold moves to where the frames see the goal
+    run(turned, [obs_bin(6)] * 30)
+    psi = heading(6) - heading(3)        # turning right moves the goal left, from strip 6 to 3
+    run(turned, [FLAT] * 6, t0=30 / FPS, yaw=psi * FPS / 6)
+    out = run(turned, [unsure(3)] * 20, t0=36 / FPS)
+    assert any(o.gate == GATE_HOLD and abs(o.heading_deg - heading(3)) < 2.5 for o in out)
+
+    with pytest.raises(ValueError, match="contradict_strips"):
+        GateConfig(contradict_strips=0)
+
+
 def test_yaw_moves_the_held_heading_and_the_belief():
     d = Decider(DecisionConfig())
     run(d, [obs_bin(7)] * 30)

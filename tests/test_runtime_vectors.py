@@ -126,9 +126,19 @@ def test_no_direction_from_before_a_stall_comes_back(stored):
     assert after and all(r["expect"]["stop"] and r["expect"]["hold_heading"] is None for r in after)
 
 
+def test_a_turn_without_yaw_input_does_not_keep_the_old_direction(stored):
+    """Version 11, step 4b: guided at strip 9, then unsure frames see the goal at strip 3 with no
+    yaw input: the hold is dropped (it played strip 9's heading for 1.5 s) and guidance stops."""
+    steps = next(sc for sc in stored["scenarios"] if sc["name"] == "pan_without_yaw_input")["steps"]
+    assert not steps[29]["expect"]["stop"]
+    after = [r["expect"] for r in steps[30:]]
+    assert all(e["hold_heading"] is None and e["gate"] != "hold" for e in after)
+    assert after[-1]["stop"]
+
+
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == 10
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == 11
     assert "decision steps" in capsys.readouterr().out
 
 

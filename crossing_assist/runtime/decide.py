@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from crossing_assist.actions import DEFAULT_FOV_DEG, ActionSpace, get_space, heading_to_pan
+from crossing_assist.actions import DEFAULT_FOV_DEG, N_BINS, ActionSpace, get_space, heading_to_pan, heading_to_x
 from crossing_assist.bundle import UNCERTAINTY_MEASURES
 from crossing_assist.runtime import belief as bf
 from crossing_assist.runtime.gate import GATE_STOP, GateConfig, alpha, mix
@@ -153,6 +153,22 @@ class Decider:
         self.t_last_ok = t
         return w
 
+    def _contradict(self, obs: Observation | None) -> None:
+        """Step 4b: a frame whose most probable strip lies more than ``contradict_strips`` strip
+        widths from the hold drops it, however unsure the frame: without a yaw input a turned
+        camera's hold stays where the goal was (a 30 deg/s scan played it 2 strips and more off on a
+        quarter of its frames), and a frame that sees the goal elsewhere is what says so. A frame
+        that sees no goal (argmax unknown) leaves the hold, which bridges such frames."""
+        if obs is None or not obs.ok or obs.probs is None or self.hold_heading is None \
+                or not abs(self.hold_heading) < 90.0:
+            return
+        a = int(np.argmax(obs.probs))
+        if a == 0:
+            return
+        seen = self.space.action_center_x(a)
+        if abs(heading_to_x(self.hold_heading, self.cfg.fov_deg) - seen) * N_BINS > self.cfg.gate.contradict_strips:
+            self.hold_heading = None
+
     def _hold(self, t: float) -> tuple[float | None, float, float]:
         """Step 6: the hold's heading (None when unusable), uncertainty and coefficient."""
         if self.hold_heading is None or not abs(self.hold_heading) < 90.0:
@@ -178,6 +194,7 @@ class Decider:
             # may have turned or walked on), so the frame meets a fresh belief and no hold
             self.belief, self.hold_heading = bf.uniform_belief(), None
         w = self._evidence(t, obs)  # 4
+        self._contradict(obs)  # 4b
         a_l, h_l = bf.belief_heading(self.belief, self.space, cfg.fov_deg)  # 5
         u_l = cfg.learner_uncertainty(self.belief, self.space) if h_l is not None else math.inf
         al_l = alpha(u_l, self.c_learner)

@@ -37,6 +37,9 @@ class GateConfig:
     the hold's uncertainty ``U_F = age / hold_time_s + turned / hold_turn_deg`` (dimensionless,
     threshold 1). ``belief_entropy_threshold``: learner threshold (nats) used when the bundle's
     measure is not ``entropy``. ``agree_deg``: largest heading difference that is averaged.
+    ``contradict_strips``: a frame whose most probable strip lies further than this many strip
+    widths from the hold drops the hold, however unsure the frame (the camera turned without the
+    yaw input saying so, or the hold was wrong).
     """
 
     saturation: float = SATURATION_HALF
@@ -45,9 +48,11 @@ class GateConfig:
     hold_turn_deg: float = 45.0
     agree_deg: float = 15.0
     belief_entropy_threshold: float = 1.2
+    contradict_strips: float = 1.5
 
     def __post_init__(self) -> None:
-        for name in ("saturation", "hold_time_s", "hold_turn_deg", "agree_deg", "belief_entropy_threshold"):
+        for name in ("saturation", "hold_time_s", "hold_turn_deg", "agree_deg", "belief_entropy_threshold",
+                     "contradict_strips"):
             if not float(getattr(self, name)) > 0:
                 raise ValueError(f"Invalid {name}: {getattr(self, name)}; valid: > 0")
         if not 0.0 < self.alpha_min < 1.0:

@@ -109,7 +109,7 @@ from crossing_assist.runtime.status import STATUS_STOP, status_message
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 10
+VERSION = 11
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -205,6 +205,11 @@ def _scenarios(rng: np.random.Generator) -> list[tuple[str, DecisionConfig, list
     stall += [(20 / FPS + 0.1 * (j + 1), 0.0, None) for j in range(10)]
     stall += [(resume + j / FPS, 0.0, flat) for j in range(1, 16)]
     out.append(("stall_then_nothing", base, stall))
+    # version 11: the camera turns with no yaw input: unsure frames see the goal 6 strips from the
+    # hold, which they drop (step 4b); the hold played the old direction for 1.5 s before
+    pan = [(i / FPS, 0.0, _frame(13, 9, 0.95, rng)) for i in range(30)]
+    pan += [((30 + i) / FPS, 0.0, _frame(13, 3, 0.3, rng)) for i in range(30)]
+    out.append(("pan_without_yaw_input", base, pan))
     return out
 
 

@@ -23,7 +23,7 @@ export const REASON_FAILED = 'failed';
 export const DEFAULT_FILTER = Object.freeze({ tau_forget_s: 2.0, tau_diffuse_s: 2.0, tau_evidence_s: 0.1, eps: 0.01 });
 export const DEFAULT_GATE = Object.freeze({
   saturation: SATURATION_HALF, alpha_min: 0.5, hold_time_s: 1.5, hold_turn_deg: 45.0, agree_deg: 15.0,
-  belief_entropy_threshold: 1.2,
+  belief_entropy_threshold: 1.2, contradict_strips: 1.5,
 });
 export const DEFAULT_DECISION = Object.freeze({
   n_actions: 13, fov_deg: DEFAULT_FOV_DEG, measure: 'entropy', threshold: 1.2, watchdog_s: 0.5,
@@ -237,7 +237,7 @@ export function decisionConfig(cfg = {}) {
     throw new RangeError(`Unknown uncertainty measure: ${JSON.stringify(out.measure)}; valid: ${UNCERTAINTY_MEASURES.join(', ')}`);
   }
   for (const [name, v] of Object.entries(out.filter)) if (!(v > 0)) throw new RangeError(`Invalid ${name}: ${v}; valid: > 0`);
-  for (const name of ['saturation', 'hold_time_s', 'hold_turn_deg', 'agree_deg', 'belief_entropy_threshold']) {
+  for (const name of ['saturation', 'hold_time_s', 'hold_turn_deg', 'agree_deg', 'belief_entropy_threshold', 'contradict_strips']) {
     if (!(out.gate[name] > 0)) throw new RangeError(`Invalid ${name}: ${out.gate[name]}; valid: > 0`);
   }
   if (!(out.gate.alpha_min > 0 && out.gate.alpha_min < 1)) throw new RangeError(`Invalid alpha_min: ${out.gate.alpha_min}; valid: 0 < alpha_min < 1`);
@@ -284,6 +284,22 @@ export class Decider {
   }
 
   /**
+   * Step 4b: a frame whose most probable strip lies more than contradict_strips strip widths from
+   * the hold drops it, however unsure the frame (a camera turned without a yaw input); a frame
+   * that sees no goal leaves the hold.
+   */
+  contradict(obs) {
+    if (this.holdHeading === null || !(Math.abs(this.holdHeading) < 90)) return;
+    const a = argmax(obs.probs);
+    if (a === 0) return;
+    const bins = this.groups[a];
+    const seen = (bins[0] - 1 + bins[bins.length - 1]) / (2 * N_BINS);
+    if (Math.abs(headingToX(this.holdHeading, this.cfg.fov_deg) - seen) * N_BINS > this.cfg.gate.contradict_strips) {
+      this.holdHeading = null;
+    }
+  }
+
+  /**
    * Advance to time t (s) with this frame's outputs, obs = {probs: number[A], uncertainty,
    * ok} (null = no new frame: a tick). Returns the decision (same fields as the Python
    * Decision.to_json(); non-finite floats become null).
@@ -310,6 +326,7 @@ export class Decider {
       w *= Math.min(1, Math.max(0, since) / cfg.filter.tau_evidence_s);
       if (w > 0) this.belief = update(this.belief, binLikelihood(obs.probs, this.groups, this.lookup), w, cfg.filter.eps);
       this.tLastOk = t;
+      this.contradict(obs);
     }
     const [aL, hL] = beliefHeading(this.belief, this.groups, cfg.fov_deg);
     const uL = hL !== null ? beliefUncertainty(this.belief, this.groups, cfg.measure) : Infinity;
