@@ -99,16 +99,16 @@ def judge(engine: Engine, z: dict[str, np.ndarray], gyro: bool) -> dict:
             strip = 0 if d.stop else x_to_bin(min(max(heading_to_x(d.heading_deg, fov), 0.0), 1.0 - 1e-9))
             if label != UNKNOWN:
                 c["in_view"] += 1
-                c["on"] += not d.stop
+                c["on"] += int(not d.stop)
                 bad = not d.stop and abs(strip - label) >= WRONG_STRIPS
-                c["wrong"] += bad
-                c["wrong_hold"] += bad and d.gate == GATE_HOLD
+                c["wrong"] += int(bad)
+                c["wrong_hold"] += int(bad and d.gate == GATE_HOLD)
             else:
                 c["out_of_view"] += 1
-                c["out_on"] += not d.stop
+                c["out_on"] += int(not d.stop)
                 # the goal left on the side the camera turned away from: right turn -> goal to the left
                 left = psi[j] > 0
-                c["out_wrong_side"] += (not d.stop) and ((d.heading_deg > 0) == left)
+                c["out_wrong_side"] += int(not d.stop and (d.heading_deg > 0) == left)
     r = lambda k, n: round(c[k] / c[n], 4) if c[n] else None  # noqa: E731
     return {**c, "beacon_on": r("on", "in_view"), "confidently_wrong": r("wrong", "in_view"),
             "wrong_by_hold": r("wrong_hold", "wrong"), "out_of_view_on": r("out_on", "out_of_view"),

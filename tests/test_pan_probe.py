@@ -1,0 +1,45 @@
+"""scripts/pan_probe.py: photos played as a scanning phone sees them, with and without a gyroscope."""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from runtime_toy import bar_dataset, toy_bundle  # noqa: F401  (fixture)
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+import pan_probe as pp  # noqa: E402
+
+
+
+def test_scan_goes_still_right_left_and_back():
+    psi = pp.scan(20.0, 30.0)
+    assert np.all(psi[:10] == 0) and psi.max() >= 17 and psi.min() <= -17 and psi[-1] == 0
+    assert np.abs(np.diff(psi)).max() <= 3.0 + 1e-9   # 30 deg/s at 10 fps
+
+
+def test_scans_replay_from_the_cache(tmp_path, toy_bundle):  # noqa: F811
+    """The toy places bars; a scan moves each bar across the view (and out of it, relabelled
+    unknown), played with and without the turn given to the decision logic. Replaying the cache
+    decides as the play did. (Step 4b itself: tests/test_runtime_decide.py and the vectors.)"""
+    data = bar_dataset(tmp_path / "data", n=6)
+    cache, out, again = tmp_path / "c.npz", tmp_path / "a.json", tmp_path / "b.json"
+    args = ["--bundle", str(toy_bundle), "--data", str(data), "--photos", "6", "--amplitude", "30"]
+    assert pp.main([*args, "--cache", str(cache), "--out", str(out)]) == 0
+    assert pp.main(["--bundle", str(toy_bundle), "--cache", str(cache), "--replay", "--out", str(again)]) == 0
+    res = json.loads(out.read_text())
+    assert res == json.loads(again.read_text())
+    assert res["photos"] == 6 and res["amplitude_deg"] >= 27 and res["rate_dps"] == 30
+    for name in ("gyro", "no_gyro"):
+        g = res[name]
+        assert g["in_view"] > 0 and g["out_of_view"] > 0 and g["beacon_on"] >= 0.9   # the toy places bars
+    # the same frames: a decision told the turn stops pointing once the bar left the view
+    assert res["gyro"]["out_of_view_on"] < res["no_gyro"]["out_of_view_on"]
+    with np.load(cache) as z:
+        labels = z["labels"]
+    assert len(set(labels[0].tolist())) > 2   # the bar moved across strips as the camera turned
+
+
+def test_replay_without_a_cache_is_one_line(tmp_path, toy_bundle, capsys):  # noqa: F811
+    assert pp.main(["--bundle", str(toy_bundle), "--replay", "--cache", str(tmp_path / "none.npz")]) == 1
+    assert capsys.readouterr().err.count("\n") == 1
