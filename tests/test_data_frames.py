@@ -151,3 +151,29 @@ def test_phone_videos_are_extracted_upright_at_their_own_frame_times(tmp_path):
     assert [t for _, t in hevc.frames] == [0.0, 0.5, 1.0, 1.5, 2.0, 2.5]
     # 30 fps to 0.967 s, then a frame every 0.2 s from 1.333 s: the first frame at or after each 0.5 s
     assert [t for _, t in vfr.frames] == [0.0, 0.5, 1.333, 1.533, 2.133, 2.533, 3.133]
+
+
+def test_the_cameras_fov_goes_from_frames_to_the_manifest(tmp_path):
+    """``crossing-data frames --fov 40.8`` lists the FOV in frames.csv, and ``votes`` writes it as
+    each row's ``fov=40.8`` flag (what crossing-eval plays the frames at); without it, no flag."""
+    from crossing_assist.data_tools.images import frame_fov
+    from crossing_assist.data_tools.manifest import read_manifest
+
+    video = _video(tmp_path / "walk.mp4", n=20)
+    for fov, out in ((["--fov", "40.8"], tmp_path / "narrow"), ([], tmp_path / "plain")):
+        r = subprocess.run([sys.executable, "-m", "crossing_assist.data_tools.cli", "frames", str(video), "--out", str(out),
+                            "--fps", "2", "--quiet", *fov], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        with open(out / "frames.csv", newline="") as fh:
+            frames = list(csv.DictReader(fh))
+        (out / "votes.csv").write_text("frame,annotator,label\n" +
+                                       "".join(f"{f['image']},ann,6\n" for f in frames))
+        r = subprocess.run([sys.executable, "-m", "crossing_assist.data_tools.cli", "votes", str(out),
+                            str(out / "votes.csv")], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        rows = read_manifest(out).rows
+        assert len(rows) == len(frames) == 4
+        assert {frame_fov(r.flags) for r in rows} == ({40.8} if fov else {None})
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.data_tools.cli", "frames", str(video), "--out",
+                        str(tmp_path / "bad"), "--fov", "400"], capture_output=True, text=True)
+    assert r.returncode != 0 and r.stderr.strip().count("\n") == 0 and "--fov" in r.stderr, r.stderr

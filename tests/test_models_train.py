@@ -283,3 +283,19 @@ def test_class_weights_inverse_frequency_and_its_milder_square_root(tiny, tmp_pa
     assert any(not torch.equal(la[k], lb[k]) for k in la)
     with pytest.raises(ConfigError, match="balance 'cube'"):
         _cfg(tiny, tmp_path / "c", balance="cube")
+
+
+def test_frames_of_another_camera_than_fov_are_named(tmp_path):
+    """Rows flagged ``fov=40.8`` (crossing-data frames --fov) trained at --fov 67: one line saying
+    how many and which camera; none when they agree; a bad flag is a ConfigError."""
+    from crossing_assist.data_tools.manifest import Dataset, Row
+    from crossing_assist.models.config import ConfigError
+    from crossing_assist.models.train import fov_mismatch
+
+    rows = [Row(f"f{i}.jpg", 6, None, "vid:a", "train", {}, ("fov=40.8",) if i < 3 else ()) for i in range(5)]
+    ds = Dataset(tmp_path, rows)
+    msg = fov_mismatch(ds, 67.0)
+    assert msg and msg.startswith("3 frames") and "3 at 40.8 deg" in msg and "--fov 67" in msg
+    assert fov_mismatch(ds, 40.5) is None
+    with pytest.raises(ConfigError, match="fov=abc"):
+        fov_mismatch(Dataset(tmp_path, [Row("f.jpg", 6, None, "vid:a", "train", {}, ("fov=abc",))]), 67.0)

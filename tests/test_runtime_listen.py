@@ -330,3 +330,47 @@ def test_crossing_eval_cuts_portrait_views_from_landscape_photos_only(tmp_path):
                         "--examples", "0", "--out", str(tmp_path / "eval2"), "--quiet"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr   # only portrait photos: no portrait views at all, no crash
     assert set(json.loads((tmp_path / "eval2" / "metrics.json").read_text())["listen"]) == {"landscape", "clip_seconds", "fps"}
+
+
+def test_crossing_eval_plays_each_frame_at_its_cameras_fov(tmp_path):
+    """A researcher's 3:4 portrait frames from a narrow camera (40 deg): a row's ``fov=40`` flag
+    (crossing-data frames --fov) or ``--fov 40`` plays them at 40 deg, where the narrow camera's
+    threshold lets the toy speak; unflagged they play at the toy bundle's 50 deg and its portrait
+    threshold silences them. Such frames are not cut into portrait views."""
+    import dataclasses
+
+    from crossing_assist.data_tools.images import save_rgb
+    from crossing_assist.data_tools.manifest import Row, write_manifest
+
+    bundle = make_toy_bundle(tmp_path / "narrow", dataclasses.replace(TOY2, threshold=1.0, portrait_threshold=1e-6),
+                             narrow_threshold=1.0, narrow_fov_deg=42.0)
+    data = tmp_path / "data"
+    rows = []
+    for i, strip in enumerate((2, 6, 11, 3, 7, 10)):
+        save_rgb(data / "images" / f"p{i}.png", bar_frame(bin_center_x(strip), h=128, w=96))
+        rows.append(Row(f"images/p{i}.png", strip, bin_center_x(strip), "src:0", "val", {}, ("fov=40",) if i < 3 else ()))
+    write_manifest(data, rows)
+
+    def run(*extra):
+        out = tmp_path / f"eval{len(extra)}"
+        r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(bundle),
+                            "--data", str(data), "--split", "val", "--portrait", "2", "--clip-seconds", "0.5",
+                            "--examples", "0", "--out", str(out), "--quiet", *extra], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        return r.stdout, json.loads((out / "metrics.json").read_text())["listen"]
+
+    text, lis = run()
+    land = lis["landscape"]
+    assert land["camera_fov_deg"] == {"40": 3, "50": 3} and "camera FOV 40 deg (3), 50 deg (3)" in text
+    assert land["beacon_on"] == 0.5 and land["confidently_wrong"] == 0.0     # the three flagged frames speak
+    _, lis = run("--fov", "40")
+    assert lis["landscape"]["camera_fov_deg"] == {"40": 6} and lis["landscape"]["beacon_on"] == 1.0
+    assert "portrait" not in lis   # frames of a known camera are played as they are
+    for bad, args in (("fov=500", ()), (None, ("--fov", "5")), (None, ("--run", str(tmp_path), "--fov", "40"))):
+        if bad:
+            write_manifest(data, [dataclasses.replace(rows[0], flags=(bad,))])
+        argv = [sys.executable, "-m", "crossing_assist.models.cli", "eval", "--data", str(data), "--split", "val",
+                "--out", str(tmp_path / "bad"), *args]
+        r = subprocess.run(argv if "--run" in args else [*argv, "--bundle", str(bundle)], capture_output=True, text=True)
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode != 0 and len(lines) == 1 and lines[0].startswith("error:") and "fov" in lines[0].lower(), r.stderr

@@ -92,7 +92,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
 
 def _cmd_frames(args: argparse.Namespace) -> int:
     from crossing_assist.data_tools.frames import FramesConfig, extract_frames
-    cfg = FramesConfig(tuple(Path(v) for v in args.videos), Path(args.out), args.fps, progress=not args.quiet)
+    cfg = FramesConfig(tuple(Path(v) for v in args.videos), Path(args.out), args.fps, progress=not args.quiet,
+                       fov_deg=args.fov)
     results, listing = extract_frames(cfg)
     for r in results:
         if r.error:
@@ -195,6 +196,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("videos", nargs="+", metavar="VIDEO")
     p.add_argument("--out", required=True, help="folder for the frames and frames.csv")
     p.add_argument("--fps", type=float, default=2.0, help="frames per second to keep (default 2)")
+    p.add_argument("--fov", type=float, metavar="DEG",
+                   help="the videos' camera: horizontal field of view of the frames as saved, degrees; kept in "
+                        "frames.csv and the manifest (flag fov=DEG), so crossing-eval plays them at it "
+                        "(default: unknown, the bundle's for the frame's orientation)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_frames)
 

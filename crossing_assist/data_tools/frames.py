@@ -3,8 +3,9 @@
 For each video, frame ``k`` is the first decoded frame at or after ``k / fps`` seconds
 (timestamps from the frame index and the video's own frame rate). Frames are written as
 ``OUT/<video>/<video>_t<seconds>.jpg`` (``corner03_t0012.500.jpg``: sorts by time) and listed
-in ``OUT/frames.csv`` (``image,source,video,t_s``) with source ``vid:<video>``, the leakage
-unit for splits. A video that cannot be opened or yields no frame is reported and skipped;
+in ``OUT/frames.csv`` (``image,source,video,t_s``, and ``fov_deg`` when the camera's FOV is given)
+with source ``vid:<video>``, the leakage unit for splits; ``crossing-data votes`` carries the FOV
+into the manifest as an ``fov=DEG`` flag, which ``crossing-eval`` plays the frames at. A video that cannot be opened or yields no frame is reported and skipped;
 the others are still processed. ``OUT/label_studio_tasks.json`` lists the same frames as
 Label Studio tasks served from local files (``/data/local-files/?d=<OUT name>/<image>``: set
 ``LABEL_STUDIO_LOCAL_FILES_DOCUMENT_ROOT`` to OUT's parent folder). A video that ends before its header's frame count
@@ -43,6 +44,7 @@ class FramesConfig:
     fps: float = 2.0
     quality: int = 92
     progress: bool = True
+    fov_deg: float | None = None    # the videos' camera: horizontal field of view, degrees (None: unknown)
 
 
 @dataclass(frozen=True)
@@ -114,6 +116,12 @@ def extract_frames(cfg: FramesConfig) -> tuple[list[VideoResult], Path | None]:
         raise VideoError(f"fps={cfg.fps} invalid; valid: 0 < fps <= 120")
     if not cfg.videos:
         raise VideoError("no videos given")
+    if cfg.fov_deg is not None:
+        from crossing_assist.geometry import GeometryError, check_fov
+        try:
+            check_fov(cfg.fov_deg)
+        except GeometryError as exc:
+            raise VideoError(f"--fov: {exc}") from None
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     taken: set[str] = set()
@@ -122,10 +130,11 @@ def extract_frames(cfg: FramesConfig) -> tuple[list[VideoResult], Path | None]:
         return results, None
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(["image", "source", "video", "t_s"])
+    fov = [] if cfg.fov_deg is None else [f"{float(cfg.fov_deg):g}"]
+    writer.writerow(["image", "source", "video", "t_s"] + (["fov_deg"] if fov else []))
     for r in results:
         for rel, t in r.frames:
-            writer.writerow([rel, f"vid:{r.name}", str(r.video), f"{t:.3f}"])
+            writer.writerow([rel, f"vid:{r.name}", str(r.video), f"{t:.3f}", *fov])
     path = out / FRAMES_CSV
     atomic_write_text(path, buf.getvalue())
     tasks = [{"data": {"image": f"/data/local-files/?d={out.name}/{rel}", "source": f"vid:{r.name}", "t_s": t}}

@@ -97,6 +97,21 @@ def flag_value(flags: tuple[str, ...], key: str) -> str | None:
     return None
 
 
+def frame_fov(flags: tuple[str, ...]) -> float | None:
+    """The camera's horizontal FOV (degrees) an ``fov=DEG`` manifest flag gives the frame (e.g. from
+    ``crossing-data frames --fov``), or None (the bundle's default for the frame's orientation).
+    ImageError for a value that is not a FOV in 20..170 degrees."""
+    from crossing_assist.geometry import GeometryError, check_fov
+
+    value = flag_value(flags, "fov")
+    if value is None:
+        return None
+    try:
+        return check_fov(value)
+    except GeometryError as exc:
+        raise ImageError(f"flag fov={value}: {exc}") from None
+
+
 def true_aspect(image: np.ndarray, flags: tuple[str, ...] = ()) -> np.ndarray:
     """Undo a squash: an ``aspect=W:H`` flag resizes the frame to that aspect (keeping its
     height) when its pixels say otherwise; frames without the flag are returned as they are."""

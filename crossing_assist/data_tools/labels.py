@@ -54,8 +54,9 @@ class VotesSummary:
                 f"{self.mean_agreement:.3f}, Fleiss' kappa {k}; wrote {self.frames_written} rows to {self.manifest}")
 
 
-def read_frames_csv(frames_dir: Path) -> dict[str, str]:
-    """``{image: source}`` from ``frames_dir/frames.csv``."""
+def read_frames_csv(frames_dir: Path) -> dict[str, tuple[str, tuple[str, ...]]]:
+    """``{image: (source, flags)}`` from ``frames_dir/frames.csv``; flags ``fov=DEG`` when the
+    file has the camera's FOV (``crossing-data frames --fov``)."""
     path = Path(frames_dir) / FRAMES_CSV
     if not path.is_file():
         raise VotesError(f"{path}: not found; run crossing-data frames first")
@@ -63,7 +64,7 @@ def read_frames_csv(frames_dir: Path) -> dict[str, str]:
         reader = state["reader"] = csv.DictReader(fh)
         if not {"image", "source"} <= set(reader.fieldnames or []):
             raise VotesError(f"{path} line 1: header must have image,source")
-        return {r["image"]: r["source"] for r in reader}
+        return {r["image"]: (r["source"], (f"fov={r['fov_deg']}",) if r.get("fov_deg") else ()) for r in reader}
 
 
 def build_voted_dataset(cfg: VotesConfig) -> VotesSummary:
@@ -95,7 +96,8 @@ def build_voted_dataset(cfg: VotesConfig) -> VotesSummary:
             continue
         if d.tie and cfg.tie == "drop":
             continue
-        rows.append(Row(image, d.label, None, sources[image], "train", dict(fv.counts), ("tie",) if d.tie else ()))
+        source, flags = sources[image]
+        rows.append(Row(image, d.label, None, source, "train", dict(fv.counts), (("tie",) if d.tie else ()) + flags))
     if not rows:
         raise VotesError("no frame has enough votes to be written")
     rows = assign_splits(rows, cfg.split) if (cfg.split.val or cfg.split.test) else rows

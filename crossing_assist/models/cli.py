@@ -181,6 +181,10 @@ def eval_parser() -> argparse.ArgumentParser:
                         "portrait FOV, and 3:4 windows of the photo (a narrower camera)")
     p.add_argument("--negatives", help="bundles: dataset of no-crossing frames (its SPLIT rows), for the silence rate")
     p.add_argument("--clip-seconds", type=float, default=1.0, help="bundles: each photo plays as a still clip this long")
+    p.add_argument("--fov", type=float, metavar="DEG",
+                   help="bundles: the frames' camera, horizontal FOV in degrees, as crossing-demo --fov (a row's "
+                        "fov=DEG flag, from crossing-data frames --fov, wins; default: the bundle's for each "
+                        "frame's orientation); such frames are not cut into portrait views")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the MC-dropout masks (onnxruntime for bundles, torch for --samples > 1): "
                         "the same seed gives the same figures")
@@ -204,7 +208,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         cfg = EvalConfig(run=a.run, bundle=a.bundle, data=a.data, split=a.split, out=a.out, samples=a.samples,
                          examples=a.examples, tta_mirror=a.tta_mirror, actions=a.actions, listen=a.listen,
                          portrait=a.portrait, negatives=a.negatives, clip_seconds=a.clip_seconds,
-                         seed=a.seed, threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
+                         fov_deg=a.fov, seed=a.seed, threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
         out, m = evaluate(cfg)
         print(f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f}), "
               f"bin MAE {m['bin_mae']:.3f} -> {out / 'metrics.json'}")
@@ -215,8 +219,9 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                 kinds = v.get("orientations") or {}
                 label = name if name != "landscape" or set(kinds) <= {"landscape"} else \
                     "as taken (" + ", ".join(f"{n} {o}" for o, n in sorted(kinds.items())) + ")"
+                fovs = ", ".join(f"{k} deg ({n})" for k, n in (v.get("camera_fov_deg") or {}).items())
                 print(f"{label:>15} ({v['frames_with_crossing']} + {v['frames_without_crossing']} no-crossing "
-                      f"frames, each a still clip through the runtime)")
+                      f"frames, each a still clip through the runtime; camera FOV {fovs or 'n/a'})")
                 print(f"{'':>15} model, first frame: accuracy {f(v['accuracy'])}, bin MAE {f(v['bin_mae'])}, "
                       f"far-x error {f(v['far_x_error'], '.4f')} (of the view's width)")
                 print(f"{'':>15} heard, last decision: beacon on {f(v['beacon_on'])} (goal in view "

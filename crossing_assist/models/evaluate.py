@@ -19,9 +19,9 @@ import numpy as np
 import torch
 
 from ..actions import get_space
-from ..data_tools.images import load_frame
+from ..data_tools.images import ImageError, frame_fov, load_frame
 from ..data_tools.manifest import Dataset, atomic_write_text, read_manifest
-from ..geometry import GeometryError, content_window, letterbox
+from ..geometry import GeometryError, check_fov, content_window, letterbox
 from ..inference import SEED_RANGE, is_seed
 from .cache import compute_features
 from .checkpoint import load_checkpoint, load_policy, run_checkpoint
@@ -49,6 +49,7 @@ class EvalConfig:
     portrait: int = 3               # bundles: portrait views per photo (phone and 3:4 window), beside landscape
     negatives: str | None = None    # a dataset of no-crossing frames (its SPLIT rows) for the silence rate
     clip_seconds: float = 1.0       # each photo is played as a still clip this long at 10 fps
+    fov_deg: float | None = None    # bundles: the frames' camera FOV (a row's fov= flag wins; None: the bundle's)
     seed: int = 0                   # the MC-dropout masks' seed (onnxruntime / torch): a rerun gives the same figures
     threads: int = 2
     cache_dir: str = "runs/.cache"
@@ -69,6 +70,14 @@ class EvalConfig:
             raise ConfigError(f"Invalid clip_seconds {self.clip_seconds}; valid: 0.1..10")
         if not is_seed(self.seed):
             raise ConfigError(f"Invalid seed {self.seed!r}; valid: {SEED_RANGE}")
+        if self.fov_deg is not None:
+            if self.run is not None:
+                raise ConfigError("Invalid arguments: --fov is the camera the runtime plays a bundle's frames at; "
+                                  "give --bundle (export the run first)")
+            try:
+                check_fov(self.fov_deg)
+            except GeometryError as exc:
+                raise ConfigError(f"Invalid --fov: {exc}") from None
 
 
 def _split(cfg: EvalConfig) -> Dataset:
@@ -136,7 +145,7 @@ def _eval_bundle(cfg: EvalConfig, part: Dataset) -> tuple[np.ndarray, dict, Any]
     for r in part.rows:
         img = load_frame(part.image_path(r), r.flags)
         try:
-            images.append(bundle.geometry.camera_view(img, bundle.input.size))
+            images.append(bundle.geometry.camera_view(img, bundle.input.size, _fov(cfg, part, r)))
         except GeometryError as exc:   # the runtime refuses such a frame (stop cue): say which, do not guess
             raise ConfigError(f"{part.image_path(r)}: {img.shape[1]}x{img.shape[0]} is too narrow for a camera "
                               f"({exc}); the runtime stops on such frames: leave it out of the split") from None
@@ -164,11 +173,22 @@ def gate_scales(steps: int = 8) -> tuple[float, ...]:
 GATE_SCALES = gate_scales()
 
 
+def _fov(cfg: EvalConfig, ds: Dataset, row) -> float | None:
+    """A frame's camera FOV: its ``fov=`` flag, else ``--fov``, else None (the bundle's default)."""
+    try:
+        fov = frame_fov(row.flags)
+    except ImageError as exc:
+        raise ConfigError(f"{ds.image_path(row)}: {exc}") from None
+    return cfg.fov_deg if fov is None else fov
+
+
 def _views(cfg: EvalConfig, part: Dataset, geometry) -> dict[str, list[tuple[np.ndarray, float | None, int, bool, float | None]]]:
     """The frames a user's phone would give, each with its camera FOV (None = the bundle's
     default): each photo as taken (landscape) and, with ``cfg.portrait``, its portrait views
     (:func:`~crossing_assist.data_tools.augment.user_views`: a phone held in portrait at the
-    bundle's portrait FOV, and 3:4 windows); no-crossing frames from ``cfg.negatives`` in all."""
+    bundle's portrait FOV, and 3:4 windows); no-crossing frames from ``cfg.negatives`` in all.
+    A frame whose camera is known (its ``fov=`` flag, or ``--fov``) is played at that FOV and not
+    cut into portrait views, which assume a photo of the training camera."""
     from ..data_tools.augment import PORTRAIT_SETS, user_views
 
     rows = [(part, r) for r in part.rows]
@@ -177,9 +197,10 @@ def _views(cfg: EvalConfig, part: Dataset, geometry) -> dict[str, list[tuple[np.
         rows += [(neg, r) for r in neg.rows if r.label == 0]
     views: dict[str, list] = {"landscape": [], **({k: [] for k in PORTRAIT_SETS} if cfg.portrait else {})}
     for ds, r in rows:
-        for name, vs in user_views(load_frame(ds.image_path(r), r.flags), r.far_x, r.label, cfg.portrait,
-                                   geometry).items():
-            views[name] += vs
+        fov = _fov(cfg, ds, r)
+        for name, vs in user_views(load_frame(ds.image_path(r), r.flags), r.far_x, r.label,
+                                   cfg.portrait if fov is None else 0, geometry).items():
+            views[name] += [v if fov is None else (*v[:4], fov) for v in vs]
     return views
 
 
@@ -221,7 +242,9 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
         t0 = float(engine.decision_config(*cams.most_common(1)[0][0]).threshold)
         curve = [{"threshold": t0 * c["scale"], **c} for c in lis.risk_coverage(scales=GATE_SCALES)]
         entry.update(bundle_threshold=t0, risk_coverage=curve, best_threshold_here=choose_threshold(curve),
-                     orientations=dict(Counter(o for o, _ in cams.elements())))   # of the photos with a crossing
+                     orientations=dict(Counter(o for o, _ in cams.elements())),   # of the photos with a crossing
+                     camera_fov_deg={f"{f:g}": n for f, n in sorted(Counter(round(f, 1) for _, f in cams.elements()
+                                                                            if f is not None).items())})
         plot_risk_coverage(curve, t0, out / ("risk_coverage.png" if name == "landscape" else f"risk_coverage_{name}.png"),
                            f"{cfg.split}, {name}: what the user hears ({len(lis.clips)} frames)")
         result[name] = entry

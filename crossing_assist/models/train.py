@@ -20,6 +20,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -286,6 +287,8 @@ def _train(cfg: TrainConfig, ctx: distributed.Context, *, resume: bool) -> Path:
         raise ConfigError(f"Invalid --out: {out} already holds a run; pass --resume or pick a new --out")
     ds = read_manifest(cfg.data)
     train_ds, val_ds = _check_sets(cfg, ds)
+    if ctx.main and (msg := fov_mismatch(ds, cfg.fov_deg)):
+        print(f"warning: {msg}", file=sys.stderr, flush=True)
     policy, start = _build(cfg)
     size = policy.config.input_size
     variants = make_variants(cfg.mirror, cfg.yaw, cfg.field, cfg.field_without, cfg.field_zoom)
@@ -408,6 +411,26 @@ def resume_config(cfg: TrainConfig, given: set[str]) -> TrainConfig:
     mine = cfg.to_dict()
     keep = names | {"out", "progress", "threads"}
     return TrainConfig.from_dict({**saved, **{k: v for k, v in mine.items() if k in keep}})
+
+
+def fov_mismatch(ds: Dataset, fov_deg: float) -> str | None:
+    """A line when rows' ``fov=`` flags (their camera, from ``crossing-data frames --fov``) differ
+    from ``--fov`` by over a degree: the yaw views and the far point's heading assume ``--fov``."""
+    from ..data_tools.images import ImageError, frame_fov
+
+    seen: dict[float, int] = {}
+    for r in ds.rows:
+        try:
+            f = frame_fov(r.flags)
+        except ImageError as exc:
+            raise ConfigError(f"{ds.image_path(r)}: {exc}") from None
+        if f is not None and abs(f - fov_deg) > 1.0:
+            seen[f] = seen.get(f, 0) + 1
+    if not seen:
+        return None
+    cams = ", ".join(f"{n} at {f:g} deg" for f, n in sorted(seen.items()))
+    return (f"{sum(seen.values())} frames were taken by a camera other than --fov {fov_deg:g} ({cams}): their yaw "
+            f"views assume --fov; train on one camera's frames with its --fov")
 
 
 def trained_epochs(out: Path) -> int:
