@@ -374,3 +374,25 @@ def test_crossing_eval_plays_each_frame_at_its_cameras_fov(tmp_path):
         r = subprocess.run(argv if "--run" in args else [*argv, "--bundle", str(bundle)], capture_output=True, text=True)
         lines = r.stderr.strip().splitlines()
         assert r.returncode != 0 and len(lines) == 1 and lines[0].startswith("error:") and "fov" in lines[0].lower(), r.stderr
+
+
+def test_adding_negatives_leaves_the_figures_on_crossings_as_they_were(tmp_path):
+    """A noisy toy (every MC sample differs): crossing-eval with --negatives gives the same
+    figures on the frames with a crossing, every view, as without (the negatives' draws used to
+    come before the portrait views', so adding them changed the portrait figures)."""
+    from crossing_assist.models.evaluate import EvalConfig, evaluate
+
+    bundle = make_toy_bundle(tmp_path / "noisy", noise=1.5)
+    data = bar_dataset(tmp_path / "data")
+    neg = bar_dataset(tmp_path / "neg", n=3, unknown=True)
+    keys = ("accuracy", "beacon_on", "confidently_wrong", "accuracy_heard", "heading_error_deg")
+
+    def run(name, negatives):
+        _, m = evaluate(EvalConfig(data=str(data), bundle=str(bundle), examples=0, portrait=1, negatives=negatives,
+                                   out=str(tmp_path / name), progress=False))
+        return {v: {k: m["listen"][v][k] for k in keys} for v in ("landscape", "portrait", "portrait_window")}, m
+
+    alone, _ = run("alone", None)
+    with_neg, m = run("neg", str(neg))
+    assert with_neg == alone
+    assert m["listen"]["portrait"]["frames_without_crossing"] == 3 and m["listen"]["landscape"]["frames_without_crossing"] == 3

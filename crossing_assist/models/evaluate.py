@@ -182,19 +182,15 @@ def _fov(cfg: EvalConfig, ds: Dataset, row) -> float | None:
     return cfg.fov_deg if fov is None else fov
 
 
-def _views(cfg: EvalConfig, part: Dataset, geometry) -> dict[str, list[tuple[np.ndarray, float | None, int, bool, float | None]]]:
-    """The frames a user's phone would give, each with its camera FOV (None = the bundle's
-    default): each photo as taken (landscape) and, with ``cfg.portrait``, its portrait views
-    (:func:`~crossing_assist.data_tools.augment.user_views`: a phone held in portrait at the
-    bundle's portrait FOV, and 3:4 windows); no-crossing frames from ``cfg.negatives`` in all.
+def _views(cfg: EvalConfig, rows: list, geometry) -> dict[str, list[tuple[np.ndarray, float | None, int, bool, float | None]]]:
+    """The frames a user's phone would give of ``rows`` ((dataset, row) pairs), each with its
+    camera FOV (None = the bundle's default): each photo as taken (landscape) and, with
+    ``cfg.portrait``, its portrait views (:func:`~crossing_assist.data_tools.augment.user_views`:
+    a phone held in portrait at the bundle's portrait FOV, and 3:4 windows).
     A frame whose camera is known (its ``fov=`` flag, or ``--fov``) is played at that FOV and not
     cut into portrait views, which assume a photo of the training camera."""
     from ..data_tools.augment import PORTRAIT_SETS, user_views
 
-    rows = [(part, r) for r in part.rows]
-    if cfg.negatives:
-        neg = read_manifest(cfg.negatives).split(cfg.split)
-        rows += [(neg, r) for r in neg.rows if r.label == 0]
     views: dict[str, list] = {"landscape": [], **({k: [] for k in PORTRAIT_SETS} if cfg.portrait else {})}
     for ds, r in rows:
         fov = _fov(cfg, ds, r)
@@ -202,6 +198,14 @@ def _views(cfg: EvalConfig, part: Dataset, geometry) -> dict[str, list[tuple[np.
                                    cfg.portrait if fov is None else 0, geometry).items():
             views[name] += [v if fov is None else (*v[:4], fov) for v in vs]
     return views
+
+
+def _negative_rows(cfg: EvalConfig) -> list:
+    """``cfg.negatives``' no-crossing rows of the split, as (dataset, row) pairs."""
+    if not cfg.negatives:
+        return []
+    neg = read_manifest(cfg.negatives).split(cfg.split)
+    return [(neg, r) for r in neg.rows if r.label == 0]
 
 
 def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
@@ -218,12 +222,22 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
     engine = Engine(cfg.bundle, threads=cfg.threads, seed=cfg.seed)
     space = engine.space
     result: dict = {"clip_seconds": cfg.clip_seconds, "fps": 10.0}
-    for name, frames in _views(cfg, _split(cfg), engine.bundle.geometry).items():
+    part = _split(cfg)
+    # every view's frames of the split are played before any no-crossing frame of --negatives: the
+    # engine's MC-dropout draws run on in play order, so adding negatives leaves the figures on the
+    # frames with a crossing as they were
+    sets = [_views(cfg, [(part, r) for r in part.rows], engine.bundle.geometry),
+            _views(cfg, _negative_rows(cfg), engine.bundle.geometry)]
+    listeners = {name: Listener(engine, cfg.clip_seconds, 10.0) for name in sets[0]}
+    for views in sets:
+        for name, frames in views.items():
+            for img, _, lab, _, fov in tqdm(frames, desc=f"listen {name}", disable=not cfg.progress or not frames,
+                                            unit="frame"):
+                listeners[name].add(img, lab, fov)
+    for name, lis in listeners.items():
+        frames = sets[0][name] + sets[1][name]
         if not frames:   # portrait views of a split with no landscape photo
             continue
-        lis = Listener(engine, cfg.clip_seconds, 10.0)
-        for img, _, lab, _, fov in tqdm(frames, desc=f"listen {name}", disable=not cfg.progress, unit="frame"):
-            lis.add(img, lab, fov)
         known = np.asarray([lab != 0 for _, _, lab, _, _ in frames])
         probs = np.stack([c[0].probs if c[0].ok else np.full(space.n, 1 / space.n) for c in lis.clips])
         labels = space.bins_to_actions(np.asarray([lab for _, _, lab, _, _ in frames]))
