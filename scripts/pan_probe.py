@@ -1,12 +1,12 @@
 """What a user hears while panning the phone: photos turned into scans, played with and without a gyroscope.
 
-A user looking for the crossing sweeps the phone left and right. crossing-eval plays still
-clips, where the camera never turns; this probe plays each photo as a scan: 1 s still, then the
-camera turned right to ``+A`` degrees, left to ``-A`` and back to straight ahead at ``R`` degrees
-per second (``--amplitude``, ``--rate``), every frame re-rendered as that turned camera would see
-it (:func:`~crossing_assist.data_tools.augment.yaw`, the unseen part black, the goal moved and
+A user looking for the crossing sweeps the phone left and right. This probe plays each photo as a
+scan, as ``crossing-eval --scan R`` does: 1 s still, then the camera turned right to ``+A``
+degrees, left to ``-A`` and back to straight ahead at ``R`` degrees per second (``--amplitude``,
+``--rate``), every frame re-rendered as that turned camera would see it
+(``crossing_assist.models.evaluate.scan_clips``: the unseen part black, the goal moved and
 relabelled, ``unknown`` once it leaves the view), 10 fps, through the bundle's engine and the
-runtime's decision logic (:class:`~crossing_assist.runtime.decide.Decider`), twice:
+runtime's decision logic (``runtime.listen.judge_scans``), twice:
 
 - ``gyro``: the decision logic told the turn (the app's opt-in gyroscope, the Python live loop's
   yaw input);
@@ -32,87 +32,40 @@ import json
 import sys
 from pathlib import Path
 
-import cv2
 import numpy as np
 
-from crossing_assist.actions import UNKNOWN, heading_to_x, x_to_bin
 from crossing_assist.bundle import BundleError
-from crossing_assist.data_tools.augment import yaw
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest
 from crossing_assist.fileio import atomic_path, atomic_write_text
-from crossing_assist.runtime.decide import Decider, Observation
+from crossing_assist.models.evaluate import scan_clips
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
-from crossing_assist.runtime.engine import Engine
-from crossing_assist.runtime.gate import GATE_HOLD
-from crossing_assist.runtime.listen import WRONG_STRIPS
-
-FPS = 10.0
-STILL_S = 1.0
-WIDTH = 640
+from crossing_assist.runtime.engine import Engine, Prediction
+from crossing_assist.runtime.listen import SCAN_FPS, judge_scans, scan_yaw
 
 
-def scan(amplitude: float, rate: float, fps: float = FPS) -> np.ndarray:
-    """The camera's yaw (degrees, + = turned right) at each frame: ``STILL_S`` still, then
-    0 -> +A -> -A -> 0 at ``rate`` degrees per second."""
-    still = np.zeros(int(round(STILL_S * fps)))
-    step = rate / fps
-    legs = [np.arange(0, amplitude, step), np.arange(amplitude, -amplitude, -step), np.arange(-amplitude, 0, step)]
-    return np.concatenate([still, *legs, [0.0]])
-
-
-def play(engine: Engine, rows, images, psi: np.ndarray) -> dict[str, np.ndarray]:
-    """Each photo scanned: the model's outputs per frame and the goal's label per frame."""
+def play(engine: Engine, images, rows, psi: np.ndarray) -> dict[str, np.ndarray]:
+    """Each photo scanned: the model's outputs and the goal's strip per frame, as arrays."""
     n, f, a = len(rows), len(psi), engine.space.n
-    out = {"probs": np.full((n, f, a), np.nan), "uncertainty": np.full((n, f), np.inf), "ok": np.zeros((n, f), bool),
-           "labels": np.zeros((n, f), np.int64), "fov_deg": np.zeros(n), "psi": psi}
+    z = {"probs": np.full((n, f, a), np.nan), "uncertainty": np.full((n, f), np.inf), "ok": np.zeros((n, f), bool),
+         "labels": np.zeros((n, f), np.int64), "fov_deg": np.full((n, f), np.nan), "psi": psi}
     for i, (r, img) in enumerate(zip(rows, images)):
-        h, w = img.shape[:2]
-        fov = engine.camera_fov(w, h)
-        out["fov_deg"][i] = fov
-        for j, p in enumerate(psi):
-            view, _, label, _ = yaw(img, r.far_x, r.label, float(p), fov)
-            pred = engine.predict(view)
-            out["labels"][i, j] = label
-            if pred.ok:
-                out["probs"][i, j], out["uncertainty"][i, j], out["ok"][i, j] = pred.probs, pred.uncertainty, True
+        preds, z["labels"][i] = scan_clips(engine, img, r.far_x, r.label, psi)
+        for j, p in enumerate(preds):
+            if p.ok:
+                z["probs"][i, j], z["uncertainty"][i, j], z["ok"][i, j], z["fov_deg"][i, j] = \
+                    p.probs, p.uncertainty, True, p.fov_deg
         print(f"\r{i + 1}/{n} photos scanned", end="", file=sys.stderr, flush=True)
     print(file=sys.stderr)
-    return out
+    return z
 
 
-def judge(engine: Engine, z: dict[str, np.ndarray], gyro: bool) -> dict:
-    """Replay the decision logic over every scan; rates over the frames after the still second."""
-    psi = z["psi"]
-    rates = np.diff(psi, prepend=psi[0]) * FPS if gyro else np.zeros_like(psi)
-    start = int(round(STILL_S * FPS))
-    c = {"in_view": 0, "on": 0, "wrong": 0, "wrong_hold": 0, "out_of_view": 0, "out_on": 0, "out_wrong_side": 0}
-    for i in range(len(z["labels"])):
-        fov = float(z["fov_deg"][i])
-        decider = Decider(engine.decision_config("landscape", fov))
-        for j in range(len(psi)):
-            obs = Observation(z["probs"][i, j], float(z["uncertainty"][i, j]), bool(z["ok"][i, j]))
-            d = decider.step(j / FPS, obs, float(rates[j]))
-            if j < start:
-                continue
-            label = int(z["labels"][i, j])
-            strip = 0 if d.stop else x_to_bin(min(max(heading_to_x(d.heading_deg, fov), 0.0), 1.0 - 1e-9))
-            if label != UNKNOWN:
-                c["in_view"] += 1
-                c["on"] += int(not d.stop)
-                bad = not d.stop and abs(strip - label) >= WRONG_STRIPS
-                c["wrong"] += int(bad)
-                c["wrong_hold"] += int(bad and d.gate == GATE_HOLD)
-            else:
-                c["out_of_view"] += 1
-                c["out_on"] += int(not d.stop)
-                # the goal left on the side the camera turned away from: right turn -> goal to the left
-                left = psi[j] > 0
-                c["out_wrong_side"] += int(not d.stop and (d.heading_deg > 0) == left)
-    r = lambda k, n: round(c[k] / c[n], 4) if c[n] else None  # noqa: E731
-    return {**c, "beacon_on": r("on", "in_view"), "confidently_wrong": r("wrong", "in_view"),
-            "wrong_by_hold": r("wrong_hold", "wrong"), "out_of_view_on": r("out_on", "out_of_view"),
-            "out_of_view_wrong_side": r("out_wrong_side", "out_of_view")}
+def clips(z: dict[str, np.ndarray]) -> list[list[Prediction]]:
+    """The cached arrays as the engine's predictions (what the decision logic reads of them)."""
+    return [[Prediction(ok=True, probs=z["probs"][i, j], uncertainty=float(z["uncertainty"][i, j]),
+                        action=int(np.argmax(z["probs"][i, j])), fov_deg=float(z["fov_deg"][i, j]))
+             if z["ok"][i, j] else Prediction(ok=False, error="failed when scanned")
+             for j in range(z["probs"].shape[1])] for i in range(z["probs"].shape[0])]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -151,24 +104,20 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         rng = np.random.default_rng(a.seed)
         rows = [rows[i] for i in sorted(rng.choice(len(rows), min(a.photos, len(rows)), replace=False))]
-        images = []
-        for r in rows:
-            img = load_frame(ds.image_path(r), r.flags)
-            h, w = img.shape[:2]
-            images.append(cv2.resize(img, (WIDTH, round(h * WIDTH / w)), interpolation=cv2.INTER_AREA) if w > WIDTH else img)
-        z = play(engine, rows, images, scan(a.amplitude, a.rate))
+        z = play(engine, [load_frame(ds.image_path(r), r.flags) for r in rows], rows, scan_yaw(a.amplitude, a.rate))
         if a.cache:
             a.cache.parent.mkdir(parents=True, exist_ok=True)
             with atomic_path(a.cache) as tmp:
                 np.savez_compressed(tmp, **z)
-    res = {"bundle": str(a.bundle), "photos": int(len(z["labels"])), "frames_per_scan": int(len(z["psi"])),
-           "amplitude_deg": float(np.abs(z["psi"]).max()), "rate_dps": float(np.abs(np.diff(z["psi"])).max() * FPS),
-           "gyro": judge(engine, z, True), "no_gyro": judge(engine, z, False)}
+    played = clips(z)
+    res = {"bundle": str(a.bundle), "photos": len(played), "frames_per_scan": int(len(z["psi"])),
+           "amplitude_deg": float(np.abs(z["psi"]).max()), "rate_dps": float(np.abs(np.diff(z["psi"])).max() * SCAN_FPS),
+           **{k: judge_scans(engine, played, z["labels"], z["psi"], gyro=k == "gyro") for k in ("gyro", "no_gyro")}}
     print("| scan | goal-in-view frames | beacon on | confidently wrong | of them by the hold | "
           "goal out of view: on | wrong side |\n|---|---|---|---|---|---|---|")
+    pct = lambda v: "–" if v is None else f"{100 * v:.1f} %"  # noqa: E731
     for name in ("gyro", "no_gyro"):
         g = res[name]
-        pct = lambda v: "–" if v is None else f"{100 * v:.1f} %"  # noqa: E731
         print(f"| {name.replace('_', ' ')} | {g['in_view']} | {pct(g['beacon_on'])} | {pct(g['confidently_wrong'])} | "
               f"{pct(g['wrong_by_hold'])} | {pct(g['out_of_view_on'])} | {pct(g['out_of_view_wrong_side'])} |")
     if a.out:

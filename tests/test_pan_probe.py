@@ -13,7 +13,9 @@ import pan_probe as pp  # noqa: E402
 
 
 def test_scan_goes_still_right_left_and_back():
-    psi = pp.scan(20.0, 30.0)
+    from crossing_assist.runtime.listen import scan_yaw
+
+    psi = scan_yaw(20.0, 30.0)
     assert np.all(psi[:10] == 0) and psi.max() >= 17 and psi.min() <= -17 and psi[-1] == 0
     assert np.abs(np.diff(psi)).max() <= 3.0 + 1e-9   # 30 deg/s at 10 fps
 

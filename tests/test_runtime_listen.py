@@ -396,3 +396,48 @@ def test_adding_negatives_leaves_the_figures_on_crossings_as_they_were(tmp_path)
     with_neg, m = run("neg", str(neg))
     assert with_neg == alone
     assert m["listen"]["portrait"]["frames_without_crossing"] == 3 and m["listen"]["landscape"]["frames_without_crossing"] == 3
+
+
+def test_crossing_eval_scan_judges_every_frame_of_a_turning_camera(tmp_path, toy_bundle):  # noqa: F811
+    """``--scan 30``: each photo played as a camera turning 0 -> +20 -> -20 -> 0 deg, told the turn
+    and not; the toy places the moving bar, so the beacon is on while it is in view and the
+    summary says so."""
+    from crossing_assist.runtime.listen import scan_yaw
+
+    data = bar_dataset(tmp_path / "data", n=4)
+    out = tmp_path / "eval"
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(toy_bundle),
+                        "--data", str(data), "--split", "val", "--portrait", "0", "--scan", "30", "--examples", "0",
+                        "--clip-seconds", "0.5", "--out", str(out), "--quiet"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    scan = json.loads((out / "metrics.json").read_text())["listen"]["scan"]
+    assert scan["photos"] == 4 and scan["rate_dps"] == 30 and scan["frames"] == len(scan_yaw(20, 30)) == 39
+    for k in ("gyro", "no_gyro"):
+        assert scan[k]["in_view"] > 0 and scan[k]["beacon_on"] >= 0.9 and scan[k]["confidently_wrong"] <= 0.05
+    assert "scan (4 photos" in r.stdout and "no gyroscope: beacon on" in r.stdout
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(toy_bundle),
+                        "--data", str(data), "--split", "val", "--scan", "-1", "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode != 0 and r.stderr.strip().count("\n") == 0 and "--scan" in r.stderr
+
+
+def test_judge_scans_counts_each_frame_against_the_goal_in_that_frame(toy_bundle):  # noqa: F811
+    """A hand-made scan: the model always sees strip 9 (it ignores the turn); after the still second
+    the goal is at strip 9 for 5 frames, strip 3 for 5 (the beacon at 9: confidently wrong), then
+    out of view on the left while the camera is turned right (the beacon at 9 points right: the
+    wrong side)."""
+    import numpy as np
+
+    from crossing_assist.runtime.engine import Prediction
+    from crossing_assist.runtime.listen import judge_scans
+
+    engine = Engine(toy_bundle)
+    p = np.full(13, 0.01)
+    p[9] = 1 - 0.12
+    pred = Prediction(ok=True, probs=p, uncertainty=0.0, action=9, fov_deg=67.0, orientation="landscape")
+    labels = np.asarray([[9] * 10 + [9] * 5 + [3] * 5 + [0] * 5])
+    psi = np.asarray([0.0] * 10 + [5.0] * 15)
+    g = judge_scans(engine, [[pred] * 25], labels, psi, gyro=False)
+    assert (g["in_view"], g["on"], g["wrong"], g["wrong_hold"]) == (10, 10, 5, 0)
+    assert (g["out_of_view"], g["out_on"], g["out_wrong_side"]) == (5, 5, 5)
+    assert g["confidently_wrong"] == 0.5 and g["out_of_view_wrong_side"] == 1.0

@@ -185,6 +185,10 @@ def eval_parser() -> argparse.ArgumentParser:
                    help="bundles: the frames' camera, horizontal FOV in degrees, as crossing-demo --fov (a row's "
                         "fov=DEG flag, from crossing-data frames --fov, wins; default: the bundle's for each "
                         "frame's orientation); such frames are not cut into portrait views")
+    p.add_argument("--scan", type=float, default=0.0, metavar="DEG_PER_S",
+                   help="bundles: also play each photo as a user scanning for the crossing, the camera turned "
+                        "0 -> +20 -> -20 -> 0 deg at this rate (e.g. 30), with and without the turn given to the "
+                        "decision logic (a gyroscope; the phone app's default has none); judged per frame")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the MC-dropout masks (onnxruntime for bundles, torch for --samples > 1): "
                         "the same seed gives the same figures")
@@ -208,7 +212,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         cfg = EvalConfig(run=a.run, bundle=a.bundle, data=a.data, split=a.split, out=a.out, samples=a.samples,
                          examples=a.examples, tta_mirror=a.tta_mirror, actions=a.actions, listen=a.listen,
                          portrait=a.portrait, negatives=a.negatives, clip_seconds=a.clip_seconds,
-                         fov_deg=a.fov, seed=a.seed, threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
+                         fov_deg=a.fov, scan_dps=a.scan, seed=a.seed, threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
         out, m = evaluate(cfg)
         print(f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f}), "
               f"bin MAE {m['bin_mae']:.3f} -> {out / 'metrics.json'}")
@@ -232,6 +236,15 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                 if e.get("n"):
                     print(f"{'':>15} heading played vs the goal, beacon on and goal in view ({e['n']} frames): median "
                           f"{e['median']:.1f} deg, mean {e['mean']:.1f} deg, p90 {e['p90']:.1f} deg")
+        scan = m.get("listen", {}).get("scan")
+        if scan:
+            print(f"{'scan':>15} ({scan['photos']} photos, each turned 0 -> +{scan['amplitude_deg']:g} -> "
+                  f"-{scan['amplitude_deg']:g} -> 0 deg at {scan['rate_dps']:g} deg/s; every frame after the first second)")
+            for k, name in (("gyro", "turn given"), ("no_gyro", "no gyroscope")):
+                g, f = scan[k], (lambda x: "n/a" if x is None else f"{x:.3f}")
+                print(f"{'':>15} {name}: beacon on {f(g['beacon_on'])}, confidently wrong {f(g['confidently_wrong'])} "
+                      f"of {g['in_view']} frames with the goal in view ({f(g['wrong_by_hold'])} of them from the "
+                      f"hold); goal out of view: beacon on {f(g['out_of_view_on'])}")
         if "conformal" in m:
             c = m["conformal"]
             print(f"conformal sets: coverage {c['coverage']:.3f} (target {c['target_coverage']:.2f}), "

@@ -50,6 +50,8 @@ class EvalConfig:
     negatives: str | None = None    # a dataset of no-crossing frames (its SPLIT rows) for the silence rate
     clip_seconds: float = 1.0       # each photo is played as a still clip this long at 10 fps
     fov_deg: float | None = None    # bundles: the frames' camera FOV (a row's fov= flag wins; None: the bundle's)
+    scan_dps: float = 0.0           # bundles: > 0 also plays each photo as a scan at this turn rate (deg/s)
+    scan_deg: float = 20.0          # the scan's amplitude either side of straight ahead
     seed: int = 0                   # the MC-dropout masks' seed (onnxruntime / torch): a rerun gives the same figures
     threads: int = 2
     cache_dir: str = "runs/.cache"
@@ -70,6 +72,9 @@ class EvalConfig:
             raise ConfigError(f"Invalid clip_seconds {self.clip_seconds}; valid: 0.1..10")
         if not is_seed(self.seed):
             raise ConfigError(f"Invalid seed {self.seed!r}; valid: {SEED_RANGE}")
+        if self.scan_dps < 0 or (self.scan_dps and not (0 < self.scan_deg < 60 and self.scan_dps <= 360)):
+            raise ConfigError(f"Invalid --scan {self.scan_dps:g} deg/s by {self.scan_deg:g} deg; valid: 0 (off) or "
+                              "up to 360 deg/s, by 0..60 deg")
         if self.fov_deg is not None:
             if self.run is not None:
                 raise ConfigError("Invalid arguments: --fov is the camera the runtime plays a bundle's frames at; "
@@ -200,6 +205,54 @@ def _views(cfg: EvalConfig, rows: list, geometry) -> dict[str, list[tuple[np.nda
     return views
 
 
+#: Photos are scanned at this width at most (a phone camera's stream, as CameraSource scales it).
+SCAN_WIDTH = 640
+
+
+def scan_clips(engine, image: np.ndarray, far_x: float | None, label: int, psi: np.ndarray,
+               fov_deg: float | None = None) -> tuple[list, np.ndarray]:
+    """One photo seen by a camera turned ``psi[j]`` degrees at each frame
+    (:func:`~crossing_assist.data_tools.augment.yaw`: the scene beyond the photo black, the goal
+    moved, ``unknown`` once it leaves the view), through ``engine``: the predictions and the
+    goal's strip per frame. ``fov_deg``: the photo's camera (None: the bundle's for its size)."""
+    import cv2
+
+    from ..data_tools.augment import yaw
+
+    h, w = image.shape[:2]
+    if w > SCAN_WIDTH:
+        image = cv2.resize(image, (SCAN_WIDTH, max(1, round(h * SCAN_WIDTH / w))), interpolation=cv2.INTER_AREA)
+    fov = engine.camera_fov(image.shape[1], image.shape[0], fov_deg)
+    preds, labels = [], []
+    for p in psi:
+        view, _, lab, _ = yaw(image, far_x, label, float(p), fov)
+        preds.append(engine.predict(view, fov))
+        labels.append(lab)
+    return preds, np.asarray(labels, np.int64)
+
+
+def _listen_scans(cfg: EvalConfig, engine, part: Dataset) -> dict:
+    """The split's photos with a measured goal, each played as a scan (:func:`scan_clips`,
+    :func:`~crossing_assist.runtime.listen.scan_yaw`) told the turn (``gyro``) and not
+    (``no_gyro``, the app's default): :func:`~crossing_assist.runtime.listen.judge_scans`."""
+    from tqdm import tqdm
+
+    from ..runtime.listen import judge_scans, scan_yaw
+
+    psi = scan_yaw(cfg.scan_deg, cfg.scan_dps)
+    clips, labels = [], []
+    for r in tqdm([r for r in part.rows if r.far_x is not None and r.label != 0], desc="listen scans",
+                  disable=not cfg.progress, unit="photo"):
+        preds, labs = scan_clips(engine, load_frame(part.image_path(r), r.flags), r.far_x, r.label, psi,
+                                 _fov(cfg, part, r))
+        clips.append(preds)
+        labels.append(labs)
+    if not clips:
+        return {}
+    return {"rate_dps": cfg.scan_dps, "amplitude_deg": cfg.scan_deg, "photos": len(clips), "frames": len(psi),
+            **{k: judge_scans(engine, clips, np.asarray(labels), psi, gyro=k == "gyro") for k in ("gyro", "no_gyro")}}
+
+
 def _negative_rows(cfg: EvalConfig) -> list:
     """``cfg.negatives``' no-crossing rows of the split, as (dataset, row) pairs."""
     if not cfg.negatives:
@@ -262,6 +315,8 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
         plot_risk_coverage(curve, t0, out / ("risk_coverage.png" if name == "landscape" else f"risk_coverage_{name}.png"),
                            f"{cfg.split}, {name}: what the user hears ({len(lis.clips)} frames)")
         result[name] = entry
+    if cfg.scan_dps and (scan := _listen_scans(cfg, engine, part)):
+        result["scan"] = scan
     return result
 
 

@@ -250,3 +250,62 @@ def choose_threshold(curve: Sequence[dict], max_wrong: float = 0.005, min_silenc
           and (c["silence_no_crossing"] is None or c["silence_no_crossing"] >= min_silence)]
     return max(ok, key=lambda c: (c["beacon_on"] or 0, -c["threshold"])) if ok else None
 
+
+
+#: A scan (:func:`scan_yaw`): still for this long first (the belief forms), and the frame rate.
+SCAN_STILL_S = 1.0
+SCAN_FPS = 10.0
+
+
+def scan_yaw(amplitude_deg: float = 20.0, rate_dps: float = 30.0, fps: float = SCAN_FPS) -> np.ndarray:
+    """A user scanning for the crossing: the camera's yaw (degrees, + = turned right) at each
+    frame, ``SCAN_STILL_S`` still, then 0 -> +A -> -A -> 0 at ``rate_dps``."""
+    if not (0 < amplitude_deg < 90 and rate_dps > 0 and fps > 0):
+        raise ValueError(f"Invalid scan: amplitude {amplitude_deg} deg (0..90), rate {rate_dps} deg/s, "
+                         f"{fps} fps (> 0)")
+    step = rate_dps / fps
+    legs = [np.arange(0, amplitude_deg, step), np.arange(amplitude_deg, -amplitude_deg, -step),
+            np.arange(-amplitude_deg, 0, step)]
+    return np.concatenate([np.zeros(int(round(SCAN_STILL_S * fps))), *legs, [0.0]])
+
+
+def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
+                psi: np.ndarray, *, gyro: bool, fps: float = SCAN_FPS) -> dict:
+    """Replay the decision logic over scanned clips (``clips[i][j]``: photo ``i`` seen with the
+    camera turned ``psi[j]`` degrees; ``labels[i, j]`` its goal's strip then, 0 once out of view),
+    told the turn (``gyro``) or not (the app's default), and judge every frame after the still
+    second against the goal in *that* frame: with the goal in view, beacon on and confidently
+    wrong, and how many of the wrong frames the heading hold played; with the goal out of view,
+    the beacon on and pointing to the side the goal did not leave by."""
+    from crossing_assist.runtime.gate import GATE_HOLD
+
+    psi = np.asarray(psi, float)
+    rates = np.diff(psi, prepend=psi[0]) * fps if gyro else np.zeros_like(psi)
+    start = int(round(SCAN_STILL_S * fps))
+    c = dict.fromkeys(("in_view", "on", "wrong", "wrong_hold", "out_of_view", "out_on", "out_wrong_side"), 0)
+    for clip, labs in zip(clips, labels):
+        fov = next((p.fov_deg for p in clip if p.ok and p.fov_deg is not None), None)
+        first = next((p for p in clip if p.ok), None)
+        decider = Decider(engine.decision_config(getattr(first, "orientation", None) or "landscape", fov))
+        fov = decider.cfg.fov_deg
+        for j, p in enumerate(clip):
+            d = decider.step(j / fps, p.observation(), float(rates[j]))
+            if j < start:
+                continue
+            label = int(labs[j])
+            if label != UNKNOWN:
+                c["in_view"] += 1
+                c["on"] += int(not d.stop)
+                bad = not d.stop and abs(x_to_bin(min(max(heading_to_x(d.heading_deg, fov), 0.0), 1.0 - 1e-9))
+                                         - label) >= WRONG_STRIPS
+                c["wrong"] += int(bad)
+                c["wrong_hold"] += int(bad and d.gate == GATE_HOLD)
+            else:
+                c["out_of_view"] += 1
+                c["out_on"] += int(not d.stop)
+                # turned right (psi > 0), the goal left the view on the left: a beacon to the right is wrong
+                c["out_wrong_side"] += int(not d.stop and (d.heading_deg > 0) == (psi[j] > 0))
+    rate = lambda k, n: c[k] / c[n] if c[n] else None  # noqa: E731
+    return {**c, "beacon_on": rate("on", "in_view"), "confidently_wrong": rate("wrong", "in_view"),
+            "wrong_by_hold": rate("wrong_hold", "wrong"), "out_of_view_on": rate("out_on", "out_of_view"),
+            "out_of_view_wrong_side": rate("out_wrong_side", "out_of_view")}
