@@ -182,14 +182,19 @@ def test_with_ffmpeg_on_path_the_beacon_is_muxed_into_the_video(tmp_path, toy_bu
 
 
 def test_the_summary_advises_sideways_only_for_a_mostly_unsure_portrait_video():
-    def lines(size, uncertain, ok):
+    """Unsure where a crossing is on most frames of a portrait video: hold it sideways. Unsure
+    because the model sees no crossing (a walk with none in view): no such advice, it would not help."""
+    def lines(size, uncertain, ok, seeing=None):
         return Summary(frames=uncertain + ok, video_s=1.0, wall_s=1.0, gates={}, failed=0, outputs={},
-                       reasons={"uncertain": uncertain, "ok": ok}, frame_size=size, fov_deg=(53.0,)).lines()
+                       reasons={"uncertain": uncertain, "ok": ok}, frame_size=size, fov_deg=(53.0,),
+                       unsure_seeing=uncertain if seeing is None else seeing).lines()
 
     advice = [line for line in lines((480, 640), 6, 4) if line.startswith("advice:")]
-    assert len(advice) == 1 and "unsure on 60% of these portrait frames" in advice[0] and "sideways" in advice[0]
+    assert len(advice) == 1 and "unsure where the crossing is on 60% of these portrait frames" in advice[0]
+    assert "sideways" in advice[0]
     assert not any(line.startswith("advice:") for line in lines((640, 480), 6, 4))   # landscape already
     assert not any(line.startswith("advice:") for line in lines((480, 640), 4, 6))   # mostly guided
+    assert not any(line.startswith("advice:") for line in lines((480, 640), 10, 0, seeing=1))   # no crossing seen
 
 
 def test_a_phone_video_plays_upright_at_its_frames_own_times():

@@ -441,3 +441,15 @@ def test_judge_scans_counts_each_frame_against_the_goal_in_that_frame(toy_bundle
     assert (g["in_view"], g["on"], g["wrong"], g["wrong_hold"]) == (10, 10, 5, 0)
     assert (g["out_of_view"], g["out_on"], g["out_wrong_side"]) == (5, 5, 5)
     assert g["confidently_wrong"] == 0.5 and g["out_of_view_wrong_side"] == 1.0
+
+
+def test_the_embedded_bundle_is_never_written_into(tmp_path, monkeypatch):
+    """crossing-eval --bundle <the embedded default> without --out writes runs/default_bundle/eval_val
+    under the working folder (it wrote into the installed package); another bundle keeps BUNDLE/eval_val."""
+    from pathlib import Path
+
+    from crossing_assist.models.evaluate import _bundle_eval_out
+    from crossing_assist.runtime.demo import DEFAULT_BUNDLE
+
+    assert _bundle_eval_out(Path(DEFAULT_BUNDLE), "val") == Path("runs") / Path(DEFAULT_BUNDLE).name / "eval_val"
+    assert _bundle_eval_out(tmp_path / "b", "test") == tmp_path / "b" / "eval_test"

@@ -169,7 +169,8 @@ def eval_parser() -> argparse.ArgumentParser:
     p.add_argument("--bundle", help="bundle folder (model.onnx + bundle.json) instead of --run")
     p.add_argument("--data", required=True, help="dataset folder (manifest.csv)")
     p.add_argument("--split", default="val", choices=("val", "test", "train"), help="val | test | train")
-    p.add_argument("--out", help="output folder (default RUN/eval_SPLIT or BUNDLE/eval_SPLIT)")
+    p.add_argument("--out", help="output folder (default RUN/eval_SPLIT or BUNDLE/eval_SPLIT; for the embedded "
+                                 "bundle runs/default_bundle/eval_SPLIT: the package is never written into)")
     p.add_argument("--samples", type=int, default=1, help="MC dropout samples for checkpoints (1 = deterministic)")
     p.add_argument("--examples", type=int, default=12, help="frames on the example sheet")
     p.add_argument("--tta-mirror", action="store_true", help="average each frame with its mirror image (checkpoints)")

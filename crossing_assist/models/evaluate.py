@@ -320,6 +320,16 @@ def listen_bundle(cfg: EvalConfig, out: Path) -> dict:
     return result
 
 
+def _bundle_eval_out(bundle: Path, split: str) -> Path:
+    """Where a bundle's evaluation goes without ``--out``: ``BUNDLE/eval_SPLIT``, except for a bundle
+    shipped inside the package (the embedded default), which is never written into:
+    ``runs/<bundle name>/eval_SPLIT`` under the working folder."""
+    package = Path(__file__).resolve().parents[1]
+    if bundle.resolve().is_relative_to(package):
+        return Path("runs") / bundle.resolve().name / f"eval_{split}"
+    return bundle / f"eval_{split}"
+
+
 def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
     """Run the evaluation; returns (output folder, metrics dict)."""
     from .metrics import compute_metrics
@@ -335,7 +345,7 @@ def evaluate(cfg: EvalConfig) -> tuple[Path, dict]:
     else:
         probs, info, bundle = _eval_bundle(cfg, part)
         n_actions, majority = int(bundle.actions.n), bundle.training.get("majority_action")
-        default_out = Path(cfg.bundle) / f"eval_{cfg.split}"
+        default_out = _bundle_eval_out(Path(cfg.bundle), cfg.split)
     if majority == 0:   # runs from before the baseline excluded unknown: the eval labels' majority
         majority = None
     grouped = cfg.actions is not None and cfg.actions != n_actions

@@ -71,6 +71,7 @@ class Summary:
     view_rows: tuple[int, int] | None = None       # (top, rows) the graph saw (Bundle.rows_seen)
     thresholds: tuple[str, ...] = ()               # the gate thresholds the frames took, in words
     warnings: tuple[str, ...] = ()
+    unsure_seeing: int = 0                         # unsure frames whose model's most probable action is a strip
 
     def lines(self) -> list[str]:
         """Human-readable summary lines."""
@@ -92,11 +93,13 @@ class Summary:
                           f"horizontal field of view of {fovs} deg{seen}")
             if self.thresholds:
                 out.insert(2, f"gate threshold: {', '.join(self.thresholds)}")
-            unsure = self.reasons.get(REASON_UNCERTAIN, 0) / n
-            if portrait and unsure >= SIDEWAYS_UNSURE:   # the phone app's SidewaysHint, for a whole video
-                out.insert(2, f"advice: the model was unsure on {100 * unsure:.0f}% of these portrait frames; "
-                              "with a crossing in view, a phone held sideways (landscape) hears the beacon more "
-                              "often (README, 'What the user hears')")
+            # the phone app's SidewaysHint, for a whole video: unsure frames on which the model places a
+            # crossing somewhere (a video with no crossing in view is unsure too, and held sideways it stays so)
+            unsure = self.unsure_seeing / n
+            if portrait and unsure >= SIDEWAYS_UNSURE:
+                out.insert(2, f"advice: the model was unsure where the crossing is on {100 * unsure:.0f}% of these "
+                              "portrait frames; a phone held sideways (landscape) hears the beacon more often "
+                              "(README, 'What the user hears')")
         if self.failed:
             out.append(f"failed inferences: {self.failed}")
         if self.truth:
@@ -154,6 +157,7 @@ class _Recorder:
         self.gates: Counter = Counter()
         self.reasons: Counter = Counter()
         self.failed = 0
+        self.unsure_seeing = 0
         self.headings: list[float | None] = []
         self.fovs: set[float] = set()
         self.frame_size: tuple[int, int] | None = None
@@ -179,6 +183,7 @@ class _Recorder:
         self.gates[d.gate] += 1
         self.reasons[d.reason] += 1
         self.failed += not step.prediction.ok
+        self.unsure_seeing += d.reason == REASON_UNCERTAIN and step.prediction.ok and step.prediction.action != 0
         self.frame_size = self.frame_size or (frame.shape[1], frame.shape[0])
         if step.prediction.fov_deg is not None:
             self.fovs.add(step.prediction.fov_deg)
@@ -290,4 +295,5 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     return Summary(frames=n, video_s=n / source.fps, wall_s=time.perf_counter() - t0, gates=dict(rec.gates),
                    reasons=dict(rec.reasons), failed=rec.failed, outputs={k: str(v) for k, v in outputs.items()},
                    truth=compare(truth, rec.headings) if truth else None, frame_size=rec.frame_size,
-                   fov_deg=tuple(sorted(rec.fovs)), view_rows=view, thresholds=thresholds, warnings=tuple(warnings))
+                   fov_deg=tuple(sorted(rec.fovs)), view_rows=view, thresholds=thresholds, warnings=tuple(warnings),
+                   unsure_seeing=rec.unsure_seeing)
