@@ -177,3 +177,17 @@ def test_the_cameras_fov_goes_from_frames_to_the_manifest(tmp_path):
     r = subprocess.run([sys.executable, "-m", "crossing_assist.data_tools.cli", "frames", str(video), "--out",
                         str(tmp_path / "bad"), "--fov", "400"], capture_output=True, text=True)
     assert r.returncode != 0 and r.stderr.strip().count("\n") == 0 and "--fov" in r.stderr, r.stderr
+
+
+def test_a_photo_among_the_videos_is_refused_and_the_videos_still_read(tmp_path):
+    """A still given as a video was opened by OpenCV as one frame, sideways (its EXIF orientation
+    ignored): it is refused naming import-ptl; the video beside it still gives its frames."""
+    from crossing_assist.data_tools.images import save_rgb
+
+    photo = tmp_path / "IMG_0001.JPG"
+    save_rgb(photo, np.zeros((24, 32, 3), np.uint8))
+    results, listing = extract_frames(FramesConfig((photo, _video(tmp_path / "v.mp4")), tmp_path / "out",
+                                                   fps=2, progress=False))
+    bad, good = results
+    assert bad.error and "a photo, not a video" in bad.error and "import-ptl" in bad.error and not bad.frames
+    assert good.error is None and len(good.frames) == 6 and listing is not None

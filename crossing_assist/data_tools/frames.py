@@ -30,6 +30,8 @@ from crossing_assist.errors import UserError
 from crossing_assist.video_clock import FrameClock
 
 FRAMES_CSV = "frames.csv"
+#: Photos, not videos: OpenCV would open one as a one-frame video, ignoring its EXIF orientation.
+PHOTO_SUFFIXES = (".jpg", ".jpeg", ".png", ".heic", ".heif", ".webp", ".bmp", ".tif", ".tiff")
 LABEL_STUDIO_TASKS = "label_studio_tasks.json"
 
 
@@ -72,6 +74,9 @@ def extract_video(path: Path, name: str, cfg: FramesConfig) -> VideoResult:
     """Write the frames of one video; errors are returned in the result, not raised."""
     if not Path(path).is_file():
         return VideoResult(path, name, (), error=f"{path}: no such file")
+    if Path(path).suffix.lower() in PHOTO_SUFFIXES:
+        return VideoResult(path, name, (), error=f"{path}: a photo, not a video; crossing-data frames reads videos "
+                                                 "(photos: crossing-data import-ptl, which turns them upright by EXIF)")
     cap = cv2.VideoCapture(str(path))
     if not cap.isOpened():
         return VideoResult(path, name, (), error=f"{path}: cannot open as a video (empty, corrupt or unknown format)")
