@@ -27,6 +27,7 @@ from crossing_assist.fileio import atomic_path
 from crossing_assist.runtime.belief import PROBS_MEASURES
 from crossing_assist.runtime.decide import Decider, DecisionConfig
 from crossing_assist.runtime.engine import Engine, Prediction
+from crossing_assist.runtime.gate import GATE_HOLD
 
 WRONG_STRIPS = 2     # >= this many strips off with the beacon on: confidently wrong
 #: What :meth:`Listener.save` writes besides its ``extra`` arrays.
@@ -63,8 +64,13 @@ def decide_still(preds: Sequence[Prediction], cfg: DecisionConfig, fps: float = 
         d = decider.step(i / fps, p.observation())
     if d is None or d.stop or d.heading_deg is None:
         return Heard(0, False, 0, None, fov)
-    strip = x_to_bin(min(max(heading_to_x(d.heading_deg, fov), 0.0), 1.0 - 1e-9))
-    return Heard(0, True, strip, float(d.heading_deg), fov)
+    return Heard(0, True, heard_strip(d.heading_deg, fov), float(d.heading_deg), fov)
+
+
+def heard_strip(heading_deg: float, fov_deg: float) -> int:
+    """The strip (1..12) a beacon playing ``heading_deg`` points at, for a camera ``fov_deg`` across
+    (beyond the frame: the edge strip)."""
+    return x_to_bin(min(max(heading_to_x(heading_deg, fov_deg), 0.0), 1.0 - 1e-9))
 
 
 def summarise(heard: Iterable[Heard]) -> dict:
@@ -251,7 +257,6 @@ def choose_threshold(curve: Sequence[dict], max_wrong: float = 0.005, min_silenc
     return max(ok, key=lambda c: (c["beacon_on"] or 0, -c["threshold"])) if ok else None
 
 
-
 #: A scan (:func:`scan_yaw`): still for this long first (the belief forms), and the frame rate.
 SCAN_STILL_S = 1.0
 SCAN_FPS = 10.0
@@ -277,16 +282,13 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
     second against the goal in *that* frame: with the goal in view, beacon on and confidently
     wrong, and how many of the wrong frames the heading hold played; with the goal out of view,
     the beacon on and pointing to the side the goal did not leave by."""
-    from crossing_assist.runtime.gate import GATE_HOLD
-
     psi = np.asarray(psi, float)
     rates = np.diff(psi, prepend=psi[0]) * fps if gyro else np.zeros_like(psi)
     start = int(round(SCAN_STILL_S * fps))
     c = dict.fromkeys(("in_view", "on", "wrong", "wrong_hold", "out_of_view", "out_on", "out_wrong_side"), 0)
     for clip, labs in zip(clips, labels):
-        fov = next((p.fov_deg for p in clip if p.ok and p.fov_deg is not None), None)
         first = next((p for p in clip if p.ok), None)
-        decider = Decider(engine.decision_config(getattr(first, "orientation", None) or "landscape", fov))
+        decider = Decider(engine.decision_config((first and first.orientation) or "landscape", first and first.fov_deg))
         fov = decider.cfg.fov_deg
         for j, p in enumerate(clip):
             d = decider.step(j / fps, p.observation(), float(rates[j]))
@@ -296,8 +298,7 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
             if label != UNKNOWN:
                 c["in_view"] += 1
                 c["on"] += int(not d.stop)
-                bad = not d.stop and abs(x_to_bin(min(max(heading_to_x(d.heading_deg, fov), 0.0), 1.0 - 1e-9))
-                                         - label) >= WRONG_STRIPS
+                bad = not d.stop and abs(heard_strip(d.heading_deg, fov) - label) >= WRONG_STRIPS
                 c["wrong"] += int(bad)
                 c["wrong_hold"] += int(bad and d.gate == GATE_HOLD)
             else:
