@@ -3,7 +3,10 @@
 Vote sources
     * CSV with a header ``frame,annotator,label`` (``bin`` is accepted for ``label``): ``frame``
       is the image path relative to the frames folder, or just its file name when that is
-      unique; ``label`` is ``1``..``12`` or ``unknown``.
+      unique; ``label`` is ``1``..``12`` or ``unknown``. A ``0`` is refused (in the manifest
+      0 means unknown, but in people's votes it is a typo or strips numbered 0..11). Files
+      saved by spreadsheets are read as they are: UTF-8 with a byte-order mark, CRLF line
+      ends, semicolon- or tab-separated (the header decides).
     * Label Studio JSON export (``Export -> JSON``): a list of tasks, each with
       ``data.image`` and ``annotations[].result[]`` holding a ``choices`` result (the shipped
       config, :data:`LABEL_STUDIO_CONFIG`, names it ``strip``). The annotator is
@@ -99,31 +102,73 @@ class FrameIndex:
         return self.by_name.get(PurePosixPath(ref).name)
 
 
+_DELIMITERS = (",", ";", "\t")     # comma; semicolon (Excel in comma-decimal locales); tab
+_ZERO_HINT = "write unknown (or leave the frame out) for no crossing; strips are 1..12"
+
+
+def _header_delimiter(first_line: str) -> str:
+    """The delimiter that makes ``first_line`` a votes header (comma when none does)."""
+    for d in _DELIMITERS:
+        names = set(next(csv.reader([first_line], delimiter=d), []))
+        if {"frame", "annotator"} <= names and names & {"label", "bin"}:
+            return d
+    return ","
+
+
+def _is_zero(value: str | None) -> bool:
+    """``"0"``, ``"00"``...: a digit string :func:`parse_label` would read as unknown."""
+    s = (value or "").strip()
+    return bool(s) and set(s) == {"0"}
+
+
+def _is_twelve(value: str | None) -> bool:
+    return (value or "").strip().lstrip("0") == "12"
+
+
 def read_votes_csv(path: Path, index: FrameIndex) -> list[tuple[str, str, int, str]]:
-    """Votes ``(frame, annotator, bin, where)`` from a CSV; VotesError names the bad line."""
+    """Votes ``(frame, annotator, bin, where)`` from a CSV; VotesError names the bad line.
+
+    Accepts what spreadsheets save: a UTF-8 byte-order mark (Excel's "CSV UTF-8"), CRLF line
+    ends, and semicolon- or tab-separated files (the header decides). A label ``0`` is refused,
+    not read as unknown: in people's votes it is a typo or strips numbered 0..11.
+    """
     path = Path(path)
-    with reading_csv(path, VotesError) as state, open(path, newline="", encoding="utf-8") as fh:
-        reader = state["reader"] = csv.DictReader(fh)
+    with open(path, "rb") as fh:
+        if fh.read(2) in (b"\xff\xfe", b"\xfe\xff"):
+            raise VotesError(f"{path}: saved as UTF-16 (Excel 'Unicode Text'); save it as 'CSV UTF-8' instead")
+    with reading_csv(path, VotesError) as state, open(path, newline="", encoding="utf-8-sig") as fh:
+        delimiter = _header_delimiter(fh.readline())
+        fh.seek(0)
+        reader = state["reader"] = csv.DictReader(fh, delimiter=delimiter)
         fields = reader.fieldnames or []
         col = "label" if "label" in fields else "bin" if "bin" in fields else None
         if "frame" not in fields or "annotator" not in fields or col is None:
-            raise VotesError(f"{path} line 1: header must have frame,annotator,label (got {','.join(fields)[:120]!r})")
-        votes = []
-        for rec in reader:
-            where = f"{path} line {reader.line_num}"
-            if None in rec or any(rec[c] is None for c in ("frame", "annotator", col)):
-                raise VotesError(f"{where}: wrong number of fields")
-            frame = index.resolve(rec["frame"])
-            if frame is None:
-                raise VotesError(f"{where}: frame {rec['frame']!r} is not in frames.csv")
-            try:
-                b = parse_label(rec[col])
-            except ValueError:
-                raise VotesError(f"{where}: label {rec[col]!r} invalid; valid: 1..12 or unknown") from None
-            who = rec["annotator"].strip()
-            if not who:
-                raise VotesError(f"{where}: annotator is empty")
-            votes.append((frame, who, b, where))
+            raise VotesError(f"{path} line 1: header must have frame,annotator,label "
+                             f"(got {','.join(fields)[:120]!r})")
+        records = [(reader.line_num, rec) for rec in reader]
+    zeros = sum(_is_zero(rec.get(col)) for _, rec in records)
+    numbering = ""
+    if zeros and not any(_is_twelve(rec.get(col)) for _, rec in records):
+        numbering = (f" (this file has {zeros} label{'s' if zeros > 1 else ''} 0 and none 12: "
+                     "if its strips are numbered 0..11, add 1 to every label)")
+    votes = []
+    for line, rec in records:
+        where = f"{path} line {line}"
+        if None in rec or any(rec[c] is None for c in ("frame", "annotator", col)):
+            raise VotesError(f"{where}: wrong number of fields")
+        frame = index.resolve(rec["frame"])
+        if frame is None:
+            raise VotesError(f"{where}: frame {rec['frame']!r} is not in frames.csv")
+        if _is_zero(rec[col]):
+            raise VotesError(f"{where}: label {short_repr(rec[col].strip(), 40)} refused: {_ZERO_HINT}{numbering}")
+        try:
+            b = parse_label(rec[col])
+        except ValueError:
+            raise VotesError(f"{where}: label {rec[col]!r} invalid; valid: 1..12 or unknown") from None
+        who = rec["annotator"].strip()
+        if not who:
+            raise VotesError(f"{where}: annotator is empty")
+        votes.append((frame, who, b, where))
     return votes
 
 
@@ -201,6 +246,8 @@ def read_label_studio(path: Path, index: FrameIndex, *, image_key: str = "image"
             if len(choices) != 1 or isinstance(choices[0], bool) or not isinstance(choices[0], (str, int)):
                 raise VotesError(f"{where}: annotation {ann.get('id', j)!r} has {len(choices)} choices; "
                                  "expected 1 (a strip 1..12 or unknown)")
+            if _is_zero(str(choices[0])):
+                raise VotesError(f"{where}: choice {str(choices[0])[:40]!r} refused: {_ZERO_HINT}")
             try:
                 b = parse_label(choices[0])
             except ValueError:
