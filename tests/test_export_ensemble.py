@@ -37,7 +37,8 @@ def _run(bundle, frames):
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "crossing_assist.export", "ensemble", *map(str, args), "--quiet"],
+    return subprocess.run([sys.executable, "-m", "crossing_assist.export", "ensemble", *map(str, args), "--quiet",
+                           "--min-calib", "2"],   # toy calibration sets
                           capture_output=True, text=True)
 
 

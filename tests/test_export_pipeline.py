@@ -48,7 +48,7 @@ def work(tmp_path_factory):
                                                   data="tiny", counts={"train": 0}))
     save_checkpoint(root / "run" / "weights" / "best.pt", policy, {"metrics": {"val": {"accuracy": 0.25}}})
     cfg = ExportConfig(run=str(root / "run"), out=str(root / "bundle"), samples=8, calib_data=str(root / "data"),
-                       batch=8, parity_frames=4, progress=False)
+                       batch=8, parity_frames=4, progress=False, min_calib=2)   # 30 toy frames
     result = export_bundle(cfg, log=lambda m: None)
     return root, result
 
@@ -172,7 +172,7 @@ def test_gate_scales_per_orientation(work, tmp_path):
     fitted = read_bundle(root / "bundle").calibration.uncertainty
     assert fitted.portrait_threshold is None and fitted.threshold_for("portrait") == fitted.threshold
     cfg = ExportConfig(run=str(root / "run"), out=str(tmp_path / "b"), samples=8, calib_data=str(root / "data"),
-                       batch=8, parity_frames=4, progress=False, gate_scale=0.5, gate_scale_portrait=1.5)
+                       batch=8, parity_frames=4, progress=False, gate_scale=0.5, gate_scale_portrait=1.5, min_calib=2)
     export_bundle(cfg, log=lambda m: None)
     u = read_bundle(tmp_path / "b").calibration.uncertainty
     assert u.threshold == pytest.approx(0.5 * fitted.threshold, rel=1e-6)
@@ -189,7 +189,7 @@ def test_the_seed_makes_an_export_reproducible(work, tmp_path):
 
     def export(name, seed):
         export_bundle(ExportConfig(run=str(root / "run"), out=str(tmp_path / name), samples=8, seed=seed,
-                                   calib_data=str(root / "data"), batch=8, parity_frames=4, progress=False),
+                                   calib_data=str(root / "data"), batch=8, parity_frames=4, progress=False, min_calib=2),
                       log=lambda m: None)
         b = read_bundle(tmp_path / name)
         return b.calibration, b.metrics["full_split"], b.metrics["cross_fit"]
@@ -208,7 +208,7 @@ def test_mirror_export_writes_the_flag_and_its_graph_is_mirror_equivariant(work,
     mirrored actions' probabilities (here 4 actions: left <-> right)."""
     root, _ = work
     cfg = ExportConfig(run=str(root / "run"), out=str(tmp_path / "m"), samples=1, p=0.0, calib_data=str(root / "data"),
-                       batch=8, parity_frames=4, progress=False, mirror=True)
+                       batch=8, parity_frames=4, progress=False, mirror=True, min_calib=2)
     export_bundle(cfg, log=lambda m: None)
     b = read_bundle(tmp_path / "m")
     assert b.mc.mirror is True and read_bundle(root / "bundle").mc.mirror is False
@@ -250,7 +250,7 @@ def test_cli_user_errors_are_one_line(tmp_path):
 def test_cli_exports_int8_and_reports(work, tmp_path):
     root, _ = work
     proc = _cli("--run", str(root / "run"), "--out", str(tmp_path / "b8"), "--samples", "4",
-                "--calib-data", str(root / "data"), "--int8", "--quiet")
+                "--calib-data", str(root / "data"), "--min-calib", "2", "--int8", "--quiet")
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith(f"bundle written: {tmp_path / 'b8'} (") and "MB" in proc.stdout
     assert "int8 vs fp32" in proc.stderr and "parity" in proc.stderr
@@ -360,7 +360,7 @@ def test_far_mass_export_fits_its_threshold_on_the_graphs_probabilities(work, tm
 
     root, _ = work
     cfg = ExportConfig(run=str(root / "run"), out=str(tmp_path / "b"), samples=8, calib_data=str(root / "data"),
-                       batch=8, parity_frames=4, progress=False, seed=1)
+                       batch=8, parity_frames=4, progress=False, seed=1, min_calib=2)
     export_bundle(dataclasses.replace(cfg, measure="far_mass"), log=lambda m: None)
     u = read_bundle(tmp_path / "b").calibration.uncertainty
     assert u.measure == "far_mass" and 0 < u.threshold < 1 and u.fitted_threshold == pytest.approx(u.threshold)
@@ -423,7 +423,7 @@ def test_the_calibration_log_says_when_its_folds_are_not_held_out_by_source(work
     for data, out in ((root / "data", "several"), (tmp_path / "one", "single")):
         logged = []
         export_bundle(ExportConfig(run=str(root / "run"), out=str(tmp_path / out), samples=8, calib_data=str(data),
-                                   batch=8, parity_frames=4, progress=False), log=logged.append)
+                                   batch=8, parity_frames=4, progress=False, min_calib=2), log=logged.append)
         lines.append(next(m for m in logged if m.startswith("held-out conformal coverage")))
     several, single = lines
     assert "folds by source: vid:" in several

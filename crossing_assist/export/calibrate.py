@@ -19,6 +19,9 @@ threshold fitted on the other folds only, never on its own frames or sources.
   clipped to the 5..95 % range of the observed ``U``; when ``U`` carries no signal (``b >= 0``)
   or the crossing lies outside that range, the clip decides (5 % when the learner is mostly
   wrong, 95 % when mostly right).
+
+A fit that ends on one of these clips did not find what it looks for: :func:`temperature_warning`
+and :func:`gate_warnings` say so in one line each (``crossing-export`` prints them as warnings).
 """
 
 from __future__ import annotations
@@ -105,23 +108,88 @@ def _logistic(u: np.ndarray, y: np.ndarray, iters: int = 50) -> tuple[float, flo
     return float(w[0]), float(w[1])
 
 
-def uncertainty_threshold(uncertainty: np.ndarray, correct: np.ndarray) -> float:
-    """The uncertainty where the fitted P(correct | U) is 0.5, clipped to U's 5..95 % quantiles.
+@dataclass(frozen=True)
+class GateFit:
+    """The gate threshold of :func:`fit_gate` and how it was decided."""
 
-    uncertainty [N] (e.g. entropy in nats), correct [N] bool (argmax == label). Always > 0.
-    """
+    threshold: float
+    clip: str | None    # None: where the fitted P(correct | U) crosses 0.5; "5 %" / "95 %": that quantile of U decided
+    signal: bool        # False: U carried no signal (the fitted P(correct | U) does not fall as U grows)
+    accuracy: float     # of the frames it was fitted on
+
+
+def fit_gate(uncertainty: np.ndarray, correct: np.ndarray) -> GateFit:
+    """:func:`uncertainty_threshold` with whether (and why) a clip decided it."""
     u = np.asarray(uncertainty, dtype=np.float64)
     y = np.asarray(correct, dtype=np.float64)
     if len(u) == 0 or len(u) != len(y):
         raise ValueError(f"uncertainty and correct must be equally long and non-empty ({len(u)}, {len(y)})")
-    lo, hi = np.quantile(u, [0.05, 0.95])
+    lo, hi = (float(q) for q in np.quantile(u, [0.05, 0.95]))
     scale = max(float(u.std()), 1e-12)
     a, b = _logistic((u - u.mean()) / scale, y)
     if b >= 0:
         t = lo if y.mean() < 0.5 else hi
     else:
         t = float(u.mean() + scale * (-a / b))
-    return float(max(min(max(t, lo), hi), 1e-6))
+    clip = "5 %" if t <= lo else "95 %" if t >= hi else None
+    return GateFit(float(max(min(max(t, lo), hi), 1e-6)), clip, b < 0, float(y.mean()))
+
+
+def uncertainty_threshold(uncertainty: np.ndarray, correct: np.ndarray) -> float:
+    """The uncertainty where the fitted P(correct | U) is 0.5, clipped to U's 5..95 % quantiles.
+
+    uncertainty [N] (e.g. entropy in nats), correct [N] bool (argmax == label). Always > 0.
+    """
+    return fit_gate(uncertainty, correct).threshold
+
+
+def measure_max(measure: str, n_actions: int) -> float:
+    """The largest value the gate measure can take with ``n_actions`` actions."""
+    return {"entropy": math.log(n_actions), "mutual_info": math.log(n_actions), "variance": 0.25,
+            "far_mass": 1.0}[measure]
+
+
+def temperature_warning(temperature: float, where: str = "--calib-data") -> str | None:
+    """One line when a fitted temperature ended on a bound of :data:`TEMP_RANGE`, else None."""
+    lo, hi = TEMP_RANGE
+    if math.log(hi) - math.log(temperature) < 1e-3:
+        return (f"temperature {temperature:.3g} is at its upper clip {hi:g}: the fit flattened the model's "
+                f"probabilities as far as it may, the model is confidently wrong on {where} (check the labels, "
+                "the split and that the run was trained for these frames)")
+    if math.log(temperature) - math.log(lo) < 1e-3:
+        return (f"temperature {temperature:.3g} is at its lower clip {lo:g}: the fit sharpened the model's "
+                f"probabilities as far as it may, its logits barely tell the actions apart on {where}")
+    return None
+
+
+def gate_warnings(uncertainty: np.ndarray, fit: GateFit, threshold: float, measure: str, n_actions: int,
+                  where: str = "--calib-data") -> list[str]:
+    """One line for each way the shipped gate ``threshold`` (the fitted one of ``fit``, perhaps
+    scaled) on the ``uncertainty`` [N] of the calibration frames is not a calibrated gate: its
+    fit ended on a clip, it lies at the measure's largest possible value, or no calibration
+    frame is at or above it (the gate speaks on every one)."""
+    u = np.asarray(uncertainty, dtype=np.float64)
+    passed = float((u < threshold).mean())
+    out = []
+    if fit.clip is not None:
+        mostly = "right" if fit.clip == "95 %" else "wrong"
+        if fit.accuracy in (0.0, 1.0):
+            why = f"the model is {'right' if fit.accuracy else 'wrong'} on every one of them"
+        elif not fit.signal:
+            why = f"{measure} does not tell the frames the model gets right from those it gets wrong"
+        else:
+            why = f"the model is {mostly} more than half the time at every {measure} there"
+        out.append(f"the gate threshold fit ended on its clip, the {fit.clip} quantile of {measure} on {where} "
+                   f"({fit.threshold:.4g}): {why}; the gate ({measure} < {threshold:.4g}) passes {passed:.0%} "
+                   f"of those {len(u)} frames")
+    top = measure_max(measure, n_actions)
+    if threshold >= 0.99 * top:
+        out.append(f"the gate threshold {threshold:.4g} is within 1 % of the largest {measure} possible with "
+                   f"{n_actions} actions ({top:.4g}): the gate passes nearly every frame, however unsure the model is")
+    elif passed == 1.0:
+        out.append(f"the gate threshold {threshold:.4g} is above the {measure} of every frame of {where} "
+                   f"(largest {u.max():.4g}): the gate passes all {len(u)} of them")
+    return out
 
 
 def source_folds(sources: list[str] | np.ndarray, k: int = 5) -> list[np.ndarray]:
@@ -205,5 +273,4 @@ class CalibrationResult:
 def uncalibrated(n_actions: int, measure: str = "entropy") -> CalibrationResult:
     """Honest defaults when no labelled data is given: temperature 1, every action in every
     conformal set (threshold 0), gate threshold at half the maximum of the measure."""
-    max_u = {"entropy": math.log(n_actions), "mutual_info": math.log(n_actions), "variance": 0.25, "far_mass": 1.0}[measure]
-    return CalibrationResult(1.0, 0.9, 0.0, 0, measure, max_u / 2)
+    return CalibrationResult(1.0, 0.9, 0.0, 0, measure, measure_max(measure, n_actions) / 2)

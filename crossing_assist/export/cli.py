@@ -3,14 +3,16 @@
 graphs as one (:mod:`crossing_assist.export.ensemble`).
 
 The export parser is generated from :class:`~crossing_assist.export.exporter.ExportConfig`'s
-defaults; user errors print one ``error: ...`` line to stderr and exit 2.
+defaults; user errors print one ``error: ...`` line to stderr and exit 2. Both refuse a
+``--calib-data`` with fewer than ``--min-calib`` (default 50) frames with a crossing, and print a
+``warning: ...`` line for a calibration fit that ended on a clip.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import fields
+from dataclasses import dataclass, fields
 from typing import Sequence
 
 HELP = {
@@ -22,6 +24,8 @@ HELP = {
     "calib_data": "dataset folder (manifest.csv) with labelled frames to calibrate on",
     "calib_split": "split of --calib-data to calibrate on (all of it; held-out coverage by folds of sources)",
     "calib_folds": "folds (whole sources) for the held-out coverage: each measured with a calibration fitted on the others",
+    "min_calib": "fewest --calib-data frames with a crossing to calibrate on; fewer are refused, as they fit the "
+                 "calibration to noise (lower it only for toy runs and tests)",
     "coverage": "target coverage of the conformal action sets",
     "measure": "the gate's uncertainty measure: entropy | mutual_info | far_mass (the probability beyond one strip of the argmax)",
     "gate_scale": "multiply the fitted gate threshold by this (pick it on held-out sources' risk-coverage curve: scripts/choose_gate.py)",
@@ -87,19 +91,42 @@ def ensemble_parser() -> argparse.ArgumentParser:
     for name in ("calib_split", "coverage", "measure", "gate_scale", "gate_scale_portrait", "batch", "seed"):
         kind = {"calib_split": str, "measure": str, "batch": int, "seed": int}.get(name, float)
         p.add_argument("--" + name.replace("_", "-"), type=kind, default=d[name], help=f"{HELP[name]} (default: {d[name]})")
+    min_calib = _ensemble_config_class().min_calib
+    p.add_argument("--min-calib", type=int, default=min_calib, help=f"{HELP['min_calib']} (default: {min_calib})")
     p.add_argument("--quiet", dest="progress", action="store_false", help="no progress bars")
     p.add_argument("--force", action="store_true", help=HELP["force"])
     p.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     return p
 
 
+def _ensemble_config_class() -> type:
+    """EnsembleConfig with ``min_calib``, which the fit it shares with crossing-export reads
+    (:func:`crossing_assist.export.exporter._fit_and_measure`)."""
+    from crossing_assist.export.ensemble import EnsembleConfig
+    from crossing_assist.export.exporter import MIN_CALIB_CROSSINGS, ExportError
+
+    if "min_calib" in {f.name for f in fields(EnsembleConfig)}:
+        return EnsembleConfig
+
+    @dataclass(frozen=True)
+    class EnsembleCliConfig(EnsembleConfig):
+        min_calib: int = MIN_CALIB_CROSSINGS
+
+        def __post_init__(self) -> None:
+            super().__post_init__()
+            if self.min_calib < 1:
+                raise ExportError(f"Invalid --min-calib {self.min_calib}; valid: >= 1")
+
+    return EnsembleCliConfig
+
+
 def _ensemble(argv: list[str]) -> int:
-    from crossing_assist.export.ensemble import EnsembleConfig, ensemble_bundle
+    from crossing_assist.export.ensemble import ensemble_bundle
     from crossing_assist.bundle import read_bundle
 
     args = vars(ensemble_parser().parse_args(argv))
     args.pop("debug")
-    cfg = EnsembleConfig(**{**args, "members": tuple(args["members"])})
+    cfg = _ensemble_config_class()(**{**args, "members": tuple(args["members"])})
     out = read_bundle(ensemble_bundle(cfg, log=lambda m: print(m, file=sys.stderr)))
     u, full = out.calibration.uncertainty, out.metrics["full_split"]
     print(f"ensemble bundle written: {out.dir} ({out.mc.members} members, {out.model_size / 1e6:.1f} MB); "

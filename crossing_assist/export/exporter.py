@@ -57,6 +57,14 @@ if TYPE_CHECKING:  # annotations only: models is imported where it is used (_loa
     from crossing_assist.models.policy import PolicyConfig
 
 PARITY_TOL = 1e-4
+#: Fewest labelled frames with a crossing (action != unknown) that ``--calib-data`` must hold;
+#: fewer are refused unless ``--min-calib`` lowers it. On fewer frames the temperature, the
+#: conformal threshold and the gate threshold are fitted to noise: the gate's 5 and 95 % clips
+#: rest on two or three frames each, the accuracy the gate is fitted against is known only to
+#: about +-7 points at 50 frames (+-18 at 8), and the split-conformal guarantee's slack is
+#: 1/(n + 1). PTL val has 864 frames; a toy set of 8 with a model wrong on all of them gave
+#: temperature 20 (its clip) and a gate threshold of ln 13 (every frame passes).
+MIN_CALIB_CROSSINGS = 50
 #: Gate measures an export fits (variance is per action: no single threshold to fit).
 EXPORT_MEASURES = ("entropy", "mutual_info", "far_mass")
 
@@ -77,6 +85,7 @@ class ExportConfig:
     calib_data: str | None = None   # dataset folder (manifest.csv) with labelled frames
     calib_split: str = "val"
     calib_folds: int = 5            # folds (whole sources) for the held-out coverage measurement
+    min_calib: int = MIN_CALIB_CROSSINGS   # fewest --calib-data frames with a crossing; fewer are refused
     coverage: float = 0.9
     measure: str = "entropy"
     gate_scale: float = 1.0         # multiplies the fitted gate threshold (chosen on held-out sources)
@@ -100,6 +109,7 @@ class ExportConfig:
             (self.p is None or 0.0 <= self.p < 1.0, f"--p {self.p}; valid: 0 <= p < 1"),
             (0.0 < self.coverage < 1.0, f"--coverage {self.coverage}; valid: 0 < coverage < 1"),
             (self.calib_folds >= 2, f"--calib-folds {self.calib_folds}; valid: >= 2"),
+            (self.min_calib >= 1, f"--min-calib {self.min_calib}; valid: >= 1"),
             (0.05 <= self.gate_scale <= 20, f"--gate-scale {self.gate_scale}; valid: 0.05..20"),
             (self.gate_scale_portrait is None or 0.05 <= self.gate_scale_portrait <= 20,
              f"--gate-scale-portrait {self.gate_scale_portrait}; valid: 0.05..20"),
@@ -171,6 +181,16 @@ def load_labelled(data_dir: str, split: str, n_actions: int, progress: bool = Tr
         raise ExportError(f"Invalid --calib-data {data_dir}: split {split!r} has no frame with a crossing label "
                           f"(all {len(actions)} unknown); calibration needs labelled crossings")
     return Labelled(images, actions, ds.far_x(), np.asarray([r.source for r in ds.rows]))
+
+
+def check_calib_size(data_dir: str, split: str, actions: np.ndarray, min_calib: int = MIN_CALIB_CROSSINGS) -> None:
+    """ExportError unless the calibration frames' action labels ``actions`` [N] hold at least
+    ``min_calib`` frames with a crossing (:data:`MIN_CALIB_CROSSINGS`)."""
+    n = int((np.asarray(actions) != 0).sum())
+    if n < min_calib:
+        raise ExportError(f"Invalid --calib-data {data_dir}: split {split!r} has {n} frames with a crossing "
+                          f"(of {len(actions)}); calibrating a gate needs at least {min_calib}, "
+                          "fewer fit it to noise: label more frames or pass --min-calib N to accept fewer")
 
 
 def _batched(images: Sequence[np.ndarray], batch: int):
@@ -300,7 +320,10 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
     """Fit the conformal and gate thresholds on the shipped graph's onnxruntime outputs for
     every labelled frame and record the graph's metrics there (coverage there is in-sample:
     the held-out figure is ``cross_fit``). In memory: the graph with ``meta`` embedded, checked
-    against ``meta`` as a written bundle would be."""
+    against ``meta`` as a written bundle would be. Refuses too few frames with a crossing
+    (:func:`check_calib_size`, ``cfg.min_calib``; a config without one, :data:`MIN_CALIB_CROSSINGS`)
+    and logs a ``warning: ...`` line for a gate fit that ended on a clip (:func:`cal.gate_warnings`)."""
+    check_calib_size(cfg.calib_data, cfg.calib_split, data.actions, getattr(cfg, "min_calib", MIN_CALIB_CROSSINGS))
     set_metadata(model, meta)
     bundle = parse_meta(meta, need_bytes=False)
     sess = inference.session_from_bytes(model_bytes(model), seed=cfg.seed)
@@ -308,7 +331,8 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
     got = inference.predict(sess, bundle.actions.n, data.images, batch=cfg.batch, progress=cfg.progress)
     correct = got["probs"].argmax(1) == data.actions
     u = np.array([far_mass(p) for p in got["probs"]]) if cfg.measure == "far_mass" else got[cfg.measure]
-    fitted = cal.uncertainty_threshold(u, correct)
+    gate = cal.fit_gate(u, correct)
+    fitted = gate.threshold
     calib = cal.CalibrationResult(
         temperature=temperature, coverage=cfg.coverage,
         threshold=cal.conformal_threshold(got["probs"], data.actions, cfg.coverage),
@@ -318,6 +342,8 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
     full = _measure(got, data, calib.threshold, meta["actions"]["n"], majority)
     log(f"{cfg.calib_split} through onnxruntime (T={meta['mc']['samples']}): accuracy {full['accuracy']:.4f} "
         f"on {full['n']} frames")
+    for warning in cal.gate_warnings(u, gate, calib.uncertainty_threshold, cfg.measure, meta["actions"]["n"]):
+        log(f"warning: {warning}")
     return calib, {"full_split": full}
 
 
@@ -334,6 +360,7 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress, geometry, canvas) if cfg.calib_data else None
     calib, metrics, notes = cal.uncalibrated(n, cfg.measure), {}, []
     if data is not None:
+        check_calib_size(cfg.calib_data, cfg.calib_split, data.actions, cfg.min_calib)   # before minutes of work
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(cfg.seed)
             logits = torch_logits(BundleGraph(policy, _spec(policy.config, cfg.samples, p, mirror=cfg.mirror)), data.images,
@@ -350,6 +377,8 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
         temperature = cal.fit_temperature(logits, data.actions)
         log(f"temperature {temperature:.3f} (NLL {cal.nll(logits, data.actions):.4f} -> "
             f"{cal.nll(logits, data.actions, temperature):.4f} on {len(data.actions)} frames)")
+        if warning := cal.temperature_warning(temperature):
+            log(f"warning: {warning}")
     else:
         temperature = 1.0
         notes.append("not calibrated: no --calib-data (temperature 1, every action in every conformal set)")

@@ -242,8 +242,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             print(f"{'scan':>15} ({scan['photos']} photos, each turned 0 -> +{scan['amplitude_deg']:g} -> "
                   f"-{scan['amplitude_deg']:g} -> 0 deg at {scan['rate_dps']:g} deg/s; every frame after the first second)")
             for k, name in (("gyro", "turn given"), ("no_gyro", "no gyroscope")):
-                g, f = scan[k], (lambda x: "n/a" if x is None else f"{x:.3f}")
-                print(f"{'':>15} {name}: beacon on {f(g['beacon_on'])}, confidently wrong {f(g['confidently_wrong'])} "
+                g, f = scan[k], (lambda x, p=".3f": "n/a" if x is None else format(x, p))
+                print(f"{'':>15} {name}: beacon on {f(g['beacon_on'])}, confidently wrong {f(g['confidently_wrong'], '.4f')} "
                       f"of {g['in_view']} frames with the goal in view ({f(g['wrong_by_hold'])} of them from the "
                       f"hold); goal out of view: beacon on {f(g['out_of_view_on'])}")
         if "conformal" in m:
