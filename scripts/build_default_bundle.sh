@@ -38,6 +38,8 @@ if [ "$VIEW_ZOOM" != 1 ]; then GATE_JSON="${GATE_JSON}_zoom$VIEW_ZOOM"; fi
 GATE_JSON="$GATE_JSON.json"
 MAX_INT8_DROP=${MAX_INT8_DROP:-0.01}
 MAX_INT8_SLOWDOWN=${MAX_INT8_SLOWDOWN:-1.10}   # int8 latency / fp32 latency, one frame, this machine
+MIN_CALIB_ARGS=()   # MIN_CALIB=N: crossing-export --min-calib N (toy calibration sets only)
+if [ -n "${MIN_CALIB:-}" ]; then MIN_CALIB_ARGS=(--min-calib "$MIN_CALIB"); fi
 
 if [ ! -f "$RUN/weights/best.pt" ]; then
     echo "error: $RUN/weights/best.pt not found; run scripts/build_default_model.sh first" >&2
@@ -90,7 +92,7 @@ export_run() {
     SRC=""
     for mode in static weights; do
         "$PY" -m crossing_assist.export --run "$run" --out "$dest/$mode" --samples "$SAMPLES" "${MIRROR_ARGS[@]}" \
-            --calib-data "$DATA" --calib-split val --int8 --int8-mode "$mode" --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" \
+            --calib-data "$DATA" --calib-split val "${MIN_CALIB_ARGS[@]}" --int8 --int8-mode "$mode" --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" \
             "${ZOOM_ARGS[@]}" --quiet
         keep=$("$PY" - "$dest/$mode/bundle.json" "$MAX_INT8_DROP" "$MAX_INT8_SLOWDOWN" <<'PYEOF'
 import json, sys
@@ -107,7 +109,7 @@ PYEOF
     done
     echo "shipping fp32" >&2
     "$PY" -m crossing_assist.export --run "$run" --out "$dest/fp32" --samples "$SAMPLES" "${MIRROR_ARGS[@]}" \
-        --calib-data "$DATA" --calib-split val --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" "${ZOOM_ARGS[@]}" --quiet
+        --calib-data "$DATA" --calib-split val "${MIN_CALIB_ARGS[@]}" --gate-scale "$GATE_SCALE" "${PORTRAIT_ARGS[@]}" "${ZOOM_ARGS[@]}" --quiet
     SRC="$dest/fp32"
 }
 export_run "$RUN" "$TMP/m0"
@@ -120,7 +122,7 @@ if [ -n "$MEMBERS" ]; then
         if [ -f "$M/bundle.json" ]; then PARTS+=("$M"); else export_run "$M" "$TMP/m$i"; PARTS+=("$SRC"); fi
         i=$((i + 1))
     done
-    "$PY" -m crossing_assist.export ensemble "${PARTS[@]}" --out "$TMP/ensemble" --calib-data "$DATA" --calib-split val \
+    "$PY" -m crossing_assist.export ensemble "${PARTS[@]}" --out "$TMP/ensemble" --calib-data "$DATA" --calib-split val "${MIN_CALIB_ARGS[@]}" \
         --measure "$GATE_MEASURE" --quiet
     SRC="$TMP/ensemble"
     STAMP_JSON="${STAMP_JSON%.json}_ensemble${#PARTS[@]}.json"

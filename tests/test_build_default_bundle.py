@@ -21,7 +21,7 @@ SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "build_default_bundle
 
 def _build(tmp_path: Path, **env) -> subprocess.CompletedProcess:
     return subprocess.run(["bash", str(SCRIPT)], capture_output=True, text=True,
-                          env={**os.environ, "PY": sys.executable, "TMPDIR": str(tmp_path), **env})
+                          env={**os.environ, "PY": sys.executable, "TMPDIR": str(tmp_path), "MIN_CALIB": "2", **env})
 
 
 def _tiny_run(tmp_path: Path) -> tuple[Path, Path, Path]:

@@ -148,7 +148,7 @@ def export_work(tmp_path_factory):
 
 def _export_args(root: Path, out: Path):
     return [*EXPORT, "--run", str(root / "run"), "--out", str(out), "--samples", "4", "--calib-data",
-            str(root / "data"), "--batch", "8", "--parity-frames", "4", "--threads", "1", "--quiet"]
+            str(root / "data"), "--min-calib", "2", "--batch", "8", "--parity-frames", "4", "--threads", "1", "--quiet"]
 
 
 def _export_facts(folder: Path) -> tuple:

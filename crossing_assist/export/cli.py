@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from typing import Sequence
 
 HELP = {
@@ -88,45 +88,22 @@ def ensemble_parser() -> argparse.ArgumentParser:
     p.add_argument("members", nargs="+", help="the member bundles' folders (at least 2)")
     p.add_argument("--out", required=True, help=HELP["out"])
     p.add_argument("--calib-data", required=True, help=HELP["calib_data"])
-    for name in ("calib_split", "coverage", "measure", "gate_scale", "gate_scale_portrait", "batch", "seed"):
-        kind = {"calib_split": str, "measure": str, "batch": int, "seed": int}.get(name, float)
+    for name in ("calib_split", "min_calib", "coverage", "measure", "gate_scale", "gate_scale_portrait", "batch", "seed"):
+        kind = {"calib_split": str, "measure": str, "min_calib": int, "batch": int, "seed": int}.get(name, float)
         p.add_argument("--" + name.replace("_", "-"), type=kind, default=d[name], help=f"{HELP[name]} (default: {d[name]})")
-    min_calib = _ensemble_config_class().min_calib
-    p.add_argument("--min-calib", type=int, default=min_calib, help=f"{HELP['min_calib']} (default: {min_calib})")
     p.add_argument("--quiet", dest="progress", action="store_false", help="no progress bars")
     p.add_argument("--force", action="store_true", help=HELP["force"])
     p.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     return p
 
 
-def _ensemble_config_class() -> type:
-    """EnsembleConfig with ``min_calib``, which the fit it shares with crossing-export reads
-    (:func:`crossing_assist.export.exporter._fit_and_measure`)."""
-    from crossing_assist.export.ensemble import EnsembleConfig
-    from crossing_assist.export.exporter import MIN_CALIB_CROSSINGS, ExportError
-
-    if "min_calib" in {f.name for f in fields(EnsembleConfig)}:
-        return EnsembleConfig
-
-    @dataclass(frozen=True)
-    class EnsembleCliConfig(EnsembleConfig):
-        min_calib: int = MIN_CALIB_CROSSINGS
-
-        def __post_init__(self) -> None:
-            super().__post_init__()
-            if self.min_calib < 1:
-                raise ExportError(f"Invalid --min-calib {self.min_calib}; valid: >= 1")
-
-    return EnsembleCliConfig
-
-
 def _ensemble(argv: list[str]) -> int:
-    from crossing_assist.export.ensemble import ensemble_bundle
+    from crossing_assist.export.ensemble import EnsembleConfig, ensemble_bundle
     from crossing_assist.bundle import read_bundle
 
     args = vars(ensemble_parser().parse_args(argv))
     args.pop("debug")
-    cfg = _ensemble_config_class()(**{**args, "members": tuple(args["members"])})
+    cfg = EnsembleConfig(**{**args, "members": tuple(args["members"])})
     out = read_bundle(ensemble_bundle(cfg, log=lambda m: print(m, file=sys.stderr)))
     u, full = out.calibration.uncertainty, out.metrics["full_split"]
     print(f"ensemble bundle written: {out.dir} ({out.mc.members} members, {out.model_size / 1e6:.1f} MB); "

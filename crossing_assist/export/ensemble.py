@@ -42,7 +42,13 @@ from crossing_assist.bundle import (
     write_bundle,
 )
 from crossing_assist.export import calibrate as cal
-from crossing_assist.export.exporter import EXPORT_MEASURES, ExportError, _fit_and_measure, load_labelled
+from crossing_assist.export.exporter import (
+    EXPORT_MEASURES,
+    MIN_CALIB_CROSSINGS,
+    ExportError,
+    _fit_and_measure,
+    load_labelled,
+)
 from crossing_assist.export.graph import model_bytes, set_metadata
 
 #: The bundle.json fields the members must share: the graph's input, what its outputs mean, and
@@ -66,8 +72,11 @@ class EnsembleConfig:
     seed: int = 0
     progress: bool = True
     force: bool = False
+    min_calib: int = MIN_CALIB_CROSSINGS
 
     def __post_init__(self) -> None:
+        if self.min_calib < 1:
+            raise ExportError(f"Invalid --min-calib {self.min_calib}; valid: >= 1")
         if len(self.members) < 2:
             raise ExportError(f"Invalid members: {len(self.members)} bundle(s); an ensemble needs at least 2")
         if self.measure not in EXPORT_MEASURES:

@@ -321,9 +321,9 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
     every labelled frame and record the graph's metrics there (coverage there is in-sample:
     the held-out figure is ``cross_fit``). In memory: the graph with ``meta`` embedded, checked
     against ``meta`` as a written bundle would be. Refuses too few frames with a crossing
-    (:func:`check_calib_size`, ``cfg.min_calib``; a config without one, :data:`MIN_CALIB_CROSSINGS`)
+    (:func:`check_calib_size`, ``cfg.min_calib``)
     and logs a ``warning: ...`` line for a gate fit that ended on a clip (:func:`cal.gate_warnings`)."""
-    check_calib_size(cfg.calib_data, cfg.calib_split, data.actions, getattr(cfg, "min_calib", MIN_CALIB_CROSSINGS))
+    check_calib_size(cfg.calib_data, cfg.calib_split, data.actions, cfg.min_calib)
     set_metadata(model, meta)
     bundle = parse_meta(meta, need_bytes=False)
     sess = inference.session_from_bytes(model_bytes(model), seed=cfg.seed)
