@@ -675,9 +675,13 @@ def test_an_upright_phone_unsure_for_a_while_is_told_to_hold_it_sideways(portrai
     t_said = portrait["result"]["sideways"]["t_spoken"]
     said = next(e for e in trace if e["kind"] == "speech" and e["t"] == t_said)
     assert said["text"] == STATUS_STOP["sideways"]
-    t = next(e["t"] for e in trace if e["kind"] == "vibrate" and e["reason"] == "sideways")
+    i = next(k for k, e in enumerate(trace) if e["kind"] == "vibrate" and e["reason"] == "sideways")
+    t = trace[i]["t"]
     assert t <= t_said
-    frames = [e for e in trace if e["kind"] == "frame" and e["fresh"] and e["t"] <= t]
+    # the frame whose decision gave the advice: the next frame entry (each frame's feedback is
+    # recorded just before it); frames captured before t may be decided after it
+    j = next(k for k in range(i + 1, len(trace)) if trace[k]["kind"] == "frame")
+    frames = [e for e in trace[:j + 1] if e["kind"] == "frame" and e["fresh"]]
     assert frames[-1]["decision"]["stop"] and frames[-1]["decision"]["reason"] == "uncertain"
     since = frames[-1]["t"]  # the unbroken "not sure" stop before the advice
     for f in reversed(frames):

@@ -643,6 +643,13 @@ test('an upright phone unsure for a while is told to hold it sideways, once in a
   quick.update(0, true, true);
   assert.equal(quick.update(1, true, true), 'sideways');
   assert.match(statusMessage({ stop: true, reason: 'sideways' })[0], /sideways/);
+  // unsure because nothing in view is a crossing (the model's argmax unknown): no such advice
+  const none = new SidewaysHint();
+  for (let t = 0; t <= 2 * after; t += 0.5) assert.equal(none.update(t, true, true, t < 1), null);
+  const mostly = new SidewaysHint(); // a crossing placed on most frames, unknown on some: told
+  let said = null;
+  for (let t = 0; t <= after; t += 0.5) said = mostly.update(t, true, true, t % 2 !== 0.5);
+  assert.equal(said, 'sideways');
 });
 
 test('the helper view names an ensemble bundle by its members', () => {

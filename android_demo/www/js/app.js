@@ -140,10 +140,11 @@ function announce([text, cls], t = now()) {
 
 /** What a decision means for the user beyond the beacon: the sentence (hysteresis) and the vibration.
  * A stop for "not sure" while the phone points far down or up says which way to tilt it instead;
- * one that has lasted a while with the phone upright says to hold it sideways (live.js). */
-function feedback(t, d) {
+ * one that has lasted a while with the phone upright, the model placing a crossing on most of its
+ * frames (`seeing`), says to hold it sideways (live.js). */
+function feedback(t, d, seeing = true) {
   const unsure = d.stop && d.reason === REASON_UNCERTAIN;
-  const sideways = app.sideways?.update(t, unsure, app.orientation === 'portrait');
+  const sideways = app.sideways?.update(t, unsure, app.orientation === 'portrait', seeing);
   const advice = unsure ? (app.tilt?.reason(t) || sideways) : null;
   if (advice) d = { ...d, reason: advice };
   const msg = app.policy.step(t, d);
@@ -310,7 +311,10 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   if (!app.audioFailed) {
     app.audio.render(fresh ? cueFor(d) : STOP_CUE);
     // a frame the camera gave but the model answered too late for: the phone is too slow
-    feedback(now(), !fresh ? { ...d, stop: true, reason: 'slow', heading_deg: null } : tooRolled ? { ...d, reason: 'rolled' } : d);
+    // the model placed a crossing somewhere on this frame (not unsure because nothing is one)
+    const seeing = obs.ok && obs.probs.indexOf(Math.max(...obs.probs)) !== 0;
+    feedback(now(), !fresh ? { ...d, stop: true, reason: 'slow', heading_deg: null } : tooRolled ? { ...d, reason: 'rolled' } : d,
+      seeing);
   }
   app.frameId = (app.frameId || 0) + 1; // unique over restarts (seq restarts with the camera)
   record({ kind: 'frame', id: app.frameId, t: captured, grabbed, decided, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, obs, decision: d,

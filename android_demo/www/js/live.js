@@ -243,27 +243,38 @@ export class TiltSilence {
  * 0.5 % confidently wrong (README, "What the user hears"): sideways, the model is sure twice as
  * often. After `after_s` of one unbroken "not sure" stop in portrait the reason becomes
  * 'sideways' until the stop ends or the phone is turned; at most once every `every_s`, so a user
- * who keeps it upright on purpose is not told again and again.
+ * who keeps it upright on purpose is not told again and again. Only when the model placed a
+ * crossing somewhere (`seeing`: its most probable action a strip) on at least half of that stop's
+ * frames: unsure because nothing in view is a crossing, held sideways it stays so (crossing-demo's
+ * summary gives the same advice by the same rule).
  */
-export const SIDEWAYS = Object.freeze({ after_s: 5.0, every_s: 120.0 });
+export const SIDEWAYS = Object.freeze({ after_s: 5.0, every_s: 120.0, seeing_share: 0.5 });
 
 export class SidewaysHint {
   constructor(cfg = SIDEWAYS) {
     this.cfg = { ...SIDEWAYS, ...cfg };
     this.since = null; // start of the current "not sure" stop in portrait
+    this.frames = 0; // that stop's frames, and those on which the model placed a crossing
+    this.seeing = 0;
     this.active = false;
     this.lastHint = -Infinity;
   }
 
-  /** A decision at time t (s): `unsure` (a "not sure" stop), `portrait`; returns 'sideways' or null. */
-  update(t, unsure, portrait) {
+  /** A decision at time t (s): `unsure` (a "not sure" stop), `portrait`, `seeing` (the frame's most
+   * probable action is a strip; default true); returns 'sideways' or null. */
+  update(t, unsure, portrait, seeing = true) {
     if (!unsure || !portrait) {
       this.since = null;
+      this.frames = 0;
+      this.seeing = 0;
       this.active = false;
       return null;
     }
     if (this.since === null) this.since = t;
-    if (!this.active && t - this.since >= this.cfg.after_s && t - this.lastHint >= this.cfg.every_s) {
+    this.frames += 1;
+    this.seeing += seeing ? 1 : 0;
+    if (!this.active && t - this.since >= this.cfg.after_s && t - this.lastHint >= this.cfg.every_s
+        && this.seeing >= this.cfg.seeing_share * this.frames) {
       this.active = true;
       this.lastHint = t;
     }
