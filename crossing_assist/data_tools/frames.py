@@ -3,10 +3,11 @@
 For each video, frame ``k`` is the first decoded frame at or after ``k / fps`` seconds
 (timestamps from the frame index and the video's own frame rate). Frames are written as
 ``OUT/<video>/<video>_t<seconds>.jpg`` (``corner03_t0012.500.jpg``: sorts by time) and listed
-in ``OUT/frames.csv`` (``image,source,video,t_s``, and ``fov_deg`` when the camera's FOV is given)
-with source ``vid:<video>``, the leakage unit for splits; ``crossing-data votes`` carries the FOV
-into the manifest as an ``fov=DEG`` flag, which ``crossing-eval`` plays the frames at. A video that cannot be opened or yields no frame is reported and skipped;
-the others are still processed. ``OUT/label_studio_tasks.json`` lists the same frames as
+in ``OUT/frames.csv`` (``image,source,video,t_s``, and ``fov_deg`` when the camera's FOV is
+given) with source ``vid:<video>``, the leakage unit for splits; ``crossing-data votes`` carries
+the FOV into the manifest as an ``fov=DEG`` flag, which ``crossing-eval`` plays the frames at. A
+video that cannot be opened or yields no frame is reported and skipped; the others are still
+processed; a photo given as a video is refused. ``OUT/label_studio_tasks.json`` lists the same frames as
 Label Studio tasks served from local files (``/data/local-files/?d=<OUT name>/<image>``: set
 ``LABEL_STUDIO_LOCAL_FILES_DOCUMENT_ROOT`` to OUT's parent folder). A video that ends before its header's frame count
 (truncated) keeps the frames decoded so far and gets a warning.
@@ -30,9 +31,9 @@ from crossing_assist.errors import UserError
 from crossing_assist.video_clock import FrameClock
 
 FRAMES_CSV = "frames.csv"
+LABEL_STUDIO_TASKS = "label_studio_tasks.json"
 #: Photos, not videos: OpenCV would open one as a one-frame video, ignoring its EXIF orientation.
 PHOTO_SUFFIXES = (".jpg", ".jpeg", ".png", ".heic", ".heif", ".webp", ".bmp", ".tif", ".tiff")
-LABEL_STUDIO_TASKS = "label_studio_tasks.json"
 
 
 class VideoError(UserError):

@@ -213,7 +213,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         cfg = EvalConfig(run=a.run, bundle=a.bundle, data=a.data, split=a.split, out=a.out, samples=a.samples,
                          examples=a.examples, tta_mirror=a.tta_mirror, actions=a.actions, listen=a.listen,
                          portrait=a.portrait, negatives=a.negatives, clip_seconds=a.clip_seconds,
-                         fov_deg=a.fov, scan_dps=a.scan, seed=a.seed, threads=a.threads, cache_dir=a.cache_dir, progress=not a.quiet)
+                         fov_deg=a.fov, scan_dps=a.scan, seed=a.seed, threads=a.threads, cache_dir=a.cache_dir,
+                         progress=not a.quiet)
         out, m = evaluate(cfg)
         print(f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f}), "
               f"bin MAE {m['bin_mae']:.3f} -> {out / 'metrics.json'}")
