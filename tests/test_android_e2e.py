@@ -517,7 +517,7 @@ def test_freshness_is_judged_by_the_frame_s_own_capture_time(run: dict) -> None:
 def test_the_camera_lost_instruction_is_heard_whole(run: dict) -> None:
     """The camera track ends and the video stalls: the sentence saying how to recover is spoken
     whole (the driver's fake voice: 60 ms a character), not cut by the watchdog's stop sentence
-    half a second later, which follows it instead."""
+    half a second later, which follows it if it comes at all."""
     c = run["result"]["camera_lost"]
     st = c["state"]
     offset = st["now_s"] - st["t"]  # the page clock minus the app's
@@ -526,8 +526,10 @@ def test_the_camera_lost_instruction_is_heard_whole(run: dict) -> None:
     assert dogs and dogs[0]["t"] - c["t"] <= WATCHDOG_S + 0.25, dogs
     lost = [h for h in c["heard"] if h["text"] == st["error"] and h["start"] >= c["t"] + offset - 0.01]
     assert len(lost) == 1 and lost[0]["how"] == "whole", c["heard"]
+    # the watchdog's stop sentence, when it comes (it races the track's end, which ends guidance:
+    # 3 runs in 9 here heard none), follows the instruction and never cuts it
     stalled = [h for h in c["heard"] if h["text"] == STATUS_STOP["stale"] and h["start"] >= c["t"] + offset]
-    assert stalled and stalled[0]["start"] >= lost[0]["end"] - 0.01, c["heard"]
+    assert all(h["start"] >= lost[0]["end"] - 0.01 for h in stalled), c["heard"]
 
 
 def test_background_pauses_and_wake_lock_is_requested_again(run: dict) -> None:
