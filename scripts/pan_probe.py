@@ -37,35 +37,25 @@ import numpy as np
 from crossing_assist.bundle import BundleError
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest
-from crossing_assist.fileio import atomic_path, atomic_write_text
+from crossing_assist.fileio import atomic_write_text
 from crossing_assist.models.evaluate import scan_clips
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
-from crossing_assist.runtime.engine import Engine, Prediction
-from crossing_assist.runtime.listen import SCAN_FPS, judge_scans, scan_yaw
+from crossing_assist.runtime.engine import Engine
+from crossing_assist.runtime.listen import SCAN_FPS, Listener, judge_scans, scan_yaw
 
 
-def play(engine: Engine, images, rows, psi: np.ndarray) -> dict[str, np.ndarray]:
-    """Each photo scanned: the model's outputs and the goal's strip per frame, as arrays."""
-    n, f, a = len(rows), len(psi), engine.space.n
-    z = {"probs": np.full((n, f, a), np.nan), "uncertainty": np.full((n, f), np.inf), "ok": np.zeros((n, f), bool),
-         "labels": np.zeros((n, f), np.int64), "fov_deg": np.full((n, f), np.nan), "psi": psi}
+def play(engine: Engine, images, rows, psi: np.ndarray) -> tuple[Listener, np.ndarray]:
+    """Each photo scanned: its predictions (a :class:`Listener`'s clips, which it saves and loads)
+    and the goal's strip per frame [photo, frame]."""
+    lis, labels = Listener(engine, len(psi) / SCAN_FPS, SCAN_FPS), []
     for i, (r, img) in enumerate(zip(rows, images)):
-        preds, z["labels"][i] = scan_clips(engine, img, r.far_x, r.label, psi)
-        for j, p in enumerate(preds):
-            if p.ok:
-                z["probs"][i, j], z["uncertainty"][i, j], z["ok"][i, j], z["fov_deg"][i, j] = \
-                    p.probs, p.uncertainty, True, p.fov_deg
-        print(f"\r{i + 1}/{n} photos scanned", end="", file=sys.stderr, flush=True)
+        preds, labs = scan_clips(engine, img, r.far_x, r.label, psi)
+        lis.clips.append(preds)
+        lis.labels.append(r.label)
+        labels.append(labs)
+        print(f"\r{i + 1}/{len(rows)} photos scanned", end="", file=sys.stderr, flush=True)
     print(file=sys.stderr)
-    return z
-
-
-def clips(z: dict[str, np.ndarray]) -> list[list[Prediction]]:
-    """The cached arrays as the engine's predictions (what the decision logic reads of them)."""
-    return [[Prediction(ok=True, probs=z["probs"][i, j], uncertainty=float(z["uncertainty"][i, j]),
-                        action=int(np.argmax(z["probs"][i, j])), fov_deg=float(z["fov_deg"][i, j]))
-             if z["ok"][i, j] else Prediction(ok=False, error="failed when scanned")
-             for j in range(z["probs"].shape[1])] for i in range(z["probs"].shape[0])]
+    return lis, np.asarray(labels, np.int64)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -90,8 +80,8 @@ def main(argv: list[str] | None = None) -> int:
         if a.cache is None or not a.cache.is_file():
             print(f"error: --replay needs the --cache file a play wrote ({a.cache} not found)", file=sys.stderr)
             return 1
-        with np.load(a.cache) as f:
-            z = {k: f[k] for k in f.files}
+        lis, extra = Listener.load(engine, a.cache)
+        labels, psi = extra["scan_labels"], extra["psi"]
     else:
         if not (a.data / "manifest.csv").is_file():
             print(f"error: no manifest at {a.data / 'manifest.csv'} (scripts/prepare_default_data.sh writes runs/data/ptl)",
@@ -104,15 +94,14 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         rng = np.random.default_rng(a.seed)
         rows = [rows[i] for i in sorted(rng.choice(len(rows), min(a.photos, len(rows)), replace=False))]
-        z = play(engine, [load_frame(ds.image_path(r), r.flags) for r in rows], rows, scan_yaw(a.amplitude, a.rate))
+        psi = scan_yaw(a.amplitude, a.rate)
+        lis, labels = play(engine, [load_frame(ds.image_path(r), r.flags) for r in rows], rows, psi)
         if a.cache:
             a.cache.parent.mkdir(parents=True, exist_ok=True)
-            with atomic_path(a.cache) as tmp:
-                np.savez_compressed(tmp, **z)
-    played = clips(z)
-    res = {"bundle": str(a.bundle), "photos": len(played), "frames_per_scan": int(len(z["psi"])),
-           "amplitude_deg": float(np.abs(z["psi"]).max()), "rate_dps": float(np.abs(np.diff(z["psi"])).max() * SCAN_FPS),
-           **{k: judge_scans(engine, played, z["labels"], z["psi"], gyro=k == "gyro") for k in ("gyro", "no_gyro")}}
+            lis.save(a.cache, scan_labels=labels, psi=psi)
+    res = {"bundle": str(a.bundle), "photos": len(lis.clips), "frames_per_scan": int(len(psi)),
+           "amplitude_deg": float(np.abs(psi).max()), "rate_dps": float(np.abs(np.diff(psi)).max() * SCAN_FPS),
+           **{k: judge_scans(engine, lis.clips, labels, psi, gyro=k == "gyro") for k in ("gyro", "no_gyro")}}
     print("| scan | goal-in-view frames | beacon on | confidently wrong | of them by the hold | "
           "goal out of view: on | wrong side |\n|---|---|---|---|---|---|---|")
     pct = lambda v: "–" if v is None else f"{100 * v:.1f} %"  # noqa: E731

@@ -47,6 +47,7 @@ from crossing_assist.export.exporter import (
     MIN_CALIB_CROSSINGS,
     ExportError,
     _fit_and_measure,
+    check_calib_size,
     load_labelled,
 )
 from crossing_assist.export.graph import model_bytes, set_metadata
@@ -189,6 +190,7 @@ def ensemble_bundle(cfg: EnsembleConfig, log: Callable[[str], None] = print) -> 
                           "members": [m.get("provenance", {}) for m in metas]}
     n = bundles[0].actions.n
     data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress, bundles[0].geometry, bundles[0].input.size)
+    check_calib_size(cfg.calib_data, cfg.calib_split, data.actions, cfg.min_calib)
     meta["calibration"] = cal.CalibrationResult(1.0, cfg.coverage, 0.0, 0, cfg.measure, 1.0).spec().to_json()
     calib, metrics = _fit_and_measure(model, meta, data, cfg, 1.0, None, log)
     meta["calibration"] = calib.spec().to_json()

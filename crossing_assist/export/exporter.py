@@ -320,10 +320,9 @@ def _fit_and_measure(model: Any, meta: dict, data: Labelled, cfg: ExportConfig, 
     """Fit the conformal and gate thresholds on the shipped graph's onnxruntime outputs for
     every labelled frame and record the graph's metrics there (coverage there is in-sample:
     the held-out figure is ``cross_fit``). In memory: the graph with ``meta`` embedded, checked
-    against ``meta`` as a written bundle would be. Refuses too few frames with a crossing
-    (:func:`check_calib_size`, ``cfg.min_calib``)
-    and logs a ``warning: ...`` line for a gate fit that ended on a clip (:func:`cal.gate_warnings`)."""
-    check_calib_size(cfg.calib_data, cfg.calib_split, data.actions, cfg.min_calib)
+    against ``meta`` as a written bundle would be. Logs a ``warning: ...`` line for a gate fit that
+    ended on a clip (:func:`cal.gate_warnings`). The callers refuse too few frames with a crossing
+    first (:func:`check_calib_size`), before any model work."""
     set_metadata(model, meta)
     bundle = parse_meta(meta, need_bytes=False)
     sess = inference.session_from_bytes(model_bytes(model), seed=cfg.seed)
@@ -360,7 +359,7 @@ def export_bundle(cfg: ExportConfig, log: Callable[[str], None] = print) -> Expo
     data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress, geometry, canvas) if cfg.calib_data else None
     calib, metrics, notes = cal.uncalibrated(n, cfg.measure), {}, []
     if data is not None:
-        check_calib_size(cfg.calib_data, cfg.calib_split, data.actions, cfg.min_calib)   # before minutes of work
+        check_calib_size(cfg.calib_data, cfg.calib_split, data.actions, cfg.min_calib)
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(cfg.seed)
             logits = torch_logits(BundleGraph(policy, _spec(policy.config, cfg.samples, p, mirror=cfg.mirror)), data.images,

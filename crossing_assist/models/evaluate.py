@@ -205,23 +205,16 @@ def _views(cfg: EvalConfig, rows: list, geometry) -> dict[str, list[tuple[np.nda
     return views
 
 
-#: Photos are scanned at this width at most (a phone camera's stream, as CameraSource scales it).
-SCAN_WIDTH = 640
-
-
 def scan_clips(engine, image: np.ndarray, far_x: float | None, label: int, psi: np.ndarray,
                fov_deg: float | None = None) -> tuple[list, np.ndarray]:
-    """One photo seen by a camera turned ``psi[j]`` degrees at each frame
-    (:func:`~crossing_assist.data_tools.augment.yaw`: the scene beyond the photo black, the goal
-    moved, ``unknown`` once it leaves the view), through ``engine``: the predictions and the
-    goal's strip per frame. ``fov_deg``: the photo's camera (None: the bundle's for its size)."""
-    import cv2
-
+    """One photo (scaled to a camera stream's width) seen by a camera turned ``psi[j]`` degrees at
+    each frame (:func:`~crossing_assist.data_tools.augment.yaw`: the scene beyond the photo black,
+    the goal moved, ``unknown`` once it leaves the view), through ``engine``: the predictions and
+    the goal's strip per frame. ``fov_deg``: the photo's camera (None: the bundle's for its size)."""
     from ..data_tools.augment import yaw
+    from ..runtime.sources import CAMERA_WIDTH, scale_to_width
 
-    h, w = image.shape[:2]
-    if w > SCAN_WIDTH:
-        image = cv2.resize(image, (SCAN_WIDTH, max(1, round(h * SCAN_WIDTH / w))), interpolation=cv2.INTER_AREA)
+    image = scale_to_width(image, CAMERA_WIDTH)
     fov = engine.camera_fov(image.shape[1], image.shape[0], fov_deg)
     preds, labels = [], []
     for p in psi:

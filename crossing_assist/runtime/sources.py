@@ -18,6 +18,9 @@ import numpy as np
 from crossing_assist.errors import UserError
 from crossing_assist.video_clock import FrameClock
 
+#: Widest frame a live camera's stream is scaled to (the app's grab does the same).
+CAMERA_WIDTH = 640
+
 
 class SourceError(UserError, RuntimeError):
     """A video or camera that cannot be opened; one line naming it."""
@@ -61,7 +64,7 @@ class CameraSource:
     behind a slow model a frame 4 camera periods old (0.8 s at 5 fps in low light) was stamped
     now and counted fresh. Frames the loop had no time for are dropped, never queued."""
 
-    def __init__(self, index: int, *, max_width: int | None = 640) -> None:
+    def __init__(self, index: int, *, max_width: int | None = CAMERA_WIDTH) -> None:
         self._cap = cv2.VideoCapture(int(index))
         if not self._cap.isOpened():
             raise SourceError(f"camera {index} cannot be opened; check the index (0 is usually the first camera)")
@@ -110,10 +113,15 @@ class CameraSource:
             reader.join(timeout=2.0)
 
 
+def scale_to_width(image: np.ndarray, max_width: int | None) -> np.ndarray:
+    """``image`` scaled down to ``max_width`` columns when wider (None: as it is), as a camera's
+    stream gives it: the app's arithmetic (camera.js grab), halves rounding up as Math.round does
+    (Python's round() gave 1280 x 721 360 rows where the app gives 361)."""
+    if max_width and image.shape[1] > max_width:
+        h = max(1, math.floor(image.shape[0] * (max_width / image.shape[1]) + 0.5))
+        image = cv2.resize(image, (max_width, h), interpolation=cv2.INTER_AREA)
+    return image
+
+
 def _to_rgb(bgr: np.ndarray, max_width: int | None) -> np.ndarray:
-    if max_width and bgr.shape[1] > max_width:
-        # the app's arithmetic (camera.js grab): halves round up, as Math.round does (Python's
-        # round() gave 1280 x 721 360 rows where the app gives 361)
-        h = max(1, math.floor(bgr.shape[0] * (max_width / bgr.shape[1]) + 0.5))
-        bgr = cv2.resize(bgr, (max_width, h), interpolation=cv2.INTER_AREA)
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    return cv2.cvtColor(scale_to_width(bgr, max_width), cv2.COLOR_BGR2RGB)

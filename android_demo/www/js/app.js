@@ -60,7 +60,7 @@ import { cameraFov, defaultFovText, FovError, frameView, gateKind, gateThreshold
 import { Haptics } from './haptics.js';
 import { isFresh, NO_TILT_TEXT, sameFrame, SidewaysHint, TiltSilence, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator,
   yawRateFromRotation } from './live.js';
-import { configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN } from './logic.js';
+import { argmax, configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN } from './logic.js';
 import { fetchBundle, openBest } from './model.js';
 import { loadSettings, saveSettings, urlOverrides } from './settings.js';
 import { Speaker, SpeechPolicy } from './speech.js';
@@ -312,7 +312,7 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
     app.audio.render(fresh ? cueFor(d) : STOP_CUE);
     // a frame the camera gave but the model answered too late for: the phone is too slow
     // the model placed a crossing somewhere on this frame (not unsure because nothing is one)
-    const seeing = obs.ok && obs.probs.indexOf(Math.max(...obs.probs)) !== 0;
+    const seeing = obs.ok && argmax(obs.probs) !== 0;
     feedback(now(), !fresh ? { ...d, stop: true, reason: 'slow', heading_deg: null } : tooRolled ? { ...d, reason: 'rolled' } : d,
       seeing);
   }

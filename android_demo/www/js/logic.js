@@ -155,7 +155,8 @@ export function beliefUncertainty(b, groups, measure) {
   return (Object.hasOwn(PROBS_MEASURES, measure) ? PROBS_MEASURES[measure] : entropy)(binProbsToActionProbs(b, groups));
 }
 
-function argmax(values) {
+/** Index of the largest value (first on ties), as numpy's argmax. */
+export function argmax(values) {
   let best = 0;
   for (let i = 1; i < values.length; i += 1) if (values[i] > values[best]) best = i;
   return best;
