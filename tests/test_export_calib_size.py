@@ -10,6 +10,7 @@ import sys
 import numpy as np
 import pytest
 import torch
+from export_toy import tiny_policy
 from runtime_toy import bar_dataset, make_toy_bundle
 
 from crossing_assist.bundle import read_bundle
@@ -25,10 +26,7 @@ from crossing_assist.export.exporter import (
     export_bundle,
 )
 from crossing_assist.export.graph import BundleGraph
-from crossing_assist.models.backbones import create_backbone
 from crossing_assist.models.checkpoint import save_checkpoint
-from crossing_assist.models.heads import create_head
-from crossing_assist.models.policy import Policy, policy_config
 
 N_ACTIONS = 13   # one action a strip: action k is bin k
 
@@ -43,14 +41,7 @@ def wrong8(tmp_path_factory):
     """A tiny run and 8 frames all labelled with the strip the model likes least (never its argmax):
     the model is confidently wrong on every one, as in the audit."""
     root = tmp_path_factory.mktemp("calib_size")
-    torch.manual_seed(0)
-    backbone = create_backbone("squeezenet1_1", weights="none")
-    head = create_head("spatial", backbone.num_features, N_ACTIONS, p=0.5)
-    with torch.no_grad():
-        for prm in head.parameters():
-            prm.mul_(8.0)  # spread the logits: random-init squeezenet features are small
-    policy = Policy(backbone, head, policy_config(backbone, "spatial", N_ACTIONS, input_size=(32, 32), data="tiny",
-                                                  counts={"train": 0}))
+    policy = tiny_policy(N_ACTIONS)
     save_checkpoint(root / "run" / "weights" / "best.pt", policy, {"metrics": {}})
     rng = np.random.default_rng(0)
     images = [rng.integers(0, 256, (40, 48, 3), dtype=np.uint8) for _ in range(8)]

@@ -9,7 +9,8 @@ import sys
 
 import numpy as np
 import pytest
-import torch
+
+from export_toy import tiny_policy
 
 from crossing_assist.bundle import BundleError, embedded_meta, read_bundle
 from crossing_assist.data_tools.images import load_frame, save_rgb
@@ -17,10 +18,7 @@ from crossing_assist.data_tools.manifest import Row, write_manifest
 from crossing_assist.conformal import bundle_conformal_report
 from crossing_assist.inference import open_session, predict, predict_bundle
 from crossing_assist.export.exporter import ExportConfig, ExportError, export_bundle
-from crossing_assist.models.backbones import create_backbone
 from crossing_assist.models.checkpoint import save_checkpoint
-from crossing_assist.models.heads import create_head
-from crossing_assist.models.policy import Policy, policy_config
 
 N_ACTIONS = 4
 
@@ -38,14 +36,7 @@ def work(tmp_path_factory):
         rows.append(Row(image=f"f{i}.png", label=label, far_x=(label - 0.5) / 12, source=f"vid:{i % 3}",
                         split="val", votes={}, flags=()))
     write_manifest(root / "data", rows)
-    torch.manual_seed(0)
-    backbone = create_backbone("squeezenet1_1", weights="none")
-    head = create_head("spatial", backbone.num_features, N_ACTIONS, p=0.5)
-    with torch.no_grad():
-        for prm in head.parameters():
-            prm.mul_(8.0)  # spread the logits: random-init squeezenet features are small
-    policy = Policy(backbone, head, policy_config(backbone, "spatial", N_ACTIONS, input_size=(32, 32),
-                                                  data="tiny", counts={"train": 0}))
+    policy = tiny_policy(N_ACTIONS)
     save_checkpoint(root / "run" / "weights" / "best.pt", policy, {"metrics": {"val": {"accuracy": 0.25}}})
     cfg = ExportConfig(run=str(root / "run"), out=str(root / "bundle"), samples=8, calib_data=str(root / "data"),
                        batch=8, parity_frames=4, progress=False, min_calib=2)   # 30 toy frames
