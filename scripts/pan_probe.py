@@ -6,12 +6,13 @@ degrees, left to ``-A`` and back to straight ahead at ``R`` degrees per second (
 ``--rate``), every frame re-rendered as that turned camera would see it
 (``crossing_assist.models.evaluate.scan_clips``: the unseen part black, the goal moved and
 relabelled, ``unknown`` once it leaves the view), 10 fps, through the bundle's engine and the
-runtime's decision logic (``runtime.listen.judge_scans``), twice:
+runtime's decision logic (``runtime.listen.judge_scans``), three times:
 
-- ``gyro``: the decision logic told the turn (the app's opt-in gyroscope, the Python live loop's
-  yaw input);
-- ``no gyro``: told nothing (the app's default): the filter's and the hold's headings stay where
-  they were while the view moves.
+- ``gyro``: the decision logic told the turn (the app's opt-in gyroscope);
+- ``camera``: told the turn read from the frames (``runtime.visual_yaw``: the app's and the
+  Python pipeline's default without a gyroscope);
+- ``no yaw``: told nothing (``crossing-demo --no-visual-yaw``, the app with both off): the
+  filter's and the hold's headings stay where they were while the view moves.
 
 Each frame of the scan (after the still second) is judged against the goal's strip in *that*
 frame: with the goal in view, beacon on and confidently wrong (on and >= 2 strips off), and how
@@ -41,21 +42,22 @@ from crossing_assist.fileio import atomic_write_text
 from crossing_assist.models.evaluate import scan_clips
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
 from crossing_assist.runtime.engine import Engine
-from crossing_assist.runtime.listen import SCAN_FPS, Listener, judge_scans, scan_yaw
+from crossing_assist.runtime.listen import SCAN_FPS, SCAN_YAW_INPUTS, Listener, judge_scans, scan_yaw
 
 
-def play(engine: Engine, images, rows, psi: np.ndarray) -> tuple[Listener, np.ndarray]:
-    """Each photo scanned: its predictions (a :class:`Listener`'s clips, which it saves and loads)
-    and the goal's strip per frame [photo, frame]."""
-    lis, labels = Listener(engine, len(psi) / SCAN_FPS, SCAN_FPS), []
+def play(engine: Engine, images, rows, psi: np.ndarray) -> tuple[Listener, np.ndarray, np.ndarray]:
+    """Each photo scanned: its predictions (a :class:`Listener`'s clips, which it saves and loads),
+    the goal's strip and the yaw rate read from the frames, per frame [photo, frame]."""
+    lis, labels, rates = Listener(engine, len(psi) / SCAN_FPS, SCAN_FPS), [], []
     for i, (r, img) in enumerate(zip(rows, images)):
-        preds, labs = scan_clips(engine, img, r.far_x, r.label, psi)
+        preds, labs, seen = scan_clips(engine, img, r.far_x, r.label, psi)
         lis.clips.append(preds)
         lis.labels.append(r.label)
         labels.append(labs)
+        rates.append(seen)
         print(f"\r{i + 1}/{len(rows)} photos scanned", end="", file=sys.stderr, flush=True)
     print(file=sys.stderr)
-    return lis, np.asarray(labels, np.int64)
+    return lis, np.asarray(labels, np.int64), np.asarray(rates, float)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -81,7 +83,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: --replay needs the --cache file a play wrote ({a.cache} not found)", file=sys.stderr)
             return 1
         lis, extra = Listener.load(engine, a.cache)
-        labels, psi = extra["scan_labels"], extra["psi"]
+        if "camera_rates" not in extra:
+            print(f"error: {a.cache} was written before scans kept the turn read from the frames; play again",
+                  file=sys.stderr)
+            return 1
+        labels, psi, rates = extra["scan_labels"], extra["psi"], extra["camera_rates"]
     else:
         if not (a.data / "manifest.csv").is_file():
             print(f"error: no manifest at {a.data / 'manifest.csv'} (scripts/prepare_default_data.sh writes runs/data/ptl)",
@@ -95,17 +101,17 @@ def main(argv: list[str] | None = None) -> int:
         rng = np.random.default_rng(a.seed)
         rows = [rows[i] for i in sorted(rng.choice(len(rows), min(a.photos, len(rows)), replace=False))]
         psi = scan_yaw(a.amplitude, a.rate)
-        lis, labels = play(engine, [load_frame(ds.image_path(r), r.flags) for r in rows], rows, psi)
+        lis, labels, rates = play(engine, [load_frame(ds.image_path(r), r.flags) for r in rows], rows, psi)
         if a.cache:
             a.cache.parent.mkdir(parents=True, exist_ok=True)
-            lis.save(a.cache, scan_labels=labels, psi=psi)
+            lis.save(a.cache, scan_labels=labels, psi=psi, camera_rates=rates)
     res = {"bundle": str(a.bundle), "photos": len(lis.clips), "frames_per_scan": int(len(psi)),
            "amplitude_deg": float(np.abs(psi).max()), "rate_dps": float(np.abs(np.diff(psi)).max() * SCAN_FPS),
-           **{k: judge_scans(engine, lis.clips, labels, psi, gyro=k == "gyro") for k in ("gyro", "no_gyro")}}
+           **judge_scans(engine, lis.clips, labels, psi, rates)}
     print("| scan | goal-in-view frames | beacon on | confidently wrong | of them by the hold | "
           "goal out of view: on | wrong side |\n|---|---|---|---|---|---|---|")
     pct = lambda v: "–" if v is None else f"{100 * v:.1f} %"  # noqa: E731
-    for name in ("gyro", "no_gyro"):
+    for name in SCAN_YAW_INPUTS:
         g = res[name]
         print(f"| {name.replace('_', ' ')} | {g['in_view']} | {pct(g['beacon_on'])} | {pct(g['confidently_wrong'])} | "
               f"{pct(g['wrong_by_hold'])} | {pct(g['out_of_view_on'])} | {pct(g['out_of_view_wrong_side'])} |")

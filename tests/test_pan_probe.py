@@ -1,4 +1,5 @@
-"""scripts/pan_probe.py: photos played as a scanning phone sees them, with and without a gyroscope."""
+"""scripts/pan_probe.py: photos played as a scanning phone sees them: the turn from a gyroscope,
+read from the frames, or not told."""
 
 import json
 import sys
@@ -22,8 +23,8 @@ def test_scan_goes_still_right_left_and_back():
 
 def test_scans_replay_from_the_cache(tmp_path, toy_bundle):  # noqa: F811
     """The toy places bars; a scan moves each bar across the view (and out of it, relabelled
-    unknown), played with and without the turn given to the decision logic. Replaying the cache
-    decides as the play did. (Step 4b itself: tests/test_runtime_decide.py and the vectors.)"""
+    unknown), played with the turn told by a gyroscope, read from the frames and not told.
+    Replaying the cache decides as the play did. (Step 4b itself: tests/test_runtime_decide.py and the vectors.)"""
     data = bar_dataset(tmp_path / "data", n=6)
     cache, out, again = tmp_path / "c.npz", tmp_path / "a.json", tmp_path / "b.json"
     args = ["--bundle", str(toy_bundle), "--data", str(data), "--photos", "6", "--amplitude", "30"]
@@ -32,14 +33,18 @@ def test_scans_replay_from_the_cache(tmp_path, toy_bundle):  # noqa: F811
     res = json.loads(out.read_text())
     assert res == json.loads(again.read_text())
     assert res["photos"] == 6 and res["amplitude_deg"] >= 27 and res["rate_dps"] == 30
-    for name in ("gyro", "no_gyro"):
-        g = res[name]
-        assert g["in_view"] > 0 and g["out_of_view"] > 0 and g["beacon_on"] >= 0.9   # the toy places bars
-    # the same frames: a decision told the turn stops pointing once the bar left the view
-    assert res["gyro"]["out_of_view_on"] < res["no_gyro"]["out_of_view_on"]
+    for name in ("gyro", "camera", "no_yaw"):
+        assert res[name]["in_view"] > 0 and res[name]["out_of_view"] > 0 and res[name]["confidently_wrong"] == 0
+    assert res["gyro"]["beacon_on"] >= 0.9   # the toy places bars
+    # the same frames: a decision told the turn, by a gyroscope or by the frames, stops pointing
+    # once the bar left the view
+    assert res["gyro"]["out_of_view_on"] < res["no_yaw"]["out_of_view_on"]
+    assert res["camera"]["out_of_view_on"] < res["no_yaw"]["out_of_view_on"]
     with np.load(cache) as z:
-        labels = z["scan_labels"]   # a Listener file: its clips and the goal per frame
+        labels, rates = z["scan_labels"], z["camera_rates"]   # a Listener file: its clips, goal and turn per frame
     assert len(set(labels[0].tolist())) > 2   # the bar moved across strips as the camera turned
+    turning = np.abs(np.diff(pp.scan_yaw(30.0, 30.0))) > 0
+    assert np.median(np.abs(rates[:, 1:][:, turning])) > 15   # read from the frames: ~30 deg/s while turning
 
 
 def test_replay_without_a_cache_is_one_line(tmp_path, toy_bundle, capsys):  # noqa: F811

@@ -412,9 +412,9 @@ def test_crossing_eval_scan_judges_every_frame_of_a_turning_camera(tmp_path, toy
     assert r.returncode == 0, r.stderr
     scan = json.loads((out / "metrics.json").read_text())["listen"]["scan"]
     assert scan["photos"] == 4 and scan["rate_dps"] == 30 and scan["frames"] == len(scan_yaw(20, 30)) == 39
-    for k in ("gyro", "no_gyro"):
+    for k in ("gyro", "camera", "no_yaw"):
         assert scan[k]["in_view"] > 0 and scan[k]["beacon_on"] >= 0.9 and scan[k]["confidently_wrong"] <= 0.05
-    assert "scan (4 photos" in r.stdout and "no gyroscope: beacon on" in r.stdout
+    assert "scan (4 photos" in r.stdout and "turn read from the frames: beacon on" in r.stdout
     r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(toy_bundle),
                         "--data", str(data), "--split", "val", "--scan", "-1", "--out", str(out)],
                        capture_output=True, text=True)
@@ -437,7 +437,7 @@ def test_judge_scans_counts_each_frame_against_the_goal_in_that_frame(toy_bundle
     pred = Prediction(ok=True, probs=p, uncertainty=0.0, action=9, fov_deg=67.0, orientation="landscape")
     labels = np.asarray([[9] * 10 + [9] * 5 + [3] * 5 + [0] * 5])
     psi = np.asarray([0.0] * 10 + [5.0] * 15)
-    g = judge_scans(engine, [[pred] * 25], labels, psi, gyro=False)
+    g = judge_scans(engine, [[pred] * 25], labels, psi, np.zeros((1, 25)))["no_yaw"]
     assert (g["in_view"], g["on"], g["wrong"], g["wrong_hold"]) == (10, 10, 5, 0)
     assert (g["out_of_view"], g["out_on"], g["out_wrong_side"]) == (5, 5, 5)
     assert g["confidently_wrong"] == 0.5 and g["out_of_view_wrong_side"] == 1.0

@@ -188,8 +188,8 @@ def eval_parser() -> argparse.ArgumentParser:
                         "frame's orientation); such frames are not cut into portrait views")
     p.add_argument("--scan", type=float, default=0.0, metavar="DEG_PER_S",
                    help="bundles: also play each photo as a user scanning for the crossing, the camera turned "
-                        "0 -> +20 -> -20 -> 0 deg at this rate (e.g. 30), with and without the turn given to the "
-                        "decision logic (a gyroscope; the phone app's default has none); judged per frame")
+                        "0 -> +20 -> -20 -> 0 deg at this rate (e.g. 30), the turn told to the decision logic by a "
+                        "gyroscope, read from the frames (the default without one) and not at all; judged per frame")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the MC-dropout masks (onnxruntime for bundles, torch for --samples > 1): "
                         "the same seed gives the same figures")
@@ -240,9 +240,11 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                           f"{e['median']:.1f} deg, mean {e['mean']:.1f} deg, p90 {e['p90']:.1f} deg")
         scan = m.get("listen", {}).get("scan")
         if scan:
+            from ..runtime.listen import SCAN_YAW_INPUTS
+
             print(f"{'scan':>15} ({scan['photos']} photos, each turned 0 -> +{scan['amplitude_deg']:g} -> "
                   f"-{scan['amplitude_deg']:g} -> 0 deg at {scan['rate_dps']:g} deg/s; every frame after the first second)")
-            for k, name in (("gyro", "turn given"), ("no_gyro", "no gyroscope")):
+            for k, name in SCAN_YAW_INPUTS.items():
                 g, f = scan[k], (lambda x, p=".3f": "n/a" if x is None else format(x, p))
                 print(f"{'':>15} {name}: beacon on {f(g['beacon_on'])}, confidently wrong {f(g['confidently_wrong'], '.4f')} "
                       f"of {g['in_view']} frames with the goal in view ({f(g['wrong_by_hold'])} of them from the "

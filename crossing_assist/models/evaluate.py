@@ -206,44 +206,50 @@ def _views(cfg: EvalConfig, rows: list, geometry) -> dict[str, list[tuple[np.nda
 
 
 def scan_clips(engine, image: np.ndarray, far_x: float | None, label: int, psi: np.ndarray,
-               fov_deg: float | None = None) -> tuple[list, np.ndarray]:
+               fov_deg: float | None = None) -> tuple[list, np.ndarray, np.ndarray]:
     """One photo (scaled to a camera stream's width) seen by a camera turned ``psi[j]`` degrees at
     each frame (:func:`~crossing_assist.data_tools.augment.yaw`: the scene beyond the photo black,
-    the goal moved, ``unknown`` once it leaves the view), through ``engine``: the predictions and
-    the goal's strip per frame. ``fov_deg``: the photo's camera (None: the bundle's for its size)."""
+    the goal moved, ``unknown`` once it leaves the view), through ``engine``: the predictions, the
+    goal's strip per frame and the yaw rate read from the frames at the scan's frame rate
+    (:class:`~crossing_assist.runtime.visual_yaw.VisualYaw`, as the pipeline reads it without a
+    gyroscope). ``fov_deg``: the photo's camera (None: the bundle's for its size)."""
     from ..data_tools.augment import yaw
+    from ..runtime.listen import SCAN_FPS
     from ..runtime.sources import CAMERA_WIDTH, scale_to_width
+    from ..runtime.visual_yaw import VisualYaw
 
     image = scale_to_width(image, CAMERA_WIDTH)
     fov = engine.camera_fov(image.shape[1], image.shape[0], fov_deg)
-    preds, labels = [], []
-    for p in psi:
+    seen, preds, labels, rates = VisualYaw(), [], [], []
+    for j, p in enumerate(psi):
         view, _, lab, _ = yaw(image, far_x, label, float(p), fov)
         preds.append(engine.predict(view, fov))
         labels.append(lab)
-    return preds, np.asarray(labels, np.int64)
+        rates.append(seen.update(view, j / SCAN_FPS, fov))
+    return preds, np.asarray(labels, np.int64), np.asarray(rates, float)
 
 
 def _listen_scans(cfg: EvalConfig, engine, part: Dataset) -> dict:
     """The split's photos with a measured goal, each played as a scan (:func:`scan_clips`,
-    :func:`~crossing_assist.runtime.listen.scan_yaw`) told the turn (``gyro``) and not
-    (``no_gyro``, the app's default): :func:`~crossing_assist.runtime.listen.judge_scans`."""
+    :func:`~crossing_assist.runtime.listen.scan_yaw`) and judged per way the turn reaches the
+    decision logic (:func:`~crossing_assist.runtime.listen.judge_scans`)."""
     from tqdm import tqdm
 
     from ..runtime.listen import judge_scans, scan_yaw
 
     psi = scan_yaw(cfg.scan_deg, cfg.scan_dps)
-    clips, labels = [], []
+    clips, labels, rates = [], [], []
     for r in tqdm([r for r in part.rows if r.far_x is not None and r.label != 0], desc="listen scans",
                   disable=not cfg.progress, unit="photo"):
-        preds, labs = scan_clips(engine, load_frame(part.image_path(r), r.flags), r.far_x, r.label, psi,
-                                 _fov(cfg, part, r))
+        preds, labs, seen = scan_clips(engine, load_frame(part.image_path(r), r.flags), r.far_x, r.label, psi,
+                                       _fov(cfg, part, r))
         clips.append(preds)
         labels.append(labs)
+        rates.append(seen)
     if not clips:
         return {}
     return {"rate_dps": cfg.scan_dps, "amplitude_deg": cfg.scan_deg, "photos": len(clips), "frames": len(psi),
-            **{k: judge_scans(engine, clips, np.asarray(labels), psi, gyro=k == "gyro") for k in ("gyro", "no_gyro")}}
+            **judge_scans(engine, clips, np.asarray(labels), psi, np.asarray(rates))}
 
 
 def _negative_rows(cfg: EvalConfig) -> list:

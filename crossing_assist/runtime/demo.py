@@ -47,6 +47,7 @@ class DemoConfig:
     max_seconds: float | None
     watchdog_s: float
     fov_deg: float | None = None
+    visual_yaw: bool = True
 
 
 def parse_args(argv: list[str] | None) -> DemoConfig:
@@ -66,6 +67,9 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
                          "(default: the bundle's, per orientation: typical phone 67 landscape, 53 portrait)")
     ap.add_argument("--watchdog", type=float, default=DEFAULT_WATCHDOG_S, help="seconds without a fresh decision "
                     f"before the beacon stops (default {DEFAULT_WATCHDOG_S}; 0 < w <= {MAX_WATCHDOG_S})")
+    ap.add_argument("--no-visual-yaw", action="store_true",
+                    help="do not follow the camera's turns read from the frames (without a gyroscope, the "
+                         "direction then stays where it was while the phone turns)")
     ap.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     a = ap.parse_args(argv)
     if a.video is not None and a.camera is not None:
@@ -104,7 +108,8 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
     return DemoConfig(video=video, camera=a.camera, bundle=bundle, out_dir=a.out, live=a.live,
                       annotate=not a.no_video, progress=not a.quiet,
                       audio_device=int(dev) if dev is not None and dev.isdigit() else dev,
-                      max_seconds=a.max_seconds, watchdog_s=a.watchdog, fov_deg=a.fov)
+                      max_seconds=a.max_seconds, watchdog_s=a.watchdog, fov_deg=a.fov,
+                      visual_yaw=not a.no_visual_yaw)
 
 
 def run_live_demo(cfg: DemoConfig) -> None:
@@ -115,7 +120,7 @@ def run_live_demo(cfg: DemoConfig) -> None:
     from crossing_assist.runtime.pipeline import open_pipeline, trace_record
     from crossing_assist.runtime.sources import CameraSource, VideoSource
 
-    pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s)
+    pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, visual_yaw=cfg.visual_yaw)
     player = CuePlayer(pipeline.beacon_cfg)
     source = CameraSource(cfg.camera) if cfg.camera is not None else VideoSource(cfg.video)
     cfg.out_dir.mkdir(parents=True, exist_ok=True)
@@ -142,7 +147,7 @@ def run(cfg: DemoConfig) -> None:
 
     summary = run_offline(OfflineConfig(video=cfg.video, bundle=cfg.bundle, out_dir=cfg.out_dir,
                                         annotate=cfg.annotate, progress=cfg.progress, fov_deg=cfg.fov_deg,
-                                        watchdog_s=cfg.watchdog_s))
+                                        watchdog_s=cfg.watchdog_s, visual_yaw=cfg.visual_yaw))
     for warning in summary.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"crossing-demo: {cfg.video} with bundle {cfg.bundle}")

@@ -274,24 +274,38 @@ def scan_yaw(amplitude_deg: float = 20.0, rate_dps: float = 30.0, fps: float = S
     return np.concatenate([np.zeros(int(round(SCAN_STILL_S * fps))), *legs, [0.0]])
 
 
+#: How a scan's turn reaches the decision logic (:func:`judge_scans`): told by a gyroscope (the
+#: app's opt-in one), read from the frames (:mod:`~crossing_assist.runtime.visual_yaw`, the app's
+#: and the Python pipeline's default without one), or not at all.
+SCAN_YAW_INPUTS = {"gyro": "turn from a gyroscope", "camera": "turn read from the frames", "no_yaw": "no turn input"}
+
+
 def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
-                psi: np.ndarray, *, gyro: bool, fps: float = SCAN_FPS) -> dict:
+                psi: np.ndarray, camera_rates: np.ndarray, fps: float = SCAN_FPS) -> dict:
     """Replay the decision logic over scanned clips (``clips[i][j]``: photo ``i`` seen with the
-    camera turned ``psi[j]`` degrees; ``labels[i, j]`` its goal's strip then, 0 once out of view),
-    told the turn (``gyro``) or not (the app's default), and judge every frame after the still
-    second against the goal in *that* frame: with the goal in view, beacon on and confidently
-    wrong, and how many of the wrong frames the heading hold played; with the goal out of view,
-    the beacon on and pointing to the side the goal did not leave by."""
+    camera turned ``psi[j]`` degrees; ``labels[i, j]`` its goal's strip then, 0 once out of view)
+    once per :data:`SCAN_YAW_INPUTS`: told the turn, told the rates ``camera_rates[i, j]`` read from
+    the frames, told nothing. Every frame after the still second is judged against the goal in
+    *that* frame: with the goal in view, beacon on and confidently wrong, and how many of the
+    wrong frames the heading hold played; with the goal out of view, the beacon on and pointing
+    to the side the goal did not leave by."""
     psi = np.asarray(psi, float)
-    rates = np.diff(psi, prepend=psi[0]) * fps if gyro else np.zeros_like(psi)
+    gyro = np.diff(psi, prepend=psi[0]) * fps
+    rates = {"gyro": np.broadcast_to(gyro, (len(clips), len(psi))), "camera": np.asarray(camera_rates, float),
+             "no_yaw": np.zeros((len(clips), len(psi)))}
+    return {k: _judge_scan_input(engine, clips, labels, psi, rates[k], fps) for k in SCAN_YAW_INPUTS}
+
+
+def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
+                      psi: np.ndarray, rates: np.ndarray, fps: float) -> dict:
     start = int(round(SCAN_STILL_S * fps))
     c = dict.fromkeys(("in_view", "on", "wrong", "wrong_hold", "out_of_view", "out_on", "out_wrong_side"), 0)
-    for clip, labs in zip(clips, labels):
+    for clip, labs, clip_rates in zip(clips, labels, rates):
         first = next((p for p in clip if p.ok), None)
         decider = Decider(engine.decision_config((first and first.orientation) or "landscape", first and first.fov_deg))
         fov = decider.cfg.fov_deg
         for j, p in enumerate(clip):
-            d = decider.step(j / fps, p.observation(), float(rates[j]))
+            d = decider.step(j / fps, p.observation(), float(clip_rates[j]))
             if j < start:
                 continue
             label = int(labs[j])

@@ -52,6 +52,7 @@ class OfflineConfig:
     beacon: BeaconConfig = field(default_factory=BeaconConfig)
     fov_deg: float | None = None     # the camera's horizontal FOV; None = the bundle's per orientation
     watchdog_s: float = DEFAULT_WATCHDOG_S   # seconds without a fresh frame before the stop (a video that dies)
+    visual_yaw: bool = True          # follow the camera's turns read from the frames (runtime.visual_yaw)
 
 
 @dataclass(frozen=True)
@@ -255,7 +256,7 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     from crossing_assist.runtime.sources import SourceError, VideoSource
 
     pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, beacon=cfg.beacon,
-                             engine=engine)
+                             engine=engine, visual_yaw=cfg.visual_yaw)
     engine = pipeline.engine
     source = VideoSource(cfg.video, max_width=cfg.max_width)
     rec = _Recorder(cfg, engine, source.fps)

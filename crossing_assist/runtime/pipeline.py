@@ -17,6 +17,7 @@ import numpy as np
 from crossing_assist.runtime.beacon import BeaconConfig, Cue, cue_for, render_cue
 from crossing_assist.runtime.decide import Decider, Decision, DecisionConfig
 from crossing_assist.runtime.engine import Engine, Prediction
+from crossing_assist.runtime.visual_yaw import VisualYaw
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
 
 
@@ -50,20 +51,26 @@ class Pipeline:
     changes (the phone turned between portrait and landscape) the belief starts afresh, since old
     strips no longer mean the same directions. A frame whose FOV cannot be known (a refused
     size) makes the next one with a FOV start afresh too. ``decision_cfg``'s other fields
-    (watchdog, filter, gate, pulse rates) are kept."""
+    (watchdog, filter, gate, pulse rates) are kept.
+
+    Turns: a yaw rate given with a frame (a gyroscope) is the decision logic's; without one the
+    turn since the last frame is read from the frames themselves (:class:`VisualYaw`), unless
+    ``visual_yaw`` is False (then none: the belief and the hold stay put while the view moves)."""
 
     def __init__(self, engine: Engine, decision_cfg: DecisionConfig | None = None,
-                 beacon_cfg: BeaconConfig | None = None) -> None:
+                 beacon_cfg: BeaconConfig | None = None, *, visual_yaw: bool = True) -> None:
         self.engine = engine
         self.decider = Decider(decision_cfg or engine.decision_config())
         self.beacon_cfg = beacon_cfg or BeaconConfig()
+        self.visual_yaw = VisualYaw() if visual_yaw else None
         self._fov_lost = False   # a frame's FOV could not be known: the next known one starts afresh
 
-    def step(self, frame_rgb: np.ndarray | None, t: float, yaw_rate_dps: float = 0.0,
+    def step(self, frame_rgb: np.ndarray | None, t: float, yaw_rate_dps: float | None = None,
              roll_deg: float | None = None) -> Step:
-        """Process a frame taken at ``t`` seconds (None = no new frame, a watchdog tick); ``roll_deg``:
-        the camera's roll when it was taken, from an orientation sensor (None: none; the frame is
-        used as it is, :meth:`Engine.predict`)."""
+        """Process a frame taken at ``t`` seconds (None = no new frame, a watchdog tick); ``yaw_rate_dps``:
+        the turn rate from a gyroscope (None: read from the frames, or none, see the class);
+        ``roll_deg``: the camera's roll when it was taken, from an orientation sensor (None: none;
+        the frame is used as it is, :meth:`Engine.predict`)."""
         pred = (self.engine.predict(frame_rgb, roll_deg=roll_deg) if frame_rgb is not None
                 else Prediction(ok=False, error="no frame"))
         obs = pred.observation() if frame_rgb is not None else None
@@ -75,19 +82,27 @@ class Pipeline:
                 self._fov_lost = False
         elif frame_rgb is not None:
             self._fov_lost = True
+        if yaw_rate_dps is None:
+            seen = self.visual_yaw.update(frame_rgb, t, pred.fov_deg) if self.visual_yaw else 0.0
+            yaw_rate_dps = seen if frame_rgb is not None else 0.0
+        elif self.visual_yaw:
+            self.visual_yaw.reset()     # the gyroscope's turn; a later frame without one starts afresh
         decision = self.decider.step(t, obs, yaw_rate_dps)
         cue = cue_for(decision)
         return Step(pred, decision, cue, cached_loop(cue, self.beacon_cfg))
 
 
 def open_pipeline(bundle: str | os.PathLike, *, fov_deg: float | None = None, watchdog_s: float = DEFAULT_WATCHDOG_S,
-                  beacon: BeaconConfig | None = None, engine: Engine | None = None) -> Pipeline:
+                  beacon: BeaconConfig | None = None, engine: Engine | None = None,
+                  visual_yaw: bool = True) -> Pipeline:
     """The demo's pipeline for ``bundle``: its :class:`Engine` (``fov_deg``: the camera's
     horizontal FOV, None = the bundle's per orientation; or the given ``engine``), the bundle's
-    decision config with ``watchdog_s`` as the stale-frame period, and ``beacon`` (default
-    :class:`BeaconConfig`). The live and the offline demo both build theirs here."""
+    decision config with ``watchdog_s`` as the stale-frame period, ``beacon`` (default
+    :class:`BeaconConfig`) and turns read from the frames unless ``visual_yaw`` is False. The
+    live and the offline demo both build theirs here."""
     engine = engine or Engine(bundle, fov_deg=fov_deg)
-    return Pipeline(engine, engine.decision_config(watchdog_s=watchdog_s), beacon or BeaconConfig())
+    return Pipeline(engine, engine.decision_config(watchdog_s=watchdog_s), beacon or BeaconConfig(),
+                    visual_yaw=visual_yaw)
 
 
 def trace_record(i: int, step: Step) -> dict:

@@ -1,0 +1,137 @@
+"""The camera's turn between two frames, read from the frames themselves (no gyroscope).
+
+A user looking for the crossing sweeps the phone; without a yaw input the decision logic's
+belief and heading hold stay where the goal was while the view moves (``scripts/pan_probe.py``).
+A turn about the vertical axis slides the whole picture sideways, so the turn between two
+consecutive frames is the horizontal shift that best lines up their thumbnails:
+
+1. each frame becomes a grey thumbnail :data:`THUMB_WIDTH` pixels wide (area mean; its height
+   keeps the frame's aspect), less its mean (an exposure change is not a turn);
+2. the middle of the new thumbnail (all but a quarter of its width at each side, and ``DY``
+   rows) is compared with the old one shifted by every whole pixel ``dx`` up to a quarter of the
+   width either way and ``dy`` up to ``DY`` (a step's bob): the mean absolute difference, each
+   less its own mean; the best ``dx`` is refined to a fraction of a pixel by the V through its
+   neighbours' scores (an absolute difference's shape near its minimum: a parabola there is off
+   by a tenth of a pixel, a tenth of a slow turn);
+3. the shift is trusted only when the scene has texture (sd >= :data:`MIN_TEXTURE` in the middle
+   compared and in the old thumbnail), the best score is clearly a match (<= :data:`MAX_MATCH` of
+   the median score of all shifts: two unrelated pictures score alike at every shift) and the best
+   ``dx`` is inside the range searched: a blank wall, a passing bus, a person walking by, a frame
+   swap or a brightness jump gives *no turn* (0), never a guess; a shift under
+   :data:`MIN_SHIFT` is a still camera (a still scene's neighbours never score quite alike: left
+   alone, that reads as a slow steady turn, ~1 deg/s at 30 frames a second);
+4. ``dx`` pixels are ``atan(dx / f)`` degrees, ``f`` the thumbnail's focal length in pixels
+   for the camera's horizontal FOV; the picture moving left (content at ``x`` came from
+   ``x + dx``, ``dx > 0``) is a turn to the right (+), the decision logic's sign.
+
+The app has the same estimator (``android_demo/www/js/visualyaw.js``); ``shift_between`` of
+both is pinned by the shared test vectors. numpy only (this is the runtime).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+THUMB_WIDTH = 64       # thumbnail width in pixels
+DY = 2                 # vertical shifts searched either way (pixels of the thumbnail)
+MIN_TEXTURE = 2.0      # thumbnail standard deviation (0..255 grey) below which a frame cannot show a turn
+MAX_MATCH = 0.5        # the best shift must score at most this fraction of the median shift's score
+MIN_SHIFT = 0.05       # a shift under this (thumbnail pixels) is a still camera (its picture's own asymmetry)
+MAX_TURN_DPS = 360.0   # a turn faster than this between two frames is not believed (a swap, a cut)
+
+
+def thumbnail(frame_rgb: np.ndarray, width: int = THUMB_WIDTH) -> np.ndarray:
+    """Grey (mean of R, G, B) area-mean thumbnail, ``width`` wide, its height from the frame's
+    aspect (at least 8): cell ``(i, j)`` averages rows ``floor(i H / h) .. floor((i+1) H / h)`` and
+    the columns alike, float64 0..255 (whole-number sums, one division: a port gets the same values)."""
+    f = np.asarray(frame_rgb)
+    if f.ndim != 3 or f.shape[2] < 3 or min(f.shape[:2]) < 2:
+        raise ValueError(f"expected an H x W x 3 frame, got shape {f.shape}")
+    h_in, w_in = f.shape[:2]
+    w = min(width, w_in)
+    h = min(h_in, max(8, int(round(w * h_in / w_in))))
+    grey = f[..., :3].astype(np.int64).sum(axis=2)   # R + G + B: whole numbers, exact sums
+    ii = np.zeros((h_in + 1, w_in + 1), np.int64)
+    ii[1:, 1:] = grey.cumsum(0).cumsum(1)
+    ys = (np.arange(h + 1) * h_in) // h
+    xs = (np.arange(w + 1) * w_in) // w
+    box = ii[ys[1:, None], xs[None, 1:]] - ii[ys[:-1, None], xs[None, 1:]] \
+        - ii[ys[1:, None], xs[None, :-1]] + ii[ys[:-1, None], xs[None, :-1]]
+    area = np.diff(ys)[:, None] * np.diff(xs)[None, :]
+    return box / (3.0 * area)
+
+
+def _middle(cur: np.ndarray) -> tuple[int, int, np.ndarray]:
+    """``(M, DY', template)``: the middle of ``cur`` compared with the shifted old thumbnail, all but
+    ``M = width // 4`` columns and ``DY' = min(DY, height // 4)`` rows at each side."""
+    h, w = cur.shape
+    m, dy = max(1, w // 4), min(DY, h // 4)
+    return m, dy, cur[dy:h - dy, m:w - m]
+
+
+def shift_scores(prev: np.ndarray, cur: np.ndarray) -> np.ndarray:
+    """Scores [dy + DY', dx + M] of every shift: the mean absolute difference between the middle
+    of ``cur`` and the window of ``prev`` shifted by ``(dx, dy)``, each less its own mean."""
+    _, _, tpl = _middle(cur)
+    win = np.lib.stride_tricks.sliding_window_view(prev, tpl.shape)        # [2dy+1, 2m+1, th, tw]
+    diff = (win - win.mean(axis=(2, 3), keepdims=True)) - (tpl - tpl.mean())
+    return np.abs(diff).mean(axis=(2, 3))
+
+
+def shift_between(prev: np.ndarray, cur: np.ndarray) -> float | None:
+    """Horizontal shift in thumbnail pixels such that ``cur[x] ~ prev[x + shift]`` (+: the picture
+    moved left, the camera turned right; 0 under :data:`MIN_SHIFT`); None when the pair cannot
+    tell (thumbnails of different sizes, too little texture in the middle of ``cur`` or in
+    ``prev``, no shift clearly a match, the best at an end of the range searched)."""
+    if prev.shape != cur.shape:
+        return None
+    if float(_middle(cur)[2].std()) < MIN_TEXTURE or float(prev.std()) < MIN_TEXTURE:
+        return None
+    scores = shift_scores(prev, cur)
+    iy, ix = np.unravel_index(int(np.argmin(scores)), scores.shape)
+    best = scores[iy, ix]
+    if not best <= MAX_MATCH * float(np.median(scores)) or not 0 < ix < scores.shape[1] - 1:
+        return None
+    a, c = scores[iy, ix - 1], scores[iy, ix + 1]      # the V through the best and its neighbours
+    rise = max(a, c) - best
+    shift = float(ix - scores.shape[1] // 2) + (0.5 * (a - c) / rise if rise > 0 else 0.0)
+    return shift if abs(shift) >= MIN_SHIFT else 0.0
+
+
+def shift_to_deg(shift_px: float, width_px: int, fov_deg: float) -> float:
+    """A horizontal shift of ``shift_px`` in an image ``width_px`` wide seen by a camera ``fov_deg``
+    across, as the camera's turn in degrees (+ = right)."""
+    f = (width_px / 2) / math.tan(math.radians(fov_deg) / 2)
+    return math.degrees(math.atan(shift_px / f))
+
+
+class VisualYaw:
+    """The camera's turn rate from consecutive frames: :meth:`update` with each frame gives the
+    yaw rate (deg/s, + = right) since the previous one, 0 when it cannot tell."""
+
+    def __init__(self, width: int = THUMB_WIDTH) -> None:
+        self.width = width
+        self.prev: np.ndarray | None = None
+        self.t_prev: float | None = None
+
+    def reset(self) -> None:
+        self.prev = self.t_prev = None
+
+    def update(self, frame_rgb: np.ndarray | None, t: float, fov_deg: float | None) -> float:
+        """The yaw rate between the last frame and ``frame_rgb`` taken at ``t`` seconds, seen with
+        a camera ``fov_deg`` across; a missing or unreadable frame or FOV starts afresh (0)."""
+        try:
+            thumb = None if frame_rgb is None or fov_deg is None else thumbnail(frame_rgb, self.width)
+        except ValueError:
+            thumb = None
+        prev, t_prev = self.prev, self.t_prev
+        self.prev, self.t_prev = thumb, (t if thumb is not None else None)
+        if thumb is None or prev is None or t_prev is None or not t > t_prev:
+            return 0.0
+        shift = shift_between(prev, thumb)
+        if shift is None:
+            return 0.0
+        rate = shift_to_deg(shift, thumb.shape[1], fov_deg) / (t - t_prev)
+        return rate if abs(rate) <= MAX_TURN_DPS else 0.0

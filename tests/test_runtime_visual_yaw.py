@@ -1,0 +1,133 @@
+"""The turn read from the frames (runtime.visual_yaw): thumbnails, shifts, rates, the pipeline's use."""
+
+import math
+
+import numpy as np
+import pytest
+from runtime_toy import toy_bundle  # noqa: F401  (fixture)
+
+from crossing_assist.runtime import visual_yaw as vy
+from crossing_assist.runtime.decide import Decider
+from crossing_assist.runtime.engine import Engine
+from crossing_assist.runtime.pipeline import Pipeline
+
+FOV = 60.0
+
+
+def _texture(h: int, w: int, seed: int = 0) -> np.ndarray:
+    """A smooth random RGB scene (uint8): noise blurred along both axes, channels differing."""
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(0, 255, (h + 8, w + 8, 3))
+    for axis in (0, 1):
+        x = sum(np.roll(x, k, axis=axis) for k in range(-4, 5)) / 9
+    x = x[4:-4, 4:-4]
+    return np.clip((x - x.mean()) * 4 + 128, 0, 255).astype(np.uint8)
+
+
+def _turn_deg(shift_px: float, width_px: int, fov: float = FOV) -> float:
+    f = (width_px / 2) / math.tan(math.radians(fov) / 2)
+    return math.degrees(math.atan(shift_px / f))
+
+
+def test_thumbnail_is_the_area_mean_of_grey():
+    frame = np.random.default_rng(1).integers(0, 256, (37, 53, 3), dtype=np.uint8)
+    thumb = vy.thumbnail(frame, 10)
+    h = max(8, round(10 * 37 / 53))     # at least 8 rows
+    assert thumb.shape == (h, 10)
+    grey = frame.astype(float).mean(axis=2)
+    for i in range(h):
+        for j in range(10):
+            cell = grey[(i * 37) // h:((i + 1) * 37) // h, (j * 53) // 10:((j + 1) * 53) // 10]
+            assert thumb[i, j] == pytest.approx(cell.mean(), abs=1e-9)
+    with pytest.raises(ValueError, match="H x W x 3"):
+        vy.thumbnail(np.zeros((10, 10)))
+
+
+@pytest.mark.parametrize("step_px", [-14, -5, 3, 9])
+def test_a_sideways_slide_is_read_as_its_turn(step_px):
+    """The camera sweeping a wide scene: each frame is the window moved by step_px, so the turn
+    per frame is that shift's angle; + = the window moved right = the camera turned right."""
+    scene = _texture(120, 700)
+    yaw, rates = vy.VisualYaw(), []
+    for k in range(6):
+        x0 = 300 + k * step_px
+        rates.append(yaw.update(scene[:, x0:x0 + 160], k / 10, FOV))
+    assert rates[0] == 0.0                                 # nothing to compare the first with
+    want = _turn_deg(step_px, 160) * 10
+    assert rates[1:] == pytest.approx([want] * 5, rel=0.08, abs=0.5)
+
+
+def test_a_real_photo_turned_by_a_known_angle(ptl_dir):
+    """PTL photos re-rendered as turned by psi (the augmentation's perspective warp, not a slide)."""
+    cv2 = pytest.importorskip("cv2")
+    from crossing_assist.data_tools.augment import yaw as turn
+    photos = sorted((ptl_dir / "images").glob("*"))[:4]
+    errors = []
+    for path in photos:
+        img = cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
+        img = cv2.resize(img, (320, 240), interpolation=cv2.INTER_AREA)
+        for psi in (-4.0, 2.0, 6.0):
+            yaw = vy.VisualYaw()
+            yaw.update(img, 0.0, 90.0)
+            errors.append(yaw.update(turn(img, None, 12, psi, 90.0)[0], 1.0, 90.0) - psi)
+    assert max(abs(e) for e in errors) < 1.0, errors
+
+
+def test_no_turn_is_read_where_there_is_none():
+    scene = _texture(48, 64)
+    still = vy.VisualYaw()
+    assert [still.update(scene, t, FOV) for t in (0.0, 0.1, 0.2)] == [0.0, 0.0, 0.0]
+    # a blank wall; a flat middle with textured sides (a template without texture scored ties)
+    flat = np.full((48, 64, 3), 90, np.uint8)
+    edges = scene.copy()
+    edges[:, 16:48] = 120
+    for frames in ((flat, flat + 1), (edges, edges)):
+        yaw = vy.VisualYaw()
+        assert [yaw.update(f, t, FOV) for t, f in enumerate(frames)] == [0.0, 0.0]
+    # an unrelated picture (a bus fills the view) is not a turn
+    assert vy.shift_between(vy.thumbnail(scene), vy.thumbnail(_texture(48, 64, seed=5))) is None
+
+
+def test_a_missing_frame_or_fov_or_a_cut_starts_afresh():
+    scene = _texture(120, 700)
+    yaw = vy.VisualYaw()
+    yaw.update(scene[:, 300:460], 0.0, FOV)
+    assert yaw.update(None, 0.1, FOV) == 0.0
+    assert yaw.update(scene[:, 305:465], 0.2, FOV) == 0.0     # nothing before it: afresh
+    assert yaw.update(scene[:, 310:470], 0.3, None) == 0.0
+    assert yaw.update(scene[:, 315:475], 0.4, FOV) == 0.0
+    assert yaw.update(scene[:, 320:480], 0.5, FOV) > 0
+    assert yaw.update(scene[:, 350:510], 0.51, FOV) == 0.0    # ~1000 deg/s: a cut, not a turn
+    assert yaw.update(scene[:, 350:510], 0.51, FOV) == 0.0    # time did not move
+
+
+def _recording(monkeypatch):
+    seen = []
+    step = Decider.step
+
+    def record(self, t, obs, yaw_rate_dps=0.0):
+        seen.append(yaw_rate_dps)
+        return step(self, t, obs, yaw_rate_dps)
+    monkeypatch.setattr(Decider, "step", record)
+    return seen
+
+
+def test_the_pipeline_follows_a_turn_seen_in_the_frames_unless_given_one(toy_bundle, monkeypatch):  # noqa: F811
+    seen = _recording(monkeypatch)
+    scene = _texture(96, 800)
+    frames = [scene[:, 300 + 6 * k:300 + 6 * k + 128] for k in range(8)]
+    engine = Engine(toy_bundle)
+    for visual, gyro, check in ((True, None, lambda r: min(r[1:]) > 5.0),
+                                (False, None, lambda r: r == [0.0] * 8),
+                                (True, -3.0, lambda r: r == [-3.0] * 8)):
+        seen.clear()
+        pipe = Pipeline(engine, visual_yaw=visual)
+        for k, f in enumerate(frames):
+            pipe.step(f, k / 10, yaw_rate_dps=gyro)
+        assert check(seen), (visual, gyro, seen)
+    # a watchdog tick (no frame) is no turn, and the frame after it has nothing to compare with
+    seen.clear()
+    pipe = Pipeline(engine)
+    for k, f in enumerate(frames[:3]):
+        pipe.step(f if k != 1 else None, k / 10)
+    assert seen == [0.0, 0.0, 0.0]
