@@ -82,6 +82,16 @@ hold and the belief from before the stall put the old direction back on for 0.2-
 scenarios before it are those of version 9. Also in version 10: each ``geometry.level`` case says
 whether the roll is ``too_far`` (:func:`crossing_assist.geometry.rolled_too_far`: beyond
 ``MAX_GUIDED_ROLL_DEG``, no guidance), and the ``status`` section has the ``rolled`` stop.
+
+Version 12: ``visual_yaw``, the camera's turn read from consecutive frames
+(:mod:`crossing_assist.runtime.visual_yaw`), which the app feeds the Decider without a
+gyroscope: its constants; ``thumbnails`` (small RGB frames, flat row-major ``rgb`` bytes, and
+the grey thumbnail each gives at a ``width``); ``shifts`` (pairs of thumbnails and the shift
+``shift_between`` finds, null where it cannot tell: no texture, different sizes, a change that
+is no shift); ``sequence`` (frames at times and FOVs through one ``VisualYaw`` of ``width``,
+the yaw rate after each: a turn right, left, a missing frame or FOV that starts afresh, a turn
+too fast to believe, a new size).
+The scenarios are those of version 11.
 """
 
 from __future__ import annotations
@@ -106,10 +116,11 @@ from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
 from crossing_assist.runtime.engine import measure_value
 from crossing_assist.runtime.live import is_fresh, same_frame
 from crossing_assist.runtime.status import STATUS_STOP, status_message
+from crossing_assist.runtime import visual_yaw as vy
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 11
+VERSION = 12
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -425,6 +436,53 @@ def _obs_json(raw: RawOutputs | None, measure: str) -> dict | None:
     return {**raw.to_json(), "uncertainty": obs.uncertainty if math.isfinite(obs.uncertainty) else None}
 
 
+def _texture(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
+    """A smooth random grey texture (h x w, 0..255): noise blurred along both axes."""
+    x = rng.uniform(0, 255, (h + 4, w + 4))
+    for axis in (0, 1):
+        x = (np.roll(x, 1, axis) + 2 * x + np.roll(x, -1, axis)) / 4
+    return x[2:-2, 2:-2]
+
+
+def _visual_yaw_vectors(rng: np.random.Generator) -> dict:
+    """Version 12: the visual yaw estimator's thumbnails, shifts and one stream of frames."""
+    def rgb(a: np.ndarray) -> dict:
+        return {"width": int(a.shape[1]), "height": int(a.shape[0]), "rgb": a.reshape(-1).tolist()}
+
+    thumbs = []
+    for (h, w), width in (((7, 11), 4), ((13, 9), 4), ((6, 6), 8), ((20, 30), 7)):
+        f = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+        thumbs.append({"frame": rgb(f), "width": width, "thumb": vy.thumbnail(f, width).tolist()})
+    base = np.round(_texture(rng, 14, 40))
+    edges_only = base[:, 8:32].copy()
+    edges_only[:, 6:18] = 120.0      # textured sides, a flat middle: the template cannot tell
+    shifts = []
+    for name, prev, cur in (
+            ("right_3", base[:, 8:32], base[:, 11:35]), ("left_5", base[:, 8:32], base[:, 3:27]),
+            ("half_pixel", base[:, 8:32], (base[:, 9:33] + base[:, 10:34]) / 2),
+            ("down_1_right_2", base[1:13, 8:32], base[2:14, 10:34]),
+            ("still", base[:, 8:32], base[:, 8:32] + 0.5), ("flat", np.full((14, 24), 90.0), np.full((14, 24), 91.0)),
+            ("flat_middle", edges_only, edges_only),
+            ("new_scene", base[:, 8:32], np.round(_texture(rng, 14, 24))), ("sizes_differ", base[:, 8:32], base[:, 8:30])):
+        s = vy.shift_between(prev, cur)
+        shifts.append({"name": name, "prev": prev.tolist(), "cur": cur.tolist(), "shift": s})
+    scene = np.stack([_texture(rng, 24, 90)] * 3, axis=2)
+    scene[..., 1] *= 0.8      # channels differ: the thumbnail is the mean of R, G, B
+    width, seq, yaw = 16, [], vy.VisualYaw(16)      # frames 48 wide: a thumbnail pixel is 3 of theirs
+    for t, x0, fov in ((0.0, 30, 60.0), (0.1, 33, 60.0), (0.2, 39, 60.0), (0.3, 36, 60.0), (0.4, None, 60.0),
+                       (0.5, 36, 60.0), (0.6, 30, 60.0), (0.7, 30, None), (0.8, 30, 60.0), (0.81, 24, 60.0),
+                       (0.9, 29, 60.0)):
+        frame = None if x0 is None else np.clip(scene[:, x0:x0 + 48], 0, 255).astype(np.uint8)
+        if t == 0.9:
+            frame = np.clip(scene[:, 29:29 + 36], 0, 255).astype(np.uint8)    # a new size: afresh
+        seq.append({"t": t, "fov_deg": fov, "frame": None if frame is None else rgb(frame),
+                    "yaw_rate_dps": yaw.update(frame, t, fov)})
+    return {"thumb_width": vy.THUMB_WIDTH, "dy": vy.DY, "min_texture": vy.MIN_TEXTURE, "max_match": vy.MAX_MATCH,
+            "min_shift": vy.MIN_SHIFT,
+            "max_turn_dps": vy.MAX_TURN_DPS, "thumbnails": thumbs, "shifts": shifts,
+            "sequence": {"width": width, "steps": seq}}
+
+
 def build_vectors(seed: int = 20240601) -> dict:
     """All scenarios and beacon vectors as one JSON-ready dict."""
     rng = np.random.default_rng(seed)
@@ -460,6 +518,7 @@ def build_vectors(seed: int = 20240601) -> dict:
         "actions": {str(n): [list(g) for g in get_space(n).groups] for n in (4, 8, 13)},
         "guards": _guards(rng),
         "status": _status_vectors(),
+        "visual_yaw": _visual_yaw_vectors(np.random.default_rng([seed, 12])),
         "geometry": {"fov_range_deg": list(FOV_RANGE_DEG), "fov_choice": _fov_choices(),
                      "view_rows": {"geometry": GEOMETRY_V3, "cases": _view_rows()},
                      "view_rows_sensor": {"geometry": GEOMETRY_V3_SENSOR, "cases": _view_rows_sensor()},
