@@ -12,10 +12,11 @@ built copy of the app on 127.0.0.1:
   then a good start, long press, and a reload with the server stopped (offline);
 * portrait (390 x 844 screen, 180 x 240 camera): the real default bundle with its MC-dropout
   noise made constant (so onnxruntime-web 1.30 and Python's onnxruntime must agree number for
-  number) on the sample clip cut to portrait; no URL flag and no sensor setting stored (the
-  app's defaults), a synthetic tilt sensor reporting the phone level, then rolled 12 deg
-  (levelled), 75 deg (stop), silent while still at 75 deg (no stale roll; "No tilt sensor"),
-  then pointed down;
+  number) on the sample clip cut to portrait (it pans right for a while), then 4 s held still on
+  a view the model is unsure of; no URL flag and no sensor setting stored (the app's defaults:
+  turns read from the camera picture), a synthetic tilt sensor reporting the phone level, then
+  rolled 12 deg (levelled), 75 deg (stop), silent while still at 75 deg (no stale roll; "No tilt
+  sensor"), then pointed down;
 * portrait with the view crop (bundle schema 3, ``geometry.view_crop``): a tiny test bundle
   whose letterbox geometry crops the frame's rows to the training camera's view, on a clip whose
   kept rows and cut-off rows point to different strips (the app must crop as Engine.predict).
@@ -73,6 +74,10 @@ WATCHDOG_S = 0.5
 BAR_PX = 80  # the helper bar under the control (4rem of 20 px)
 DEFAULT_BUNDLE = REPO / "crossing_assist" / "assets" / "default_bundle"
 SAMPLE_CLIP = REPO / "crossing_assist" / "assets" / "sample_clip.mp4"
+#: The portrait clip's still ending: its frame 71 (as the pan reaches the crossing: the default
+#: bundle's far mass 0.33-0.40 on it with noise, over the 0.027 portrait threshold, its top action a
+#: strip) held for STILL_S seconds.
+STILL_FRAME, STILL_S = 71, 4
 #: The test bundle's geometry: distinct default FOVs per orientation, so the tests see which one
 #: the app chose; the toy graph resizes whatever it gets to its canvas, hence ``fit: stretch``.
 APP_GEOMETRY = Geometry(fit="stretch", camera_fov_deg=(67.0, 53.0), train_fov_deg=67.0)
@@ -166,6 +171,13 @@ def portrait(tmp_path_factory) -> dict:
         pw = (h * 3 // 4) // 2 * 2  # a 3:4 portrait window from the middle
         x0 = (w - pw) // 2
         frames.append(cv2.cvtColor(bgr[: h // 2 * 2, x0:x0 + pw], cv2.COLOR_BGR2RGB))
+    # Then, after the guidance at the end of the pan, the phone held still (sensor noise of +-2) on
+    # STILL_FRAME, a view the model sees a crossing in but is unsure of: an unbroken "not sure"
+    # stop for the hold-it-sideways advice. The pan itself no longer gives one: followed with the
+    # turn read from the picture, its unsure frames no longer break off from the not-seeing ones.
+    rng = np.random.default_rng(STILL_FRAME)
+    frames += [np.clip(frames[STILL_FRAME].astype(np.int16) + rng.integers(-2, 3, frames[STILL_FRAME].shape), 0, 255)
+               .astype(np.uint8) for _ in range(STILL_S * 10)]
     clip.write_y4m(tmp / "clip.y4m", frames, 10)
     result = _drive(tmp, www, tmp / "clip.y4m", 8.0, "--phases", "short", "--viewport", "390x844", "--tilt", "1",
                     "--sideways-after", str(SIDEWAYS_AFTER_S), "--roll", str(ROLL_DEG), "--level", "1",
@@ -301,6 +313,7 @@ def test_gyroscope_turn_reaches_the_decider(run: dict) -> None:
     frames = [e for e in run["result"]["trace"] if e["kind"] == "frame"]
     yaws = [e["yaw_rate_dps"] for e in frames[1:] if e["t"] < run["result"]["samples"][-1]["t"]]
     assert 2.5 <= float(np.median(yaws)) <= 3.5, np.percentile(yaws, [10, 50, 90])
+    assert {e["yaw_source"] for e in frames} == {"gyro"}   # ?gyro=1: the gyroscope wins over the camera picture
 
 
 def test_no_tilt_sensor_is_said_once_per_start_and_guidance_goes_on(run: dict) -> None:
@@ -872,16 +885,38 @@ def test_a_rolled_phone_s_frames_are_levelled_as_python_levels_them(portrait: di
 def test_the_tilt_sensor_is_on_without_any_url_flag_or_setting(portrait: dict) -> None:
     """The portrait run loads the app with no URL flag for the sensors and no sensor setting
     stored (a user who never opened the settings): the tilt sensor is used all the same, so the
-    levelling and the roll stop above are the app's defaults; the gyroscope stays off."""
+    levelling and the roll stop above are the app's defaults; the gyroscope stays off, and turns
+    are read from the camera picture (the next test)."""
     r = portrait["result"]
     query = r["page_url"].split("?", 1)[-1]
-    assert "gyro" not in query and "tilt" not in query, r["page_url"]
+    assert "gyro" not in query and "tilt" not in query and "visualyaw" not in query, r["page_url"]
     stored = json.loads(r["stored_settings"])
-    assert "gyro" not in stored and "tilt" not in stored, stored
+    assert "gyro" not in stored and "tilt" not in stored and "visualYaw" not in stored, stored
     frames = [e for e in r["trace"] if e["kind"] == "frame"]
     assert any(e["roll_deg"] != 0 for e in frames), "nothing levelled with the defaults"
-    assert all(e["yaw_rate_dps"] == 0 for e in frames)   # no gyroscope unless turned on
+    assert {e["yaw_source"] for e in frames} == {"camera"}   # no gyroscope unless turned on: the picture's turn
     assert "rolled" in r["roll"]["tilt_text"] and "too far" in r["roll"]["tilt_text"], r["roll"]["tilt_text"]
+
+
+def test_without_the_gyroscope_the_turn_is_read_from_the_picture_as_python_reads_it(portrait: dict) -> None:
+    """The portrait run (the app's defaults: no gyroscope) feeds the Decider the turn read from
+    the camera picture: each frame's rate is Python's ``VisualYaw`` fed the same frames (the
+    levelled frame the model ran on, before any view crop) at the app's capture times and FOVs,
+    started afresh wherever the app started a fresh Decider, within 1e-6 deg/s (relative above
+    1; the two compute the same sums, in another order). The sample clip pans right for about 5 s
+    (Python reads up to ~45 deg/s on it), so the rates are not all zero."""
+    from crossing_assist.runtime.visual_yaw import VisualYaw
+
+    seen, worst, turning = VisualYaw(), 0.0, 0
+    for entry, rgb in _app_steps_in_order(portrait, least=10):
+        assert entry["yaw_source"] == "camera", entry["yaw_source"]
+        if entry["new_decider"]:
+            seen.reset()
+        want = seen.update(rgb, entry["t"], entry["fov_deg"])
+        worst = max(worst, abs(entry["yaw_rate_dps"] - want) / max(1.0, abs(want)))
+        turning += abs(want) >= 5.0
+    assert worst <= 1e-6, worst
+    assert turning >= 5, f"only {turning} frames turning 5 deg/s or more"
 
 
 def test_a_tilt_sensor_that_stops_leaves_no_stale_roll_and_is_said_once(portrait: dict) -> None:

@@ -15,8 +15,9 @@ import { cameraElevationDeg, cameraRollDeg, NO_TILT_TEXT, sameFrame, SIDEWAYS, S
   yawRateFromRotation } from '../www/js/live.js';
 import { cueFor, Decider, decisionConfig, observationFromOutputs } from '../www/js/logic.js';
 import { rgbaToRgb } from '../www/js/model.js';
-import { replayVectors } from '../www/js/vectors.js';
+import { replayVectors, thumbFromRows } from '../www/js/vectors.js';
 import { modelName, statusMessage } from '../www/js/view.js';
+import * as visualYaw from '../www/js/visualyaw.js';
 
 const HERE = dirname(fileURLToPath(import.meta.url));
 const VECTORS = join(HERE, '..', 'test_vectors.json');
@@ -340,6 +341,135 @@ test('gyroscope: the integrator gives the mean turn rate between two steps', () 
   y.add(10, 1.0); // after a 0.5 s sensor gap: at most 0.2 s is integrated
   assert.ok(Math.abs(y.take(1) - 10 * 0.2) < 1e-9);
   assert.equal(y.take(0), 0);
+});
+
+// ----------------------------------------------------------------------------- visual yaw (vectors version 12)
+
+const nearly = (got, want, tol = 1e-9) => Math.abs(got - want) <= tol * Math.max(1, Math.abs(want));
+
+test('visual yaw: the constants are the Python runtime\'s', { skip: noVectors }, () => {
+  const v = loadVectors().visual_yaw;
+  assert.deepEqual([visualYaw.THUMB_WIDTH, visualYaw.DY, visualYaw.MIN_TEXTURE, visualYaw.MAX_MATCH, visualYaw.MIN_SHIFT, visualYaw.MAX_TURN_DPS],
+    [v.thumb_width, v.dy, v.min_texture, v.max_match, v.min_shift, v.max_turn_dps]);
+});
+
+test('visual yaw: every thumbnail vector within 1e-9', { skip: noVectors }, () => {
+  const cases = loadVectors().visual_yaw.thumbnails;
+  assert.ok(cases.length >= 4);
+  for (const [i, c] of cases.entries()) {
+    const got = visualYaw.thumbnail(Uint8Array.from(c.frame.rgb), c.frame.width, c.frame.height, c.width);
+    const want = thumbFromRows(c.thumb);
+    assert.deepEqual([got.w, got.h], [want.w, want.h], `thumbnail ${i}`);
+    want.data.forEach((x, k) => assert.ok(nearly(got.data[k], x), `thumbnail ${i}[${k}]: ${got.data[k]} vs ${x}`));
+    // a plain array of bytes gives the same
+    assert.deepEqual(visualYaw.thumbnail(c.frame.rgb, c.frame.width, c.frame.height, c.width).data, got.data);
+  }
+});
+
+test('visual yaw: every shift vector within 1e-9, null exactly where Python cannot tell', { skip: noVectors }, () => {
+  const cases = loadVectors().visual_yaw.shifts;
+  assert.ok(cases.some((c) => c.shift === null) && cases.some((c) => c.shift !== null && c.shift !== 0));
+  for (const c of cases) {
+    const got = visualYaw.shiftBetween(thumbFromRows(c.prev), thumbFromRows(c.cur));
+    if (c.shift === null) assert.equal(got, null, c.name);
+    else assert.ok(got !== null && nearly(got, c.shift), `${c.name}: ${got} vs ${c.shift}`);
+  }
+});
+
+test('visual yaw: the sequence of frames gives the Python rates within 1e-9', { skip: noVectors }, () => {
+  const { width, steps } = loadVectors().visual_yaw.sequence;
+  assert.ok(steps.some((s) => s.yaw_rate_dps > 0) && steps.some((s) => s.yaw_rate_dps < 0));
+  const yaw = new visualYaw.VisualYaw(width);
+  for (const s of steps) {
+    const frame = s.frame && { width: s.frame.width, height: s.frame.height, rgb: Uint8Array.from(s.frame.rgb) };
+    const got = yaw.update(frame, s.t, s.fov_deg);
+    assert.ok(nearly(got, s.yaw_rate_dps), `t ${s.t}: ${got} vs ${s.yaw_rate_dps}`);
+  }
+});
+
+test('visual yaw: a wrong port is caught by the replay', { skip: noVectors }, () => {
+  const v = loadVectors();
+  v.visual_yaw.shifts.find((c) => c.name === 'right_3').shift += 1e-6;
+  v.visual_yaw.max_match = 0.45;
+  const r = replayVectors(v);
+  assert.deepEqual(r.failures.map((f) => [f.scenario, f.field]), [['visual_yaw.constants', 'max_match'], ['visual_yaw.shifts', 'right_3']]);
+});
+
+/** A smooth random grey texture, h x w, 0..255 (bilinear between random knots 6 px apart). */
+function texture(h, w, seed = 1) {
+  let x = seed;
+  const rand = () => ((x = (x * 1103515245 + 12345) % 2147483648) / 2147483648);
+  const gw = Math.ceil(w / 6) + 2;
+  const knots = Array.from({ length: gw * (Math.ceil(h / 6) + 2) }, () => 255 * rand());
+  const out = new Float64Array(h * w);
+  for (let i = 0; i < h; i += 1) {
+    for (let j = 0; j < w; j += 1) {
+      const [u, v] = [j / 6, i / 6];
+      const [a, b] = [Math.floor(u), Math.floor(v)];
+      const [fu, fv] = [u - a, v - b];
+      const k = (p, q) => knots[q * gw + p];
+      out[i * w + j] = (1 - fv) * ((1 - fu) * k(a, b) + fu * k(a + 1, b)) + fv * ((1 - fu) * k(a, b + 1) + fu * k(a + 1, b + 1));
+    }
+  }
+  return out;
+}
+
+/** The w x h RGB frame of `scene` (sw wide) from column x0: grey, every channel equal. */
+function window_(scene, sw, x0, w, h) {
+  const rgb = new Uint8Array(w * h * 3);
+  for (let i = 0; i < h; i += 1) for (let j = 0; j < w; j += 1) rgb.fill(Math.round(scene[i * sw + x0 + j]), 3 * (i * w + j), 3 * (i * w + j) + 3);
+  return { rgb, width: w, height: h };
+}
+
+test('visual yaw: a texture shifted by 3 px is a shift of ~3; two identical frames are no turn', () => {
+  const [h, sw] = [48, 100];
+  const scene = texture(h, sw);
+  const prev = visualYaw.thumbnail(window_(scene, sw, 10, 64, h).rgb, 64, h);
+  const cur = visualYaw.thumbnail(window_(scene, sw, 13, 64, h).rgb, 64, h); // content came from 3 px right
+  const shift = visualYaw.shiftBetween(prev, cur);
+  assert.ok(Math.abs(shift - 3) < 0.1, `${shift}`);
+  assert.ok(Math.abs(visualYaw.shiftBetween(cur, prev) + 3) < 0.1); // the other way: left
+  const scores = visualYaw.shiftScores(prev, cur);
+  assert.deepEqual([scores.rows, scores.cols], [5, 33]);
+  // 64 px at 60 deg: 3 px is atan(3 / f) ~ 3.1 deg; in 0.1 s, ~31 deg/s to the right
+  const yaw = new visualYaw.VisualYaw();
+  const a = window_(scene, sw, 10, 64, h);
+  assert.equal(yaw.update(a, 0, 60), 0); // nothing to compare with yet
+  assert.equal(yaw.update({ ...a, rgb: a.rgb.slice() }, 0.1, 60), 0); // the same picture: no turn
+  const rate = yaw.update(window_(scene, sw, 13, 64, h), 0.2, 60);
+  assert.ok(Math.abs(rate - (10 * 180 / Math.PI) * Math.atan(3 / (32 / Math.tan(Math.PI / 6)))) < 1, `${rate}`);
+  assert.equal(yaw.update(window_(scene, sw, 16, 64, h), 0.2, 60), 0); // no time passed: afresh
+  assert.equal(yaw.update(window_(scene, sw, 13, 64, h), 0.3, null), 0); // FOV unknown: afresh
+  assert.equal(yaw.update(window_(scene, sw, 10, 64, h), 0.4, 60), 0); // ... so nothing to compare with
+  yaw.reset();
+  assert.equal(yaw.update(window_(scene, sw, 13, 64, h), 0.5, 60), 0); // reset: afresh
+  assert.equal(yaw.update({ rgb: new Uint8Array(5), width: 64, height: 48 }, 0.6, 60), 0); // unreadable frame: 0
+  assert.throws(() => visualYaw.thumbnail(new Uint8Array(5), 64, 48), RangeError);
+});
+
+test('visual yaw: a 480 x 640 frame takes milliseconds, not tens', () => {
+  const [h, sw] = [640, 560];
+  const scene = texture(h, sw, 3);
+  const frames = [0, 8, 16, 24].map((x0) => window_(scene, sw, x0, 480, h));
+  const yaw = new visualYaw.VisualYaw();
+  for (let i = 0; i < 20; i += 1) yaw.update(frames[i % 4], i / 10, 53); // warm up
+  const t0 = performance.now();
+  for (let i = 20; i < 60; i += 1) yaw.update(frames[i % 4], i / 10, 53);
+  const ms = (performance.now() - t0) / 40;
+  assert.ok(ms < 20, `${ms.toFixed(2)} ms per update`);
+});
+
+test('URL flag ?visualyaw=0 turns off following turns from the camera; on by default', async () => {
+  const { DEFAULT_SETTINGS, loadSettings, urlOverrides } = await import('../www/js/settings.js');
+  assert.equal(DEFAULT_SETTINGS.visualYaw, true);
+  const u = (q) => urlOverrides(new URLSearchParams(q));
+  assert.deepEqual(u('?visualyaw=0'), { visualYaw: false });
+  assert.deepEqual(u('?visualyaw=1&gyro=1'), { gyro: true, tilt: true, visualYaw: true });
+  assert.deepEqual(u('?visualyaw=no'), {});
+  const store = new Map([['crossing-assist-settings', JSON.stringify({ visualYaw: 'yes' })]]);
+  assert.equal(loadSettings({ getItem: (k) => store.get(k) ?? null }).visualYaw, true); // damaged: the default
+  store.set('crossing-assist-settings', JSON.stringify({ visualYaw: false, gyro: false }));
+  assert.equal(loadSettings({ getItem: (k) => store.get(k) ?? null }).visualYaw, false);
 });
 
 // ----------------------------------------------------------------------------- issue 12 / 14 modules

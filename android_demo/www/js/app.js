@@ -41,8 +41,12 @@
 // Advice on a "not sure" stop (the decision is unchanged, only the sentence and the vibration):
 // with the tilt sensor on, a phone pointed far down or up is told which way to tilt (TiltWatch);
 // a phone held upright and unsure for 5 s is told to hold it sideways (SidewaysHint).
-// The gyroscope (following turns: the Decider's yaw rate) is OFF by default (settings.js `gyro`):
-// its sign on a given phone needs a sighted check first.
+// Following turns (the Decider's yaw rate, so the beacon turns with a sweeping phone): the
+// gyroscope when it is on (settings.js `gyro`, OFF by default: its sign on a given phone needs a
+// sighted check first); else the turn read from the camera picture, the shift between the frame
+// the model ran on and the one before (visualyaw.js VisualYaw, the Python pipeline's; settings.js
+// `visualYaw`, ON by default), started afresh with every fresh Decider; else none (0). Each frame's
+// trace entry says which (yaw_source 'gyro' | 'camera' | 'off').
 //
 // The whole screen above the helper bar is one control: tap to start; while guiding, a double
 // tap or a long press ends guidance (a single tap only says how), and a tap resumes lost audio.
@@ -50,7 +54,8 @@
 // URL flags: ?test=1 keeps a trace of every step (and copies of the camera frames, levelled,
 // before any view crop) in window.crossingAssist for the end-to-end test; ?bundle=URL loads another bundle
 // folder; ?gyro=1 turns on the gyroscope and the tilt sensor, ?tilt=0 turns the tilt sensor off
-// (?tilt=1 on), for this visit only (never saved); ?threads=N sets the WASM threads;
+// (?tilt=1 on), ?visualyaw=0 turns off following turns from the camera picture (?visualyaw=1 on),
+// for this visit only (never saved); ?threads=N sets the WASM threads;
 // ?tutorial_speed=K plays the tutorial K times faster; ?sideways_after_s=S gives the hold-it-sideways
 // advice after S s instead of 5.
 
@@ -67,6 +72,7 @@ import { Speaker, SpeechPolicy } from './speech.js';
 import { playTutorial } from './tutorial.js';
 import { replayVectors } from './vectors.js';
 import { HelperView } from './view.js';
+import { VisualYaw } from './visualyaw.js';
 
 const POLL_MS = 20;
 const FRAME_WAIT_MS = 100;
@@ -79,7 +85,7 @@ const params = new URLSearchParams(location.search);
 const TEST = params.get('test') === '1';
 const TUTORIAL_SPEED = Math.max(1, Number(params.get('tutorial_speed')) || 1);
 const SIDEWAYS_AFTER_S = Number(params.get('sideways_after_s')) || undefined; // tests: a shorter wait
-const OVERRIDES = urlOverrides(params); // ?gyro=1, ?tilt=0|1: this visit only
+const OVERRIDES = urlOverrides(params); // ?gyro=1, ?tilt=0|1, ?visualyaw=0|1: this visit only
 const MAX_TRACE = 5000;
 const MAX_FRAMES = 600;
 
@@ -92,6 +98,8 @@ const app = {
   t0: performance.now(), settings: loadSettings(), policy: new SpeechPolicy(), haptics: new Haptics(),
   speaker: new Speaker(true), audioFailed: false, paused: false, wakeLock: null, wakeLockRequests: 0,
   perf: { frames: 0, busyS: 0, startedS: 0, recentMs: 0 },
+  visualYaw: new VisualYaw(), // turns read from the camera picture (without the gyroscope)
+  cameraTurn: null, // its last rate (deg/s) for the helper view; null while it is not the source
 };
 window.crossingAssist = app;
 const view = new HelperView(document);
@@ -247,6 +255,7 @@ function resetDecisions() {
   app.generation += 1;
   app.decider = null;
   app.fov = null;
+  app.visualYaw.reset(); // no turn read against a frame from before
 }
 
 /** One new (not frozen) camera frame, captured at `captured` s and grabbed at `grabbed` s, end to
@@ -270,6 +279,7 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
     // The phone turned (or the setting changed): strips mean other headings, and the
     // orientation (a narrow camera in portrait) has its own gate threshold; start afresh.
     app.decider = new Decider(configFromBundle(app.meta, { fov_deg: cam.fov, threshold }));
+    app.visualYaw.reset(); // a turn is read only between frames of one FOV and one Decider
     app.fov = cam.fov;
     record({ kind: 'fov', t: captured, fov_deg: cam.fov, orientation: cam.orientation, threshold,
       width: frame.width, height: frame.height });
@@ -282,6 +292,13 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
     ? ', a narrow camera’s gate threshold' : '';
   const levelled = frame.roll_deg ? `, turned ${Math.abs(frame.roll_deg).toFixed(0)}° ${frame.roll_deg > 0 ? 'clockwise' : 'counter-clockwise'} to level` : '';
   view.camera(`${cam.orientation} ${frame.width}×${frame.height}, field of view ${cam.fov.toFixed(1)}° (${cam.source})${crop}${narrow}${levelled}`);
+  // The turn since the last frame: the gyroscope's (taken below), else read from this frame (the
+  // whole levelled frame, at the whole frame's FOV), else none. Read before the model runs: a
+  // result dropped below leaves this frame as the last one only until resetDecisions.
+  const yawSource = app.yaw ? 'gyro' : sensorOn('visualYaw') ? 'camera' : 'off';
+  if (yawSource !== 'camera') app.visualYaw.reset(); // turned on later: afresh, not against an old frame
+  const cameraTurn = yawSource === 'camera' ? app.visualYaw.update(frame, captured, cam.fov) : 0;
+  app.cameraTurn = yawSource === 'camera' ? cameraTurn : null;
   const decider = app.decider;
   let outputs = null;
   let obs;
@@ -302,7 +319,7 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   app.inflight = null;
   // paused, ended, or the decisions reset while the model ran (e.g. hidden and shown again): drop it
   if (!app.running || app.paused || generation !== app.generation) return;
-  const yaw = app.yaw ? app.yaw.take(dt) : 0;
+  const yaw = yawSource === 'gyro' ? app.yaw.take(dt) : cameraTurn;
   const d = decider.step(captured, obs, yaw);
   const decided = now();
   const fresh = isFresh(decided, captured);
@@ -317,7 +334,7 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
       seeing);
   }
   app.frameId = (app.frameId || 0) + 1; // unique over restarts (seq restarts with the camera)
-  record({ kind: 'frame', id: app.frameId, t: captured, grabbed, decided, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, obs, decision: d,
+  record({ kind: 'frame', id: app.frameId, t: captured, grabbed, decided, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, yaw_source: yawSource, obs, decision: d,
     fov_deg: cam.fov, width: frame.width, height: frame.height, view_rows: [seen.top, seen.rows], roll_deg: frame.roll_deg ?? 0,
     outputs: outputs && plain(outputs) });
   if (TEST) {
@@ -409,7 +426,7 @@ function poll() {
   app.polls = (app.polls || 0) + 1;
   if (app.polls % 10 === 0) {
     view.levels(app.audio.levels());
-    view.turning(app.yaw ? app.turnRate || 0 : null);
+    view.turning(app.yaw ? app.turnRate || 0 : app.cameraTurn); // null: neither follows turns
     view.tilt(tiltText(t));
   }
 }
@@ -487,7 +504,7 @@ function onMotion(e) {
   app.turnRate = rate;
 }
 
-/** A motion sensor setting for this visit: the URL flag's (?gyro=1, ?tilt=0) else the kept setting. */
+/** A sensor setting for this visit: the URL flag's (?gyro=1, ?tilt=0, ?visualyaw=0) else the kept setting. */
 function sensorOn(key) {
   return OVERRIDES[key] ?? app.settings[key];
 }
@@ -589,6 +606,7 @@ async function start({ tutorial = !app.settings.tutorialDone } = {}) {
     app.grabber = new FrameGrabber($('video'));
     resetDecisions();
     app.orientation = null;
+    app.cameraTurn = null;
     app.sideways = new SidewaysHint(SIDEWAYS_AFTER_S ? { after_s: SIDEWAYS_AFTER_S } : undefined);
     app.audioFailed = false;
     app.paused = false;
@@ -730,7 +748,7 @@ async function selfTest() {
 
 function bindSettings() {
   const s = app.settings;
-  const boxes = { speech: 'speech', 'haptic-dir': 'hapticDirections', 'tilt-sensor': 'tilt', gyro: 'gyro' };
+  const boxes = { speech: 'speech', 'haptic-dir': 'hapticDirections', 'tilt-sensor': 'tilt', gyro: 'gyro', 'visual-yaw': 'visualYaw' };
   for (const [id, key] of Object.entries(boxes)) {
     $(id).checked = OVERRIDES[key] ?? s[key]; // a URL flag shows (this visit only)
     $(id).addEventListener('change', () => {

@@ -11,8 +11,9 @@ import { cameraFov, FovError, gateThreshold, levelAngle, orientation, PAD_RGB, r
 import { isFresh, sameFrame, Watchdog } from './live.js';
 import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains } from './logic.js';
 import { statusMessage } from './view.js';
+import * as visualYaw from './visualyaw.js';
 
-const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11];
+const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12];
 
 function close(a, b, tol) {
   return Math.abs(a - b) <= tol * Math.max(1, Math.abs(b));
@@ -200,5 +201,50 @@ export function replayVectors(vectors) {
       fail({ scenario: 'geometry.level', field: `too_far ${v.roll_deg}`, got: rolledTooFar(v.roll_deg), expected: v.too_far });
     }
   }
+  checks += replayVisualYaw(vectors.visual_yaw, tol, fail);
   return { version: vectors.version, scenarios: vectors.scenarios.length, steps, checks, failures, nFailures, maxRelDiff };
+}
+
+/** A thumbnail ({w, h, data}) from the vectors' nested rows. */
+export function thumbFromRows(rows) {
+  return { w: rows[0]?.length ?? 0, h: rows.length, data: Float64Array.from(rows.flat()) };
+}
+
+/**
+ * Version 12: the visual yaw estimator (visualyaw.js): its constants exactly, each thumbnail
+ * element, each shift (null exactly) and each rate of the sequence within `tol`. Returns the
+ * number of checks; nothing without the section (older vectors).
+ */
+function replayVisualYaw(v, tol, fail) {
+  if (!v) return 0;
+  let checks = 0;
+  const where = (part, field) => ({ scenario: `visual_yaw.${part}`, field });
+  const consts = { thumb_width: 'THUMB_WIDTH', dy: 'DY', min_texture: 'MIN_TEXTURE', max_match: 'MAX_MATCH', min_shift: 'MIN_SHIFT', max_turn_dps: 'MAX_TURN_DPS' };
+  for (const [key, name] of Object.entries(consts)) {
+    checks += 1;
+    if (visualYaw[name] !== v[key]) fail({ ...where('constants', key), got: visualYaw[name], expected: v[key] });
+  }
+  v.thumbnails.forEach((c, i) => {
+    checks += 1;
+    const got = visualYaw.thumbnail(Uint8Array.from(c.frame.rgb), c.frame.width, c.frame.height, c.width);
+    const want = thumbFromRows(c.thumb);
+    if (got.w !== want.w || got.h !== want.h || want.data.some((x, k) => !close(got.data[k], x, tol))) {
+      fail({ ...where('thumbnails', String(i)), got: [got.w, got.h, Array.from(got.data)], expected: [want.w, want.h, c.thumb] });
+    }
+  });
+  for (const c of v.shifts) {
+    checks += 1;
+    const got = visualYaw.shiftBetween(thumbFromRows(c.prev), thumbFromRows(c.cur));
+    if ((got === null) !== (c.shift === null) || (got !== null && !close(got, c.shift, tol))) {
+      fail({ ...where('shifts', c.name), got, expected: c.shift });
+    }
+  }
+  const yaw = new visualYaw.VisualYaw(v.sequence.width);
+  v.sequence.steps.forEach((s, i) => {
+    checks += 1;
+    const frame = s.frame && { width: s.frame.width, height: s.frame.height, rgb: Uint8Array.from(s.frame.rgb) };
+    const got = yaw.update(frame, s.t, s.fov_deg);
+    if (!close(got, s.yaw_rate_dps, tol)) fail({ ...where('sequence', `${i} t ${s.t}`), got, expected: s.yaw_rate_dps });
+  });
+  return checks;
 }
