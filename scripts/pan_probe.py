@@ -1,4 +1,4 @@
-"""What a user hears while panning the phone: photos turned into scans, played with and without a gyroscope.
+"""A user panning the phone: photos turned into scans, the turn from a gyroscope, from the frames, or none.
 
 A user looking for the crossing sweeps the phone left and right. This probe plays each photo as a
 scan, as ``crossing-eval --scan R`` does: 1 s still, then the camera turned right to ``+A``
