@@ -52,13 +52,12 @@ def thumbnail(frame_rgb: np.ndarray, width: int = THUMB_WIDTH) -> np.ndarray:
     h_in, w_in = f.shape[:2]
     w = min(width, w_in)
     h = min(h_in, max(8, int(round(w * h_in / w_in))))
-    grey = f[..., :3].astype(np.int64).sum(axis=2)   # R + G + B: whole numbers, exact sums
-    ii = np.zeros((h_in + 1, w_in + 1), np.int64)
-    ii[1:, 1:] = grey.cumsum(0).cumsum(1)
-    ys = (np.arange(h + 1) * h_in) // h
+    grey = f[..., 0].astype(np.int32)              # R + G + B: whole numbers, exact sums
+    grey += f[..., 1]
+    grey += f[..., 2]
+    ys = (np.arange(h + 1) * h_in) // h            # strictly increasing: h <= h_in, w <= w_in
     xs = (np.arange(w + 1) * w_in) // w
-    box = ii[ys[1:, None], xs[None, 1:]] - ii[ys[:-1, None], xs[None, 1:]] \
-        - ii[ys[1:, None], xs[None, :-1]] + ii[ys[:-1, None], xs[None, :-1]]
+    box = np.add.reduceat(np.add.reduceat(grey, ys[:-1], axis=0, dtype=np.int64), xs[:-1], axis=1)
     area = np.diff(ys)[:, None] * np.diff(xs)[None, :]
     return box / (3.0 * area)
 
@@ -76,8 +75,9 @@ def shift_scores(prev: np.ndarray, cur: np.ndarray) -> np.ndarray:
     of ``cur`` and the window of ``prev`` shifted by ``(dx, dy)``, each less its own mean."""
     _, _, tpl = _middle(cur)
     win = np.lib.stride_tricks.sliding_window_view(prev, tpl.shape)        # [2dy+1, 2m+1, th, tw]
-    diff = (win - win.mean(axis=(2, 3), keepdims=True)) - (tpl - tpl.mean())
-    return np.abs(diff).mean(axis=(2, 3))
+    diff = win - win.mean(axis=(2, 3), keepdims=True)                      # one array, then in place
+    diff -= tpl - tpl.mean()
+    return np.abs(diff, out=diff).mean(axis=(2, 3))
 
 
 def shift_between(prev: np.ndarray, cur: np.ndarray) -> float | None:
