@@ -426,7 +426,8 @@ function poll() {
   app.polls = (app.polls || 0) + 1;
   if (app.polls % 10 === 0) {
     view.levels(app.audio.levels());
-    view.turning(app.yaw ? app.turnRate || 0 : app.cameraTurn); // null: neither follows turns
+    if (app.yaw) view.turning(app.turnRate || 0, 'gyroscope');
+    else view.turning(sensorOn('visualYaw') ? app.cameraTurn ?? 0 : null, 'camera picture'); // null: not followed
     view.tilt(tiltText(t));
   }
 }

@@ -150,9 +150,11 @@ export class HelperView {
     this.el('levelR').value = r;
   }
 
-  turning(rateDps) {
+  /** The turn rate the Decider is told (deg/s, + = right) and where it comes from; null: not followed. */
+  turning(rateDps, source = 'gyroscope') {
     const side = rateDps >= 0 ? 'right' : 'left';
-    this.el('turning').textContent = rateDps === null ? 'gyroscope off' : `${fmt(Math.abs(rateDps), 0)}°/s ${side}`;
+    this.el('turning').textContent = rateDps === null ? 'not followed (gyroscope and camera picture off)'
+      : `${fmt(Math.abs(rateDps), 0)}°/s ${side} (${source})`;
   }
 
   /** What the tilt sensor says now (levelling, roll limit): one line for the helper. */
