@@ -88,6 +88,23 @@ def test_no_turn_is_read_where_there_is_none():
     assert vy.shift_between(vy.thumbnail(scene), vy.thumbnail(_texture(48, 64, seed=5))) is None
 
 
+@pytest.mark.parametrize("cover", [(0.3, 0.5), (0.5, 0.6), (0.8, 0.7)])
+def test_a_bus_passing_a_still_camera_is_no_turn(cover):
+    """A textured block (a bus: `cover` of the frame's width and height, from the bottom) crossing
+    a still view at 30 px a frame moves part of the picture; the tiles it covers veto any shift
+    (without them the estimator read the bus's motion as the camera turning the other way)."""
+    view, bus = _texture(120, 160, seed=1), _texture(120, 400, seed=2)
+    bw, bh = int(cover[0] * 160), int(cover[1] * 120)
+    yaw, turned = vy.VisualYaw(), 0.0
+    for k in range(12):
+        frame, x = view.copy(), -bw + 30 * k
+        x0, x1 = max(0, x), min(160, x + bw)
+        if x1 > x0:
+            frame[120 - bh:, x0:x1] = bus[:bh, x0 - x + 100:x1 - x + 100]
+        turned += yaw.update(frame, k / 10, FOV) / 10
+    assert abs(turned) < 2.0, turned
+
+
 def test_a_missing_frame_or_fov_or_a_cut_starts_afresh():
     scene = _texture(120, 700)
     yaw = vy.VisualYaw()

@@ -349,8 +349,8 @@ const nearly = (got, want, tol = 1e-9) => Math.abs(got - want) <= tol * Math.max
 
 test('visual yaw: the constants are the Python runtime\'s', { skip: noVectors }, () => {
   const v = loadVectors().visual_yaw;
-  assert.deepEqual([visualYaw.THUMB_WIDTH, visualYaw.DY, visualYaw.MIN_TEXTURE, visualYaw.MAX_MATCH, visualYaw.MIN_SHIFT, visualYaw.MAX_TURN_DPS],
-    [v.thumb_width, v.dy, v.min_texture, v.max_match, v.min_shift, v.max_turn_dps]);
+  assert.deepEqual([visualYaw.THUMB_WIDTH, visualYaw.DY, visualYaw.MIN_TEXTURE, visualYaw.MAX_MATCH, visualYaw.MIN_SHIFT, visualYaw.TILES, visualYaw.TILE_VETO, visualYaw.MAX_TURN_DPS],
+    [v.thumb_width, v.dy, v.min_texture, v.max_match, v.min_shift, v.tiles, v.tile_veto, v.max_turn_dps]);
 });
 
 test('visual yaw: every thumbnail vector within 1e-9', { skip: noVectors }, () => {

@@ -15,11 +15,16 @@ consecutive frames is the horizontal shift that best lines up their thumbnails:
    by a tenth of a pixel, a tenth of a slow turn);
 3. the shift is trusted only when the scene has texture (sd >= :data:`MIN_TEXTURE` in the middle
    compared and in the old thumbnail), the best score is clearly a match (<= :data:`MAX_MATCH` of
-   the median score of all shifts: two unrelated pictures score alike at every shift) and the best
-   ``dx`` is inside the range searched: a blank wall, a passing bus, a person walking by, a frame
-   swap or a brightness jump gives *no turn* (0), never a guess; a shift under
-   :data:`MIN_SHIFT` is a still camera (a still scene's neighbours never score quite alike: left
-   alone, that reads as a slow steady turn, ~1 deg/s at 30 frames a second);
+   the median score of all shifts: two unrelated pictures score alike at every shift), the best
+   ``dx`` is inside the range searched, and **no part of the picture moves otherwise**: the middle
+   is cut into a :data:`TILES` x :data:`TILES` grid, and a tile with texture whose own best shift
+   scores under 1 / :data:`TILE_VETO` of its best within a pixel of the chosen ``dx`` vetoes it
+   (a camera's turn moves the whole picture; a bus or a person passing a still camera moves part
+   of it, which without this read as a turn: a bus over half the view, 22 deg a pass). A blank
+   wall, a passing bus, a person walking by, a frame swap or a brightness jump gives *no turn*
+   (0), never a guess; a shift under :data:`MIN_SHIFT` is a still camera (a still scene's
+   neighbours never score quite alike: left alone, that reads as a slow steady turn, ~1 deg/s at
+   30 frames a second);
 4. ``dx`` pixels are ``atan(dx / f)`` degrees, ``f`` the thumbnail's focal length in pixels
    for the camera's horizontal FOV; the picture moving left (content at ``x`` came from
    ``x + dx``, ``dx > 0``) is a turn to the right (+), the decision logic's sign.
@@ -39,6 +44,8 @@ DY = 2                 # vertical shifts searched either way (pixels of the thum
 MIN_TEXTURE = 2.0      # thumbnail standard deviation (0..255 grey) below which a frame cannot show a turn
 MAX_MATCH = 0.5        # the best shift must score at most this fraction of the median shift's score
 MIN_SHIFT = 0.05       # a shift under this (thumbnail pixels) is a still camera (its picture's own asymmetry)
+TILES = 3              # the middle is cut into TILES x TILES tiles, each able to veto a shift
+TILE_VETO = 2.0        # ... when its score near the shift is over this many times its own best
 MAX_TURN_DPS = 360.0   # a turn faster than this between two frames is not believed (a swap, a cut)
 
 
@@ -70,30 +77,53 @@ def _middle(cur: np.ndarray) -> tuple[int, int, np.ndarray]:
     return m, dy, cur[dy:h - dy, m:w - m]
 
 
-def shift_scores(prev: np.ndarray, cur: np.ndarray) -> np.ndarray:
-    """Scores [dy + DY', dx + M] of every shift: the mean absolute difference between the middle
-    of ``cur`` and the window of ``prev`` shifted by ``(dx, dy)``, each less its own mean."""
+def _tiles(th: int, tw: int) -> tuple[np.ndarray, np.ndarray]:
+    """First row and first column of each of the middle's :data:`TILES` x :data:`TILES` tiles."""
+    return (np.arange(TILES) * th) // TILES, (np.arange(TILES) * tw) // TILES
+
+
+def tile_scores(prev: np.ndarray, cur: np.ndarray) -> np.ndarray:
+    """Sums [dy + DY', dx + M, i, j] over tile (i, j) of the middle of ``cur`` of the absolute
+    difference with the window of ``prev`` shifted by ``(dx, dy)``, each (the middle, the window)
+    less its own mean."""
     _, _, tpl = _middle(cur)
     win = np.lib.stride_tricks.sliding_window_view(prev, tpl.shape)        # [2dy+1, 2m+1, th, tw]
     diff = win - win.mean(axis=(2, 3), keepdims=True)                      # one array, then in place
     diff -= tpl - tpl.mean()
-    return np.abs(diff, out=diff).mean(axis=(2, 3))
+    ry, rx = _tiles(*tpl.shape)
+    return np.add.reduceat(np.add.reduceat(np.abs(diff, out=diff), ry, axis=2), rx, axis=3)
+
+
+def shift_scores(prev: np.ndarray, cur: np.ndarray) -> np.ndarray:
+    """Scores [dy + DY', dx + M] of every shift: the mean absolute difference between the middle
+    of ``cur`` and the window of ``prev`` shifted by ``(dx, dy)``, each less its own mean."""
+    tiles = tile_scores(prev, cur)
+    return tiles.sum(axis=(2, 3)) / _middle(cur)[2].size
 
 
 def shift_between(prev: np.ndarray, cur: np.ndarray) -> float | None:
     """Horizontal shift in thumbnail pixels such that ``cur[x] ~ prev[x + shift]`` (+: the picture
     moved left, the camera turned right; 0 under :data:`MIN_SHIFT`); None when the pair cannot
     tell (thumbnails of different sizes, too little texture in the middle of ``cur`` or in
-    ``prev``, no shift clearly a match, the best at an end of the range searched)."""
+    ``prev``, no shift clearly a match, the best at an end of the range searched, a tile of the
+    middle vetoing it)."""
     if prev.shape != cur.shape:
         return None
-    if float(_middle(cur)[2].std()) < MIN_TEXTURE or float(prev.std()) < MIN_TEXTURE:
+    _, _, tpl = _middle(cur)
+    if float(tpl.std()) < MIN_TEXTURE or float(prev.std()) < MIN_TEXTURE:
         return None
-    scores = shift_scores(prev, cur)
+    tiles = tile_scores(prev, cur)
+    scores = tiles.sum(axis=(2, 3)) / tpl.size
     iy, ix = np.unravel_index(int(np.argmin(scores)), scores.shape)
     best = scores[iy, ix]
     if not best <= MAX_MATCH * float(np.median(scores)) or not 0 < ix < scores.shape[1] - 1:
         return None
+    ry, rx = _tiles(*tpl.shape)
+    for i, rows in enumerate(np.split(tpl, ry[1:], axis=0)):
+        for j, part in enumerate(np.split(rows, rx[1:], axis=1)):
+            own = tiles[:, :, i, j]
+            if float(part.std()) >= MIN_TEXTURE and not own[:, ix - 1:ix + 2].min() <= TILE_VETO * own.min():
+                return None                             # this part of the picture moved otherwise
     a, c = scores[iy, ix - 1], scores[iy, ix + 1]      # the V through the best and its neighbours
     rise = max(a, c) - best
     shift = float(ix - scores.shape[1] // 2) + (0.5 * (a - c) / rise if rise > 0 else 0.0)

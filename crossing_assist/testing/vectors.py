@@ -456,13 +456,15 @@ def _visual_yaw_vectors(rng: np.random.Generator) -> dict:
     base = np.round(_texture(rng, 14, 40))
     edges_only = base[:, 8:32].copy()
     edges_only[:, 6:18] = 120.0      # textured sides, a flat middle: the template cannot tell
+    bus = base[:, 8:32].copy()
+    bus[5:, 2:22] = base[5:, 15:35]  # a still camera; its lower two thirds (a bus) moved 5 px
     shifts = []
     for name, prev, cur in (
             ("right_3", base[:, 8:32], base[:, 11:35]), ("left_5", base[:, 8:32], base[:, 3:27]),
             ("half_pixel", base[:, 8:32], (base[:, 9:33] + base[:, 10:34]) / 2),
             ("down_1_right_2", base[1:13, 8:32], base[2:14, 10:34]),
             ("still", base[:, 8:32], base[:, 8:32] + 0.5), ("flat", np.full((14, 24), 90.0), np.full((14, 24), 91.0)),
-            ("flat_middle", edges_only, edges_only),
+            ("flat_middle", edges_only, edges_only), ("part_moved", base[:, 8:32], bus),
             ("new_scene", base[:, 8:32], np.round(_texture(rng, 14, 24))), ("sizes_differ", base[:, 8:32], base[:, 8:30])):
         s = vy.shift_between(prev, cur)
         shifts.append({"name": name, "prev": prev.tolist(), "cur": cur.tolist(), "shift": s})
@@ -478,7 +480,7 @@ def _visual_yaw_vectors(rng: np.random.Generator) -> dict:
         seq.append({"t": t, "fov_deg": fov, "frame": None if frame is None else rgb(frame),
                     "yaw_rate_dps": yaw.update(frame, t, fov)})
     return {"thumb_width": vy.THUMB_WIDTH, "dy": vy.DY, "min_texture": vy.MIN_TEXTURE, "max_match": vy.MAX_MATCH,
-            "min_shift": vy.MIN_SHIFT,
+            "min_shift": vy.MIN_SHIFT, "tiles": vy.TILES, "tile_veto": vy.TILE_VETO,
             "max_turn_dps": vy.MAX_TURN_DPS, "thumbnails": thumbs, "shifts": shifts,
             "sequence": {"width": width, "steps": seq}}
 

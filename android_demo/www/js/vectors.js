@@ -219,7 +219,7 @@ function replayVisualYaw(v, tol, fail) {
   if (!v) return 0;
   let checks = 0;
   const where = (part, field) => ({ scenario: `visual_yaw.${part}`, field });
-  const consts = { thumb_width: 'THUMB_WIDTH', dy: 'DY', min_texture: 'MIN_TEXTURE', max_match: 'MAX_MATCH', min_shift: 'MIN_SHIFT', max_turn_dps: 'MAX_TURN_DPS' };
+  const consts = { thumb_width: 'THUMB_WIDTH', dy: 'DY', min_texture: 'MIN_TEXTURE', max_match: 'MAX_MATCH', min_shift: 'MIN_SHIFT', tiles: 'TILES', tile_veto: 'TILE_VETO', max_turn_dps: 'MAX_TURN_DPS' };
   for (const [key, name] of Object.entries(consts)) {
     checks += 1;
     if (visualYaw[name] !== v[key]) fail({ ...where('constants', key), got: visualYaw[name], expected: v[key] });

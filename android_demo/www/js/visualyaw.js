@@ -10,10 +10,13 @@
 //    first minimum in [dy][dx] row-major order, numpy's argmin) is refined by the V through its
 //    neighbours' scores;
 // 3. the shift is trusted only with texture (population sd >= MIN_TEXTURE in the middle compared
-//    and in the old thumbnail), a best score <= MAX_MATCH of the median score of all shifts and
-//    the best dx inside the range searched, else the pair cannot tell (null): a blank wall, a
-//    passing bus, a brightness jump gives no turn, never a guess; a shift under MIN_SHIFT is a
-//    still camera (0: a still scene's neighbours never score quite alike);
+//    and in the old thumbnail), a best score <= MAX_MATCH of the median score of all shifts, the
+//    best dx inside the range searched and no tile vetoing it (the middle cut into a TILES x
+//    TILES grid; a tile with texture whose own best scores under 1 / TILE_VETO of its best within
+//    a pixel of the chosen dx: part of the picture moved otherwise, a bus passing a still camera),
+//    else the pair cannot tell (null): a blank wall, a passing bus, a brightness jump gives no
+//    turn, never a guess; a shift under MIN_SHIFT is a still camera (0: a still scene's
+//    neighbours never score quite alike);
 // 4. dx pixels are atan(dx / f) degrees for the camera's horizontal FOV; the picture moving left
 //    (dx > 0) is a turn to the right (+), the Decider's sign. A rate over MAX_TURN_DPS is 0.
 //
@@ -25,6 +28,8 @@ export const DY = 2; // vertical shifts searched either way (thumbnail pixels)
 export const MIN_TEXTURE = 2.0; // thumbnail sd (0..255 grey) below which a frame cannot show a turn
 export const MAX_MATCH = 0.5; // the best shift must score at most this fraction of the median shift's score
 export const MIN_SHIFT = 0.05; // a shift under this (thumbnail pixels) is a still camera
+export const TILES = 3; // the middle is cut into TILES x TILES tiles, each able to veto a shift
+export const TILE_VETO = 2.0; // ... when its score near the shift is over this many times its own best
 export const MAX_TURN_DPS = 360.0; // a faster turn between two frames is not believed (a swap, a cut)
 
 const DEG = Math.PI / 180; // CPython's math.radians / math.degrees factors
@@ -97,13 +102,25 @@ function stdOf(t, x0, y0, tw, th) {
   return Math.sqrt(q / n);
 }
 
-/** Fill `out` (Float64Array, rows x cols) with the scores; `tplc` (tw * th) takes the middle less
- * its mean, `cols` (prev.w) the window rows' column sums (each window's mean from tw of them). */
-function scoresInto(prev, cur, out, tplc, colsum) {
+/** First row (or column) of each of TILES tiles of `size` rows (numpy's (arange(TILES) * size) // TILES). */
+function tileStarts(size) {
+  const starts = new Int32Array(TILES + 1);
+  for (let i = 0; i < TILES; i += 1) starts[i] = Math.floor((i * size) / TILES);
+  starts[TILES] = size;
+  return starts;
+}
+
+/** Fill `out` (Float64Array, rows x cols) with the scores and `tiles` (rows x cols x TILES x
+ * TILES) with each tile's sum of absolute differences; `tplc` (tw * th) takes the middle less its
+ * mean, `colsum` (prev.w) the window rows' column sums (each window's mean from tw of them). */
+function scoresInto(prev, cur, out, tiles, tplc, colsum) {
   const [m, dy, tw, th] = middle(cur);
   const n = tw * th;
   const rows = cur.h - th + 1;
   const cols = cur.w - tw + 1;
+  const ry = tileStarts(th);
+  const rx = tileStarts(tw);
+  const tt = TILES * TILES;
   let s = 0;
   for (let y = 0; y < th; y += 1) for (let x = 0, p = (dy + y) * cur.w + m; x < tw; x += 1, p += 1) s += cur.data[p];
   const tmean = s / n;
@@ -119,14 +136,24 @@ function scoresInto(prev, cur, out, tplc, colsum) {
       let ws = 0;
       for (let x = 0; x < tw; x += 1) ws += colsum[ix + x];
       const wmean = ws / n;
-      let d = 0;
-      for (let y = 0, k = 0; y < th; y += 1) {
-        for (let x = 0, p = (iy + y) * pw + ix; x < tw; x += 1, p += 1, k += 1) d += Math.abs(a[p] - wmean - tplc[k]);
+      const t0 = (iy * cols + ix) * tt;
+      let total = 0;
+      for (let i = 0; i < TILES; i += 1) {
+        for (let j = 0; j < TILES; j += 1) {
+          let d = 0;
+          for (let y = ry[i]; y < ry[i + 1]; y += 1) {
+            for (let x = rx[j], p = (iy + y) * pw + ix + x, k = y * tw + x; x < rx[j + 1]; x += 1, p += 1, k += 1) {
+              d += Math.abs(a[p] - wmean - tplc[k]);
+            }
+          }
+          tiles[t0 + i * TILES + j] = d;
+          total += d;
+        }
       }
-      out[iy * cols + ix] = d / n;
+      out[iy * cols + ix] = total / n;
     }
   }
-  return { rows, cols };
+  return { rows, cols, ry, rx };
 }
 
 /**
@@ -137,15 +164,17 @@ function scoresInto(prev, cur, out, tplc, colsum) {
 export function shiftScores(prev, cur) {
   const [m, dy, tw, th] = middle(cur);
   const data = new Float64Array((2 * dy + 1) * (2 * m + 1));
-  const { rows, cols } = scoresInto(prev, cur, data, new Float64Array(tw * th), new Float64Array(prev.w));
+  const tiles = new Float64Array(data.length * TILES * TILES);
+  const { rows, cols } = scoresInto(prev, cur, data, tiles, new Float64Array(tw * th), new Float64Array(prev.w));
   return { rows, cols, data: data.subarray(0, rows * cols) };
 }
 
 /**
  * Horizontal shift in thumbnail pixels such that cur[x] ~ prev[x + shift] (+: the picture moved
  * left, the camera turned right; 0 under MIN_SHIFT); null when the pair cannot tell (different
- * sizes, too little texture, no shift clearly a match, the best at an end of the range searched).
- * `scratch` ({scores, sorted, tplc, colsum}: Float64Arrays, grown here): VisualYaw's, so that nothing is allocated.
+ * sizes, too little texture, no shift clearly a match, the best at an end of the range searched,
+ * a tile of the middle vetoing it).
+ * `scratch` ({scores, sorted, tiles, tplc, colsum}: Float64Arrays, grown here): VisualYaw's, so that nothing is allocated.
  */
 export function shiftBetween(prev, cur, scratch = {}) {
   if (prev.w !== cur.w || prev.h !== cur.h) return null;
@@ -155,11 +184,13 @@ export function shiftBetween(prev, cur, scratch = {}) {
   if (!(scratch.scores?.length >= size)) {
     scratch.scores = new Float64Array(size);
     scratch.sorted = new Float64Array(size);
+    scratch.tiles = new Float64Array(size * TILES * TILES);
   }
   if (!(scratch.tplc?.length >= tw * th)) scratch.tplc = new Float64Array(tw * th);
   if (!(scratch.colsum?.length >= prev.w)) scratch.colsum = new Float64Array(prev.w);
   const s = scratch.scores;
-  const { rows, cols } = scoresInto(prev, cur, s, scratch.tplc, scratch.colsum);
+  const tiles = scratch.tiles;
+  const { rows, cols, ry, rx } = scoresInto(prev, cur, s, tiles, scratch.tplc, scratch.colsum);
   const n = rows * cols; // odd (2 DY' + 1 rows, 2 M + 1 columns): the median is the middle score
   let k = 0; // numpy's argmin: the first minimum (or the first NaN) in row-major order
   for (let i = 1; i < n; i += 1) if (s[i] < s[k] || (s[i] !== s[i] && s[k] === s[k])) k = i;
@@ -169,6 +200,20 @@ export function shiftBetween(prev, cur, scratch = {}) {
   const ix = k % cols;
   const best = s[k];
   if (!(best <= MAX_MATCH * sorted[(n - 1) / 2]) || !(ix > 0 && ix < cols - 1)) return null;
+  const tt = TILES * TILES;
+  for (let i = 0; i < TILES; i += 1) {
+    for (let j = 0; j < TILES; j += 1) {
+      if (!(stdOf(cur, m + rx[j], dy + ry[i], rx[j + 1] - rx[j], ry[i + 1] - ry[i]) >= MIN_TEXTURE)) continue;
+      let own = Infinity;
+      let near = Infinity;
+      for (let q = 0; q < n; q += 1) {
+        const v = tiles[q * tt + i * TILES + j];
+        own = Math.min(own, v);
+        if (Math.abs((q % cols) - ix) <= 1) near = Math.min(near, v);
+      }
+      if (!(near <= TILE_VETO * own)) return null; // this part of the picture moved otherwise
+    }
+  }
   const a = s[k - 1]; // the V through the best and its neighbours
   const c = s[k + 1];
   const rise = Math.max(a, c) - best;
