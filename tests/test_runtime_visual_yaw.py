@@ -148,3 +148,26 @@ def test_the_pipeline_follows_a_turn_seen_in_the_frames_unless_given_one(toy_bun
     for k, f in enumerate(frames[:3]):
         pipe.step(f if k != 1 else None, k / 10)
     assert seen == [0.0, 0.0, 0.0]
+
+
+def test_the_check_script_reads_known_turns_buses_and_the_sample_clip(tmp_path):
+    """scripts/visual_yaw_check.py on toy bar photos: its figures are the estimator's (turns read
+    near their angle, a bus read as less turn with the veto than without, the sample clip's turn
+    to the crossing read within a few degrees); a missing manifest is one line and exit 1."""
+    import json
+    import sys
+    from pathlib import Path
+
+    from runtime_toy import bar_dataset
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    import visual_yaw_check as check
+
+    out = tmp_path / "vy.json"
+    assert check.main(["--data", str(bar_dataset(tmp_path / "d", n=3)), "--photos", "3", "--out", str(out)]) == 0
+    res = json.loads(out.read_text())
+    turns = res["known_turns"]
+    assert turns["pairs"] == 15 and turns["refused"] < 15 and turns["mae_deg"] < 1.0
+    assert all(b["veto"]["mean_abs_deg"] <= b["no_veto"]["mean_abs_deg"] for b in res["buses"].values())
+    clip = res["sample_clip"]["turn"]
+    assert abs(clip["read_sum_deg"] - clip["true_sum_deg"]) < 5 and abs(clip["true_sum_deg"]) > 90
+    assert check.main(["--data", str(tmp_path / "none")]) == 1
