@@ -22,9 +22,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from prepared_data import draw, open_manifest  # noqa: E402  (a sibling script: the probes' photos)
+
 from crossing_assist.data_tools.augment import crop_window
 from crossing_assist.data_tools.images import load_frame, save_rgb
-from crossing_assist.data_tools.manifest import Row, read_manifest, write_manifest
+from crossing_assist.data_tools.manifest import Row, write_manifest
 from crossing_assist.geometry import TRAIN_FOV_DEG, window_fov
 
 
@@ -35,13 +38,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path("runs/fovcheck"))
     a = ap.parse_args(argv)
-    if not (a.data / "manifest.csv").is_file():
-        print(f"error: no manifest at {a.data / 'manifest.csv'} (scripts/prepare_default_data.sh writes runs/data/ptl)",
-              file=sys.stderr)
+    ds = open_manifest(a.data)
+    if ds is None:
         return 1
-    ds = read_manifest(a.data)
     rows = [r for r in ds.rows if r.split == "val" and r.far_x is not None]
-    rows = [rows[i] for i in sorted(np.random.default_rng(a.seed).choice(len(rows), min(a.photos, len(rows)), replace=False))]
+    rows = draw(rows, a.photos, np.random.default_rng(a.seed))
     fov = window_fov(9 / 16, TRAIN_FOV_DEG)
     out: dict[str, list[Row]] = {"plain": [], "flag": []}
     for i, r in enumerate(rows):

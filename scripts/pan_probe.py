@@ -35,9 +35,11 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from prepared_data import draw, open_manifest  # noqa: E402  (a sibling script: the probes' photos)
+
 from crossing_assist.bundle import BundleError
 from crossing_assist.data_tools.images import load_frame
-from crossing_assist.data_tools.manifest import read_manifest
 from crossing_assist.fileio import atomic_write_text
 from crossing_assist.models.evaluate import scan_clips
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
@@ -89,17 +91,15 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         labels, psi, rates = extra["scan_labels"], extra["psi"], extra["camera_rates"]
     else:
-        if not (a.data / "manifest.csv").is_file():
-            print(f"error: no manifest at {a.data / 'manifest.csv'} (scripts/prepare_default_data.sh writes runs/data/ptl)",
-                  file=sys.stderr)
+        ds = open_manifest(a.data)
+        if ds is None:
             return 1
-        ds = read_manifest(a.data)
         rows = [r for r in ds.rows if r.split == a.split and r.far_x is not None]
         if not rows:
             print(f"error: no photo with a crossing in split {a.split!r} of {a.data}", file=sys.stderr)
             return 1
         rng = np.random.default_rng(a.seed)
-        rows = [rows[i] for i in sorted(rng.choice(len(rows), min(a.photos, len(rows)), replace=False))]
+        rows = draw(rows, a.photos, rng)
         psi = scan_yaw(a.amplitude, a.rate)
         lis, labels, rates = play(engine, [load_frame(ds.image_path(r), r.flags) for r in rows], rows, psi)
         if a.cache:

@@ -41,12 +41,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from prepared_data import draw, open_manifest  # noqa: E402  (a sibling script: the probes' photos)
 from robustness_table import gated  # noqa: E402  (a sibling script: one way to decide at another bundle's gate)
 
 from crossing_assist.bundle import BundleError, read_bundle
 from crossing_assist.data_tools.augment import roll
 from crossing_assist.data_tools.images import flag_value, load_frame
-from crossing_assist.data_tools.manifest import read_manifest
 from crossing_assist.fileio import atomic_write_text
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
 from crossing_assist.runtime.engine import Engine
@@ -197,11 +197,9 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         return report(res, a.out, a.plot)
     rolls = parse_rolls(a.rolls)
-    if not (a.data / "manifest.csv").is_file():
-        print(f"error: no manifest at {a.data / 'manifest.csv'} (scripts/prepare_default_data.sh writes runs/data/ptl)",
-              file=sys.stderr)
+    ds = open_manifest(a.data)
+    if ds is None:
         return 1
-    ds = read_manifest(a.data)
     rows = [r for r in ds.rows if r.split == a.split and r.far_x is not None and a.source in (None, r.source)]
     if not rows:
         print(f"error: no photo with a crossing in split {a.split!r}{'' if a.source is None else f' from {a.source}'} "
@@ -215,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     rng = np.random.default_rng(a.seed)
-    rows = [rows[i] for i in sorted(rng.choice(len(rows), min(a.photos, len(rows)), replace=False))]
+    rows = draw(rows, a.photos, rng)
     images = [load_frame(ds.image_path(r), r.flags) for r in rows]
     res = {"bundle": str(a.bundle), "gate": None if a.gate is None else str(a.gate),
            "data": str(a.data), "split": a.split, "source": a.source, "photos": len(rows),

@@ -29,9 +29,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from prepared_data import draw, open_manifest  # noqa: E402  (a sibling script: the probes' photos)
+
 from crossing_assist.data_tools.augment import yaw as turned
 from crossing_assist.data_tools.images import load_frame
-from crossing_assist.data_tools.manifest import read_manifest
 from crossing_assist.data_tools.synth import clip_pose, clip_scene
 from crossing_assist.fileio import atomic_write_text
 from crossing_assist.runtime import visual_yaw as vy
@@ -139,17 +141,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, help="write the figures as JSON here")
     a = ap.parse_args(argv)
-    if not (a.data / "manifest.csv").is_file():
-        print(f"error: no manifest at {a.data / 'manifest.csv'} (scripts/prepare_default_data.sh writes runs/data/ptl)",
-              file=sys.stderr)
+    ds = open_manifest(a.data)
+    if ds is None:
         return 1
-    ds = read_manifest(a.data)
     rows = [r for r in ds.rows if r.split == a.split]
     if not rows:
         print(f"error: no photo in split {a.split!r} of {a.data}", file=sys.stderr)
         return 1
     rng = np.random.default_rng(a.seed)
-    rows = [rows[i] for i in sorted(rng.choice(len(rows), min(a.photos, len(rows)), replace=False))]
+    rows = draw(rows, a.photos, rng)
     images = []
     for r in rows:
         img = load_frame(ds.image_path(r), r.flags)
