@@ -404,7 +404,10 @@ def test_crossing_eval_scan_judges_every_frame_of_a_turning_camera(tmp_path, toy
     summary says so."""
     from crossing_assist.runtime.listen import scan_yaw
 
+    from crossing_assist.geometry import window_fov
+
     data = bar_dataset(tmp_path / "data", n=4)
+    neg = bar_dataset(tmp_path / "neg", n=2, unknown=True)
     out = tmp_path / "eval"
     r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(toy_bundle),
                         "--data", str(data), "--split", "val", "--portrait", "0", "--scan", "30", "--examples", "0",
@@ -412,9 +415,31 @@ def test_crossing_eval_scan_judges_every_frame_of_a_turning_camera(tmp_path, toy
     assert r.returncode == 0, r.stderr
     scan = json.loads((out / "metrics.json").read_text())["listen"]["scan"]
     assert scan["photos"] == 4 and scan["rate_dps"] == 30 and scan["frames"] == len(scan_yaw(20, 30)) == 39
+    assert scan["camera_fov_deg"] == {"90": 4}   # the toy's camera
     for k in ("gyro", "camera", "no_yaw"):
         assert scan[k]["in_view"] > 0 and scan[k]["beacon_on"] >= 0.9 and scan[k]["confidently_wrong"] <= 0.05
     assert "scan (4 photos" in r.stdout and "turn read from the frames: beacon on" in r.stdout
+    assert "portrait_window" not in scan and "no_crossing" not in scan and "narrow camera" not in r.stdout
+
+    # with portrait views and negatives: the same scans by a narrow camera (the middle 3:4 of each
+    # turned view, at its own FOV), and the no-crossing frames scanned (all silent)
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(toy_bundle),
+                        "--data", str(data), "--split", "val", "--portrait", "1", "--scan", "30", "--examples", "0",
+                        "--negatives", str(neg), "--clip-seconds", "0.5", "--out", str(out), "--quiet"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    scan2 = json.loads((out / "metrics.json").read_text())["listen"]["scan"]
+    assert scan2["photos"] == 4 and all(scan2[k]["in_view"] == scan[k]["in_view"] for k in ("gyro", "camera", "no_yaw"))
+    win, none = scan2["portrait_window"], scan2["no_crossing"]
+    assert win["photos"] == 4 and win["camera_fov_deg"] == {f"{window_fov(54 / 96, 90.0):.1f}": 4}
+    for k in ("gyro", "camera", "no_yaw"):
+        # the toy sees only bars inside the window: a bar beside it (its edge strip) stays silent, so
+        # the narrow camera is on less often, never wrong; no-crossing frames are never heard
+        assert 0 < win[k]["beacon_on"] < scan[k]["beacon_on"] and win[k]["confidently_wrong"] <= 0.05
+        assert none["photos"] == 2 and none[k]["in_view"] == 0 and none[k]["out_of_view"] == 2 * (39 - 10)
+        assert none[k]["silence"] == 1.0
+    assert "narrow camera, a 3:4 window" in r.stdout and "2 no-crossing frames scanned the same way, beacon off: " \
+        "turn from a gyroscope 1.000" in r.stdout
     r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(toy_bundle),
                         "--data", str(data), "--split", "val", "--scan", "-1", "--out", str(out)],
                        capture_output=True, text=True)

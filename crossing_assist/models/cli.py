@@ -244,11 +244,27 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
 
             print(f"{'scan':>15} ({scan['photos']} photos, each turned 0 -> +{scan['amplitude_deg']:g} -> "
                   f"-{scan['amplitude_deg']:g} -> 0 deg at {scan['rate_dps']:g} deg/s; every frame after the first second)")
-            for k, name in SCAN_YAW_INPUTS.items():
-                g, f = scan[k], (lambda x, p=".3f": "n/a" if x is None else format(x, p))
-                print(f"{'':>15} {name}: beacon on {f(g['beacon_on'])}, confidently wrong {f(g['confidently_wrong'], '.4f')} "
-                      f"of {g['in_view']} frames with the goal in view ({f(g['wrong_by_hold'])} of them from the "
-                      f"hold); goal out of view: beacon on {f(g['out_of_view_on'])}")
+            f = lambda x, p=".3f": "n/a" if x is None else format(x, p)  # noqa: E731
+
+            def judged(s: dict) -> None:
+                for k, name in SCAN_YAW_INPUTS.items():
+                    g = s[k]
+                    print(f"{'':>15} {name}: beacon on {f(g['beacon_on'])}, confidently wrong "
+                          f"{f(g['confidently_wrong'], '.4f')} of {g['in_view']} frames with the goal in view "
+                          f"({f(g['wrong_by_hold'])} of them from the hold); goal out of view: beacon on "
+                          f"{f(g['out_of_view_on'])}")
+
+            judged(scan)
+            if "portrait_window" in scan:
+                w = scan["portrait_window"]
+                print(f"{'':>15} the same scans by a narrow camera, a 3:4 window in the middle of each view "
+                      f"({w['photos']} photos, {' / '.join(w['camera_fov_deg'])} deg across; a goal beside the "
+                      "window is its edge strip):")
+                judged(scan["portrait_window"])
+            if "no_crossing" in scan:
+                n = scan["no_crossing"]
+                print(f"{'':>15} {n['photos']} no-crossing frames scanned the same way, beacon off: "
+                      + ", ".join(f"{name} {f(n[k]['silence'])}" for k, name in SCAN_YAW_INPUTS.items()))
         if "conformal" in m:
             c = m["conformal"]
             print(f"conformal sets: coverage {c['coverage']:.3f} (target {c['target_coverage']:.2f}), "

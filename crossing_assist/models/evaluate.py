@@ -205,15 +205,24 @@ def _views(cfg: EvalConfig, rows: list, geometry) -> dict[str, list[tuple[np.nda
     return views
 
 
+#: The narrow camera a scan also plays (``crossing-eval --scan`` with ``--portrait``): a 3:4 window
+#: in the middle of each photo, turning with it (the portrait_window view's camera, ~41 deg across).
+SCAN_WINDOW_ASPECT = 3 / 4
+
+
 def scan_clips(engine, image: np.ndarray, far_x: float | None, label: int, psi: np.ndarray,
-               fov_deg: float | None = None) -> tuple[list, np.ndarray, np.ndarray]:
+               fov_deg: float | None = None, window: float | None = None) -> tuple[list, np.ndarray, np.ndarray]:
     """One photo (scaled to a camera stream's width) seen by a camera turned ``psi[j]`` degrees at
     each frame (:func:`~crossing_assist.data_tools.augment.yaw`: the scene beyond the photo black,
     the goal moved, ``unknown`` once it leaves the view), through ``engine``: the predictions, the
     goal's strip per frame and the yaw rate read from the frames at the scan's frame rate
     (:class:`~crossing_assist.runtime.visual_yaw.VisualYaw`, as the pipeline reads it without a
-    gyroscope). ``fov_deg``: the photo's camera (None: the bundle's for its size)."""
-    from ..data_tools.augment import yaw
+    gyroscope). ``fov_deg``: the photo's camera (None: the bundle's for its size). ``window``: a
+    narrower camera turning with it instead, which sees the middle window of this aspect (width /
+    height) of each turned view at the window's own FOV; a goal beside the window but still in the
+    photo is the edge strip (:func:`~crossing_assist.data_tools.augment.crop_window`)."""
+    from ..data_tools.augment import crop_window, yaw
+    from ..geometry import window_fov
     from ..runtime.listen import SCAN_FPS
     from ..runtime.sources import CAMERA_WIDTH, scale_to_width
     from ..runtime.visual_yaw import VisualYaw
@@ -222,34 +231,60 @@ def scan_clips(engine, image: np.ndarray, far_x: float | None, label: int, psi: 
     fov = engine.camera_fov(image.shape[1], image.shape[0], fov_deg)
     seen, preds, labels, rates = VisualYaw(), [], [], []
     for j, p in enumerate(psi):
-        view, _, lab, _ = yaw(image, far_x, label, float(p), fov)
-        preds.append(engine.predict(view, fov))
+        view, x, lab, _ = yaw(image, far_x, label, float(p), fov)
+        cam = fov
+        if window is not None:
+            view, x, lab = crop_window(view, x, lab, window, 0.5)
+            cam = window_fov(view.shape[1] / image.shape[1], fov)
+        preds.append(engine.predict(view, cam))
         labels.append(lab)
-        rates.append(seen.update(view, j / SCAN_FPS, fov))
+        rates.append(seen.update(view, j / SCAN_FPS, cam))
     return preds, np.asarray(labels, np.int64), np.asarray(rates, float)
 
 
 def _listen_scans(cfg: EvalConfig, engine, part: Dataset) -> dict:
     """The split's photos with a measured goal, each played as a scan (:func:`scan_clips`,
     :func:`~crossing_assist.runtime.listen.scan_yaw`) and judged per way the turn reaches the
-    decision logic (:func:`~crossing_assist.runtime.listen.judge_scans`)."""
+    decision logic (:func:`~crossing_assist.runtime.listen.judge_scans`); with ``cfg.portrait``
+    also as the narrow camera (``portrait_window``: :data:`SCAN_WINDOW_ASPECT`), and the
+    ``--negatives`` frames as scans too (``no_crossing``: every frame after the still second
+    should be silent)."""
     from tqdm import tqdm
 
-    from ..runtime.listen import judge_scans, scan_yaw
+    from ..runtime.listen import SCAN_YAW_INPUTS, judge_scans, scan_yaw
 
     psi = scan_yaw(cfg.scan_deg, cfg.scan_dps)
-    clips, labels, rates = [], [], []
-    for r in tqdm([r for r in part.rows if r.far_x is not None and r.label != 0], desc="listen scans",
-                  disable=not cfg.progress, unit="photo"):
-        preds, labs, seen = scan_clips(engine, load_frame(part.image_path(r), r.flags), r.far_x, r.label, psi,
-                                       _fov(cfg, part, r))
-        clips.append(preds)
-        labels.append(labs)
-        rates.append(seen)
-    if not clips:
+
+    def play(rows: list, desc: str, window: float | None = None) -> dict:
+        clips, labels, rates = [], [], []
+        for ds, r in tqdm(rows, desc=desc, disable=not cfg.progress or not rows, unit="photo"):
+            image = load_frame(ds.image_path(r), r.flags)
+            if window is not None and image.shape[1] <= image.shape[0]:
+                continue   # a window narrower than the photo is cut from landscape photos only
+            preds, labs, seen = scan_clips(engine, image, r.far_x, r.label, psi, _fov(cfg, ds, r), window)
+            clips.append(preds)
+            labels.append(labs)
+            rates.append(seen)
+        if not clips:
+            return {"photos": 0}
+        fovs = Counter(round(p.fov_deg, 1) for c in clips for p in c[:1] if p.fov_deg is not None)
+        return {"photos": len(clips), "camera_fov_deg": {f"{k:g}": n for k, n in sorted(fovs.items())},
+                **judge_scans(engine, clips, np.asarray(labels), psi, np.asarray(rates))}
+
+    rows = [(part, r) for r in part.rows if r.far_x is not None and r.label != 0]
+    if not rows:
         return {}
-    return {"rate_dps": cfg.scan_dps, "amplitude_deg": cfg.scan_deg, "photos": len(clips), "frames": len(psi),
-            **judge_scans(engine, clips, np.asarray(labels), psi, np.asarray(rates))}
+    out = {"rate_dps": cfg.scan_dps, "amplitude_deg": cfg.scan_deg, "frames": len(psi),
+           **play(rows, "listen scans")}
+    # a narrow camera is cut from photos of the bundle's own camera only (as the portrait views are)
+    wide = [(ds, r) for ds, r in rows if _fov(cfg, ds, r) is None]
+    if cfg.portrait and wide and (narrow := play(wide, "listen scans, 3:4 window", SCAN_WINDOW_ASPECT))["photos"]:
+        out["portrait_window"] = narrow
+    if negatives := _negative_rows(cfg):
+        out["no_crossing"] = none = play(negatives, "listen scans, no crossing")
+        for k in SCAN_YAW_INPUTS:   # every judged frame is out of view: silence is the beacon off on them
+            none[k]["silence"] = 1.0 - none[k]["out_of_view_on"]
+    return out
 
 
 def _negative_rows(cfg: EvalConfig) -> list:
