@@ -150,6 +150,37 @@ def test_the_pipeline_follows_a_turn_seen_in_the_frames_unless_given_one(toy_bun
     assert seen == [0.0, 0.0, 0.0]
 
 
+def test_a_rolled_camera_is_read_levelled_as_the_app_reads_it(toy_bundle, monkeypatch):  # noqa: F811
+    """A street (the sample clip's 5th frame) seen by a 67 deg camera rolled 30 deg, turning by
+    known angles: told the roll, the pipeline reads the turn from the frame levelled (as the model
+    sees it, and as the app reads it); unlevelled the picture moves along the rolled axis and the
+    turn read is further off. The model's outputs are those of the engine levelling the frame
+    itself."""
+    cv2 = pytest.importorskip("cv2")
+    from crossing_assist.data_tools.augment import roll, yaw as turn
+    from crossing_assist.runtime.demo import DEFAULT_CLIP
+
+    cap = cv2.VideoCapture(str(DEFAULT_CLIP))
+    for _ in range(5):
+        ok, bgr = cap.read()
+    assert ok
+    scene = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    seen = _recording(monkeypatch)
+    turns = [0.0, 1.0, 4.0, 0.0, -3.0]          # the camera's yaw at each frame, 10 fps
+    frames = [roll(turn(scene, None, 12, psi, 67.0)[0], None, 0.5, 0, 30.0, fill="reflect")[0] for psi in turns]
+    truth = np.diff(turns) * 10
+    errors = {}
+    for told in (30.0, None):
+        seen.clear()
+        pipe, ref = Pipeline(Engine(toy_bundle, fov_deg=67.0, seed=5)), Engine(toy_bundle, fov_deg=67.0, seed=5)
+        for k, f in enumerate(frames):   # the same MC-dropout draws in the same order: the same outputs
+            assert np.array_equal(pipe.step(f, k / 10, roll_deg=told).prediction.probs,
+                                  ref.predict(f, roll_deg=told).probs)
+        errors[told] = np.abs(np.asarray(seen[1:]) - truth)
+    assert errors[30.0].max() < 2.0, errors                     # 0.2 deg a frame at 10 fps
+    assert errors[None].mean() > 2 * errors[30.0].mean(), errors
+
+
 def test_the_check_script_reads_known_turns_buses_and_the_sample_clip(tmp_path):
     """scripts/visual_yaw_check.py on toy bar photos: its figures are the estimator's (turns read
     near their angle, a bus read as less turn with the veto than without, the sample clip's turn
@@ -168,6 +199,8 @@ def test_the_check_script_reads_known_turns_buses_and_the_sample_clip(tmp_path):
     turns = res["known_turns"]
     assert turns["pairs"] == 15 and turns["refused"] < 15 and turns["mae_deg"] < 1.0
     assert all(b["veto"]["mean_abs_deg"] <= b["no_veto"]["mean_abs_deg"] for b in res["buses"].values())
+    assert set(res["rolled"]) == {"10", "20", "30"}
+    assert all(r[k]["pairs"] == 15 and r[k]["refused"] < 15 for r in res["rolled"].values() for k in ("as_is", "levelled"))
     clip = res["sample_clip"]["turn"]
     assert abs(clip["read_sum_deg"] - clip["true_sum_deg"]) < 5 and abs(clip["true_sum_deg"]) > 90
     assert check.main(["--data", str(tmp_path / "none")]) == 1
