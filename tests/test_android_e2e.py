@@ -1033,7 +1033,8 @@ def narrow_video(tmp_path_factory) -> dict:
     frames = [np.clip(clip.bar_frame(w, h, 4.0).astype(np.int16) + rng.integers(-3, 4, (h, w, 3)), 0, 255)
               .astype(np.uint8) for _ in range(50)]
     clip.write_y4m(tmp / "clip.y4m", frames, 10)
-    result = _drive(tmp, _build(tmp, bundle), tmp / "clip.y4m", 4.0, "--phases", "short", "--viewport", "390x844")
+    result = _drive(tmp, _build(tmp, bundle), tmp / "clip.y4m", 4.0, "--phases", "short", "--viewport", "390x844",
+                    "--visual-yaw", "0")
     return {"result": result, "engine": Engine(bundle)}
 
 
@@ -1052,6 +1053,19 @@ def test_9_16_video_takes_the_narrow_cameras_threshold_and_decides_as_python(nar
     assert f"(threshold {unc.narrow_threshold:.2f})" in text and unc.threshold != unc.narrow_threshold, text
     gates = _assert_same_decisions(engine, _app_steps_in_order(narrow_video, least=15))
     assert "learner" in gates, gates
+
+
+def test_visualyaw_0_follows_no_turn_and_says_so(narrow_video: dict) -> None:
+    """The narrow-video run loads the app with ?visualyaw=0: no frame's turn is read from the
+    picture (the source is off, the Decider told 0 deg/s), the helper view says turns are not
+    followed, and the flag is this visit's only (not stored)."""
+    r = narrow_video["result"]
+    assert "visualyaw=0" in r["page_url"], r["page_url"]
+    frames = [e for e in r["trace"] if e["kind"] == "frame"]
+    assert len(frames) >= 15 and {e["yaw_source"] for e in frames} == {"off"}, {e["yaw_source"] for e in frames}
+    assert all(e["yaw_rate_dps"] == 0 for e in frames)
+    assert r["turning_text"].startswith("not followed"), r["turning_text"]
+    assert "visualYaw" not in json.loads(r["stored_settings"])
 
 
 # ----------------------------------------------------------------------------- the shipped bundle

@@ -34,7 +34,8 @@
 // stop says to hold it level; --sensor-stops 1 after it: the sensor falls silent while the phone
 // is still turned 75 deg, until the app says it has no tilt sensor and 5 frames came more than
 // 0.6 s after the last reading, then reports level again), (--tilt 1: the phone tilted down until
-// a "not sure" stop says to raise it), collect, double tap.
+// a "not sure" stop says to raise it), (--visual-yaw 0|1: the page loaded with ?visualyaw=0|1),
+// collect, double tap.
 // Landscape "full" phases dispatch no deviceorientation event at all: no tilt sensor.
 // The driver asserts nothing; it exits non-zero only when it could not run.
 
@@ -67,6 +68,7 @@ function parseArgs(argv) {
     else if (k === '--level') args.level = v === '1';
     else if (k === '--sensor-stops') args.sensorStops = v === '1';
     else if (k === '--sideways-after') args.sidewaysAfter = Number(v);
+    else if (k === '--visual-yaw') args.visualYaw = v;
     else throw new Error(`unknown argument ${k}`);
   }
   if (!args.clip || !args.out) throw new Error('usage: e2e_driver.mjs --clip clip.y4m --out result.json [--run-s S] [--www DIR]');
@@ -211,6 +213,7 @@ async function collect(page) {
       speed_text: document.getElementById('speed').textContent, bundle_text: document.getElementById('bundle').textContent,
       camera_text: document.getElementById('camera').textContent,
       uncertainty_text: document.getElementById('uncertainty').textContent,
+      turning_text: document.getElementById('turning').textContent,
     };
   });
 }
@@ -519,7 +522,8 @@ async function shortPhases(page, server, args, result) {
   // no sensor setting stored and no URL flag for them: the app's defaults (tilt sensor on)
   await page.addInitScript(() => localStorage.setItem('crossing-assist-settings',
     JSON.stringify({ tutorialDone: true, hapticDirections: true })));
-  await page.goto(`${server.url}?test=1${args.sidewaysAfter ? `&sideways_after_s=${args.sidewaysAfter}` : ''}`);
+  await page.goto(`${server.url}?test=1${args.sidewaysAfter ? `&sideways_after_s=${args.sidewaysAfter}` : ''}`
+    + `${args.visualYaw !== undefined ? `&visualyaw=${args.visualYaw}` : ''}`);
   result.page_url = page.url();
   result.stored_settings = await page.evaluate(() => localStorage.getItem('crossing-assist-settings'));
   const base = args.level ? LEVEL_PORTRAIT : null;
