@@ -56,7 +56,8 @@ class Pipeline:
 
     Turns: a yaw rate given with a frame (a gyroscope) is the decision logic's; without one the
     turn since the last frame is read from the frames themselves (:class:`VisualYaw`), unless
-    ``visual_yaw`` is False (then none: the belief and the hold stay put while the view moves)."""
+    ``visual_yaw`` is False (then none: the belief and the hold stay put while the view moves); a
+    frame given with its roll is read levelled, as the model sees it."""
 
     def __init__(self, engine: Engine, decision_cfg: DecisionConfig | None = None,
                  beacon_cfg: BeaconConfig | None = None, *, visual_yaw: bool = True) -> None:
