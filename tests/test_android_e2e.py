@@ -1068,6 +1068,48 @@ def test_visualyaw_0_follows_no_turn_and_says_so(narrow_video: dict) -> None:
     assert "visualYaw" not in json.loads(r["stored_settings"])
 
 
+@pytest.fixture(scope="module")
+def wrong_gyro(tmp_path_factory) -> dict:
+    """The toy bundle, a portrait camera panning right over a textured scene (6 px a frame at 10
+    fps: about 30 deg/s at the portrait FOV), and a gyroscope that reads the same turn as a turn
+    left (?gyro=1): its sign is wrong on this phone."""
+    clip = _clip_tool()
+    tmp = tmp_path_factory.mktemp("android_e2e_gyro")
+    bundle = toy_bundle.make_toy_bundle(tmp / "bundle", toy_bundle.APP_TOY, geometry=APP_GEOMETRY)
+    rng = np.random.default_rng(7)
+    h, w, step = 160, 120, 6
+    scene = rng.uniform(0, 255, (h, w + step * 80, 3))
+    for axis in (0, 1):   # a smooth random scene: enough texture for the picture's turn
+        scene = sum(np.roll(scene, k, axis=axis) for k in range(-3, 4)) / 7
+    scene = np.clip((scene - scene.mean()) * 4 + 128, 0, 255).astype(np.uint8)
+    frames = [np.ascontiguousarray(scene[:, step * k:step * k + w]) for k in range(80)]
+    clip.write_y4m(tmp / "clip.y4m", frames, 10)
+    result = _drive(tmp, _build(tmp, bundle), tmp / "clip.y4m", 6.0, "--phases", "short", "--viewport", "390x844",
+                    "--gyro", "-30")
+    return {"result": result}
+
+
+def test_a_gyroscope_turning_the_wrong_way_is_found_out_and_left(wrong_gyro: dict) -> None:
+    """?gyro=1 on a phone whose gyroscope reads the camera's turn right as a turn left: the
+    picture's turn (GyroCheck) finds it out after its first clear turns, the user hears and sees
+    so once, and from then on the Decider follows the picture's turn (rightwards), not the
+    gyroscope's, for the rest of the guidance."""
+    r = wrong_gyro["result"]
+    frames = [e for e in r["trace"] if e["kind"] == "frame"]
+    checks = [e for e in r["trace"] if e["kind"] == "gyro_check"]
+    assert len(checks) == 1 and checks[0]["verdict"] == "wrong", checks
+    before = [e for e in frames if e["t"] < checks[0]["t"]]
+    after = [e for e in frames if e["t"] >= checks[0]["t"]]
+    assert before and {e["yaw_source"] for e in before} == {"gyro"}, {e["yaw_source"] for e in before}
+    assert all(e["yaw_rate_dps"] < -20 for e in before[1:]), [e["yaw_rate_dps"] for e in before]
+    assert len(before) <= 20, len(before)   # found out within a couple of seconds of turning
+    assert len(after) >= 10 and {e["yaw_source"] for e in after} == {"camera"}
+    assert np.median([e["yaw_rate_dps"] for e in after]) > 15   # the picture's turn: right
+    spoken = [e["text"] for e in r["trace"] if e["kind"] == "speech" and "gyroscope" in e["text"]]
+    assert spoken == ["The gyroscope reads turns the wrong way: turns are followed from the camera picture."], spoken
+    assert r["turning_text"].endswith("(camera picture)"), r["turning_text"]
+
+
 # ----------------------------------------------------------------------------- the shipped bundle
 
 

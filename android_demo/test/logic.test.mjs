@@ -11,7 +11,7 @@ import { fileURLToPath } from 'node:url';
 import { actionHeading, headingToPan, spaceGroups, spaceNames } from '../www/js/actions.js';
 import { BundleError, parseBundleMeta } from '../www/js/bundle.js';
 import { gateKind, gateThreshold, LEVEL, levelAngle, rolledTooFar } from '../www/js/geometry.js';
-import { cameraElevationDeg, cameraRollDeg, NO_TILT_TEXT, sameFrame, SIDEWAYS, SidewaysHint, TILT, TiltSilence, TiltWatch, Watchdog, YawIntegrator,
+import { cameraElevationDeg, cameraRollDeg, GYRO_CHECK, GyroCheck, NO_TILT_TEXT, sameFrame, SIDEWAYS, SidewaysHint, TILT, TiltSilence, TiltWatch, Watchdog, YawIntegrator,
   yawRateFromRotation } from '../www/js/live.js';
 import { cueFor, Decider, decisionConfig, observationFromOutputs } from '../www/js/logic.js';
 import { rgbaToRgb } from '../www/js/model.js';
@@ -787,4 +787,29 @@ test('the helper view names an ensemble bundle by its members', () => {
   assert.equal(modelName({ ensemble: [{ backbone: 'efficientnet_lite0' }, { backbone: 'efficientnet_lite0' }] }),
     'ensemble of 2 × efficientnet_lite0');
   assert.equal(modelName(undefined), 'unknown backbone');
+});
+
+test('a gyroscope the camera picture contradicts is found out; passing buses and a still phone are not', () => {
+  const run = (pairs) => {
+    const g = new GyroCheck();
+    return pairs.map(([gyro, cam]) => g.add(gyro, cam));
+  };
+  const turns = (n, gyro, cam) => Array.from({ length: n }, () => [gyro, cam]);
+  // the right sign: ok once enough turns were seen by both, never before
+  const right = run(turns(10, 28, 30));
+  assert.deepEqual(right.slice(0, GYRO_CHECK.least - 1), Array(GYRO_CHECK.least - 1).fill('unchecked'));
+  assert.equal(right.at(-1), 'ok');
+  // turned the wrong way: wrong, and it stays wrong
+  assert.equal(run(turns(GYRO_CHECK.least, -30, 30)).at(-1), 'wrong');
+  assert.equal(run(turns(GYRO_CHECK.least - 1, -30, 30)).at(-1), 'unchecked');
+  assert.equal(run([...turns(GYRO_CHECK.least, 30, -30), ...turns(20, 30, 30)]).at(-1), 'wrong');
+  // a still phone (gyroscope noise) with a bus crossing the view for 3 s decides nothing, nor a
+  // blank wall (the picture reads no turn), nor a reading that is not a number
+  assert.equal(run([...turns(30, 3, -25), ...turns(30, 40, 0), ...turns(10, NaN, 30)]).at(-1), 'unchecked');
+  // a bus read against the turn now and then does not condemn a good gyroscope
+  const mixed = Array.from({ length: 30 }, (_, i) => (i % 3 === 0 ? [25, -40] : [25, 25]));
+  assert.ok(run(mixed).slice(GYRO_CHECK.least + 2).every((v) => v === 'ok'));
+  // right most of the time after a bad start: ok again (never wrong)
+  const start = run([...turns(5, -30, 30), ...turns(12, 30, 30)]);
+  assert.ok(!start.includes('wrong') && start.at(-1) === 'ok');
 });

@@ -35,6 +35,7 @@
 // is still turned 75 deg, until the app says it has no tilt sensor and 5 frames came more than
 // 0.6 s after the last reading, then reports level again), (--tilt 1: the phone tilted down until
 // a "not sure" stop says to raise it), (--visual-yaw 0|1: the page loaded with ?visualyaw=0|1),
+// (--gyro DPS: loaded with ?gyro=1, a gyroscope reading a steady turn of DPS deg/s, + right),
 // collect, double tap.
 // Landscape "full" phases dispatch no deviceorientation event at all: no tilt sensor.
 // The driver asserts nothing; it exits non-zero only when it could not run.
@@ -69,6 +70,7 @@ function parseArgs(argv) {
     else if (k === '--sensor-stops') args.sensorStops = v === '1';
     else if (k === '--sideways-after') args.sidewaysAfter = Number(v);
     else if (k === '--visual-yaw') args.visualYaw = v;
+    else if (k === '--gyro') args.gyro = Number(v);
     else throw new Error(`unknown argument ${k}`);
   }
   if (!args.clip || !args.out) throw new Error('usage: e2e_driver.mjs --clip clip.y4m --out result.json [--run-s S] [--www DIR]');
@@ -523,7 +525,7 @@ async function shortPhases(page, server, args, result) {
   await page.addInitScript(() => localStorage.setItem('crossing-assist-settings',
     JSON.stringify({ tutorialDone: true, hapticDirections: true })));
   await page.goto(`${server.url}?test=1${args.sidewaysAfter ? `&sideways_after_s=${args.sidewaysAfter}` : ''}`
-    + `${args.visualYaw !== undefined ? `&visualyaw=${args.visualYaw}` : ''}`);
+    + `${args.visualYaw !== undefined ? `&visualyaw=${args.visualYaw}` : ''}${args.gyro !== undefined ? '&gyro=1' : ''}`);
   result.page_url = page.url();
   result.stored_settings = await page.evaluate(() => localStorage.getItem('crossing-assist-settings'));
   const base = args.level ? LEVEL_PORTRAIT : null;
@@ -532,6 +534,10 @@ async function shortPhases(page, server, args, result) {
   result.first_load = server.requests.slice();
   result.states = { ready: await page.evaluate(screenState) };
   await control(page).click();
+  if (args.gyro !== undefined) {   // a portrait phone's gyroscope reading a steady turn (+ right: rotation about y, negative)
+    await page.evaluate((rate) => setInterval(() => window.dispatchEvent(new DeviceMotionEvent('devicemotion',
+      { rotationRate: { alpha: 0, beta: 0, gamma: -rate }, interval: 16 })), 16), args.gyro);
+  }
   await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'frame'), null, 60000, 'the first frame decision');
   const samples = [];
   await guide(page, args.runS, samples);

@@ -43,7 +43,9 @@
 // a phone held upright and unsure for 5 s is told to hold it sideways (SidewaysHint).
 // Following turns (the Decider's yaw rate, so the beacon turns with a sweeping phone): the
 // gyroscope when it is on (settings.js `gyro`, OFF by default: its sign on a given phone needs a
-// sighted check first); else the turn read from the camera picture, the shift between the frame
+// sighted check first) and the camera picture has not found it turning the wrong way (live.js
+// GyroCheck: then the user is told once, and the picture's turn is followed for the rest of the
+// guidance); else the turn read from the camera picture, the shift between the frame
 // the model ran on and the one before (visualyaw.js VisualYaw, the Python pipeline's; settings.js
 // `visualYaw`, ON by default), started afresh with every fresh Decider; else none (0). Each frame's
 // trace entry says which (yaw_source 'gyro' | 'camera' | 'off').
@@ -63,7 +65,7 @@ import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
 import { cameraFov, defaultFovText, FovError, frameView, gateKind, gateThreshold, orientation, PAD_RGB, rolledTooFar, zoomedFov } from './geometry.js';
 import { Haptics } from './haptics.js';
-import { isFresh, NO_TILT_TEXT, sameFrame, SidewaysHint, TiltSilence, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator,
+import { GYRO_WRONG_TEXT, GyroCheck, isFresh, NO_TILT_TEXT, sameFrame, SidewaysHint, TiltSilence, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator,
   yawRateFromRotation } from './live.js';
 import { argmax, configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN } from './logic.js';
 import { fetchBundle, openBest } from './model.js';
@@ -295,10 +297,12 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   // The turn since the last frame: the gyroscope's (taken below), else read from this frame (the
   // whole levelled frame, at the whole frame's FOV), else none. Read before the model runs: a
   // result dropped below leaves this frame as the last one only until resetDecisions.
-  const yawSource = app.yaw ? 'gyro' : sensorOn('visualYaw') ? 'camera' : 'off';
-  if (yawSource !== 'camera') app.visualYaw.reset(); // turned on later: afresh, not against an old frame
-  const cameraTurn = yawSource === 'camera' ? app.visualYaw.update(frame, captured, cam.fov) : 0;
-  app.cameraTurn = yawSource === 'camera' ? cameraTurn : null;
+  // With the gyroscope on, the picture's turn is read too, to check the gyroscope's (GyroCheck).
+  const picture = sensorOn('visualYaw');
+  let yawSource = gyroFollowed() ? 'gyro' : picture ? 'camera' : 'off';
+  if (!picture) app.visualYaw.reset(); // turned on later: afresh, not against an old frame
+  const cameraTurn = picture ? app.visualYaw.update(frame, captured, cam.fov) : 0;
+  app.cameraTurn = picture ? cameraTurn : null;
   const decider = app.decider;
   let outputs = null;
   let obs;
@@ -319,7 +323,17 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   app.inflight = null;
   // paused, ended, or the decisions reset while the model ran (e.g. hidden and shown again): drop it
   if (!app.running || app.paused || generation !== app.generation) return;
-  const yaw = yawSource === 'gyro' ? app.yaw.take(dt) : cameraTurn;
+  let yaw = yawSource === 'camera' ? cameraTurn : 0;
+  if (yawSource === 'gyro') {
+    const gyro = app.yaw.take(dt);
+    if (picture && app.gyroCheck.add(gyro, cameraTurn) === 'wrong') {
+      gyroWrong(captured);
+      yawSource = 'camera';
+      yaw = cameraTurn;
+    } else {
+      yaw = gyro;
+    }
+  }
   const d = decider.step(captured, obs, yaw);
   const decided = now();
   const fresh = isFresh(decided, captured);
@@ -426,10 +440,26 @@ function poll() {
   app.polls = (app.polls || 0) + 1;
   if (app.polls % 10 === 0) {
     view.levels(app.audio.levels());
-    if (app.yaw) view.turning(app.turnRate || 0, 'gyroscope');
+    if (gyroFollowed()) view.turning(app.turnRate || 0, 'gyroscope');
     else view.turning(sensorOn('visualYaw') ? app.cameraTurn ?? 0 : null, 'camera picture'); // null: not followed
     view.tilt(tiltText(t));
   }
+}
+
+/** The gyroscope is on and not found out by the camera picture (GyroCheck). */
+function gyroFollowed() {
+  return Boolean(app.yaw) && app.gyroCheck.verdict !== 'wrong';
+}
+
+/** The camera picture contradicts the gyroscope: turns are followed from the picture from now
+ * on (this guidance), and the user is told once, spoken whole and shown. */
+function gyroWrong(t) {
+  record({ kind: 'gyro_check', t, verdict: 'wrong', turns: app.gyroCheck.turns.slice() });
+  view.status(GYRO_WRONG_TEXT, '');
+  $('notice').textContent = GYRO_WRONG_TEXT;
+  $('notice').hidden = false;
+  app.speaker.say(GYRO_WRONG_TEXT, { urgent: true });
+  record({ kind: 'speech', t, text: GYRO_WRONG_TEXT });
 }
 
 /** The tilt sensor gives nothing: guidance goes on unlevelled, and the user is told, in words
@@ -547,6 +577,7 @@ async function startSensors(asked) {
   if (motion === 'granted') {
     window.addEventListener('devicemotion', onMotion);
     app.yaw = new YawIntegrator();
+    app.gyroCheck = new GyroCheck();
   } else if (motion === 'denied') {
     showError('The gyroscope was not allowed: turns are not followed.');
   }

@@ -116,6 +116,46 @@ export class YawIntegrator {
 }
 
 /**
+ * The gyroscope checked against the camera picture. Its sign on a given phone rests on the W3C
+ * axes and yawRateFromRotation's reading of the screen angle, which a browser or a phone may
+ * break; a gyroscope that reads turns the wrong way moves the beacon away from the crossing as
+ * the user turns toward it. So while both are on, every frame's turn from the gyroscope is
+ * compared with the turn read from the picture (visualyaw.js). Only frames where both read a
+ * clear turn (|rate| >= `turn_dps`) count: the same way confirms, the other way contradicts.
+ * A turn in the picture alone proves nothing (a bus crossing a still phone's view, or a bar
+ * moving in the test clip, reads as a turn), nor does a turn of the gyroscope alone (a blank
+ * wall). Of the last `window` counted frames, once at least `least` were seen, `contradicted`
+ * or more contradicting makes the verdict 'wrong' for good (this guidance): the gyroscope is no
+ * longer followed. A gyroscope blind to turns (another axis) is not found out: it leaves the
+ * beacon where the goal was, as no yaw input does, rather than sending it the wrong way.
+ */
+export const GYRO_WRONG_TEXT = 'The gyroscope reads turns the wrong way: turns are followed from the camera picture.';
+export const GYRO_CHECK = Object.freeze({ turn_dps: 15, window: 12, least: 8, contradicted: 0.75 });
+
+export class GyroCheck {
+  constructor(cfg = GYRO_CHECK) {
+    this.cfg = cfg;
+    this.turns = []; // the last counted frames: true = confirmed
+    this.verdict = 'unchecked'; // 'unchecked' | 'ok' | 'wrong'
+  }
+
+  /** One frame's turn rates (deg/s, + right): the gyroscope's and the picture's; returns the verdict. */
+  add(gyroDps, cameraDps) {
+    const c = this.cfg;
+    if (this.verdict === 'wrong' || !(Math.abs(cameraDps) >= c.turn_dps && Math.abs(gyroDps) >= c.turn_dps)) {
+      return this.verdict; // NaN fails the comparisons too
+    }
+    this.turns.push(gyroDps * cameraDps > 0);
+    if (this.turns.length > c.window) this.turns.shift();
+    if (this.turns.length >= c.least) {
+      const bad = this.turns.filter((ok) => !ok).length / this.turns.length;
+      this.verdict = bad >= c.contradicted ? 'wrong' : 'ok';
+    }
+    return this.verdict;
+  }
+}
+
+/**
  * How the phone may be tilted before the far kerb leaves the rows the model is shown. The view
  * crop keeps the training camera's vertical view, centred. PTL's photographers pointed their
  * phones a few degrees below the horizon (their far kerbs sit just above the middle of the
