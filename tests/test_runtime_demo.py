@@ -130,6 +130,29 @@ def test_cli_runs_and_says_where_the_outputs_are(tmp_path, toy_bundle):  # noqa:
     assert {p.name for p in out.iterdir()} >= {"beacon.wav", "annotated.mp4", "trace.jsonl"}
 
 
+def test_threads_make_the_same_decisions(tmp_path, toy_bundle, capsys, monkeypatch):  # noqa: F811
+    """``--threads 2`` (the model on two onnxruntime threads) writes the same trace as the default
+    one thread (the MC-dropout masks do not depend on the threads); a thread count out of range
+    is one line and exit 2."""
+    from crossing_assist.runtime import pipeline
+
+    opened, engine = [], pipeline.Engine
+    monkeypatch.setattr(pipeline, "Engine", lambda *a, **k: opened.append(k["threads"]) or engine(*a, **k))
+    clip = write_clip(tmp_path / "c.mp4", np.linspace(0.2, 0.8, 12), noise=8.0)
+    traces = []
+    for threads in ("1", "2"):
+        out = tmp_path / f"t{threads}"
+        assert demo.main([str(clip), "--bundle", str(toy_bundle), "--out", str(out), "--quiet", "--no-video",
+                          "--threads", threads]) == 0
+        traces.append((out / "trace.jsonl").read_text())
+    assert opened == [1, 2] and traces[0] == traces[1] and traces[0].count("\n") >= 12
+    capsys.readouterr()
+    for bad in ("-1", "65"):
+        assert demo.main([str(clip), "--bundle", str(toy_bundle), "--threads", bad]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--threads" in err
+
+
 def test_cli_bad_input_is_one_line(tmp_path, toy_bundle):  # noqa: F811
     proc = subprocess.run([sys.executable, "-m", "crossing_assist.runtime.demo", str(tmp_path / "nope.mp4"),
                            "--bundle", str(toy_bundle)], capture_output=True, text=True, timeout=120)
@@ -160,11 +183,11 @@ def test_benchmark_reports_decisions_per_second(tmp_path, toy_bundle):  # noqa: 
     clip = write_clip(tmp_path / "b.mp4", np.linspace(0.1, 0.9, 30))
     script = Path(__file__).resolve().parents[1] / "benchmarks" / "demo_throughput.py"
     proc = subprocess.run([sys.executable, str(script), "--bundle", str(toy_bundle), "--video", str(clip),
-                           "--repeat", "1", "--json"], capture_output=True, text=True, timeout=120)
+                           "--repeat", "1", "--json", "--threads", "1", "2"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     rec = json.loads(proc.stdout.strip().splitlines()[-1])
     assert rec["decisions_per_s"] > 0 and rec["x_real_time"] == pytest.approx(rec["decisions_per_s"] / 30, rel=1e-6)
-    assert str(toy_bundle) in proc.stdout
+    assert str(toy_bundle) in proc.stdout and "model on 1 thread," in proc.stdout and "model on 2 threads:" in proc.stdout
 
 
 def test_with_ffmpeg_on_path_the_beacon_is_muxed_into_the_video(tmp_path, toy_bundle, monkeypatch):  # noqa: F811

@@ -26,6 +26,7 @@ DEFAULT_CLIP = ASSETS / "sample_clip.mp4"
 DEFAULT_OUT = Path("crossing_demo_out")
 MAX_WATCHDOG_S = 2.0   # the stale-frame stop must fire: a longer silence is not a safety switch
 MAX_CAMERA = 63
+MAX_THREADS = 64
 
 
 class DemoError(UserError, RuntimeError):
@@ -48,6 +49,7 @@ class DemoConfig:
     watchdog_s: float
     fov_deg: float | None = None
     visual_yaw: bool = True
+    threads: int = 1
 
 
 def parse_args(argv: list[str] | None) -> DemoConfig:
@@ -70,6 +72,9 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
     ap.add_argument("--no-visual-yaw", action="store_true",
                     help="do not follow the camera's turns read from the frames (without a gyroscope, the "
                          "direction then stays where it was while the phone turns)")
+    ap.add_argument("--threads", type=int, default=1, metavar="N",
+                    help=f"onnxruntime threads for the model, 1..{MAX_THREADS} (default 1, as a phone's app runs it; "
+                         "0 = onnxruntime's default, all cores)")
     ap.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     a = ap.parse_args(argv)
     if a.video is not None and a.camera is not None:
@@ -88,6 +93,8 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
     if not 0 < a.watchdog <= MAX_WATCHDOG_S:
         raise DemoError(f"--watchdog {a.watchdog} invalid; valid: 0 < seconds <= {MAX_WATCHDOG_S} "
                         "(the beacon must stop soon after the frames stop)")
+    if not 0 <= a.threads <= MAX_THREADS:
+        raise DemoError(f"--threads {a.threads} invalid; valid: 0..{MAX_THREADS} (0 = onnxruntime's default)")
     if a.max_seconds is not None and not 0 < a.max_seconds < 1e7:
         raise DemoError(f"--max-seconds {a.max_seconds} invalid; valid: > 0 seconds")
     video, bundle = a.video, a.bundle
@@ -109,7 +116,7 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
                       annotate=not a.no_video, progress=not a.quiet,
                       audio_device=int(dev) if dev is not None and dev.isdigit() else dev,
                       max_seconds=a.max_seconds, watchdog_s=a.watchdog, fov_deg=a.fov,
-                      visual_yaw=not a.no_visual_yaw)
+                      visual_yaw=not a.no_visual_yaw, threads=a.threads)
 
 
 def run_live_demo(cfg: DemoConfig) -> None:
@@ -120,7 +127,8 @@ def run_live_demo(cfg: DemoConfig) -> None:
     from crossing_assist.runtime.pipeline import open_pipeline, trace_record
     from crossing_assist.runtime.sources import CameraSource, VideoSource
 
-    pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, visual_yaw=cfg.visual_yaw)
+    pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, visual_yaw=cfg.visual_yaw,
+                             threads=cfg.threads)
     player = CuePlayer(pipeline.beacon_cfg)
     source = CameraSource(cfg.camera) if cfg.camera is not None else VideoSource(cfg.video)
     cfg.out_dir.mkdir(parents=True, exist_ok=True)
@@ -147,7 +155,8 @@ def run(cfg: DemoConfig) -> None:
 
     summary = run_offline(OfflineConfig(video=cfg.video, bundle=cfg.bundle, out_dir=cfg.out_dir,
                                         annotate=cfg.annotate, progress=cfg.progress, fov_deg=cfg.fov_deg,
-                                        watchdog_s=cfg.watchdog_s, visual_yaw=cfg.visual_yaw))
+                                        watchdog_s=cfg.watchdog_s, visual_yaw=cfg.visual_yaw,
+                                        threads=cfg.threads))
     for warning in summary.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"crossing-demo: {cfg.video} with bundle {cfg.bundle}")

@@ -53,6 +53,7 @@ class OfflineConfig:
     fov_deg: float | None = None     # the camera's horizontal FOV; None = the bundle's per orientation
     watchdog_s: float = DEFAULT_WATCHDOG_S   # seconds without a fresh frame before the stop (a video that dies)
     visual_yaw: bool = True          # follow the camera's turns read from the frames (runtime.visual_yaw)
+    threads: int = 1                 # onnxruntime threads for the model (0: its default, all cores)
 
 
 @dataclass(frozen=True)
@@ -256,7 +257,7 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     from crossing_assist.runtime.sources import SourceError, VideoSource
 
     pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, beacon=cfg.beacon,
-                             engine=engine, visual_yaw=cfg.visual_yaw)
+                             engine=engine, visual_yaw=cfg.visual_yaw, threads=cfg.threads)
     engine = pipeline.engine
     source = VideoSource(cfg.video, max_width=cfg.max_width)
     rec = _Recorder(cfg, engine, source.fps)

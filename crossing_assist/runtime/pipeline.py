@@ -104,13 +104,14 @@ class Pipeline:
 
 def open_pipeline(bundle: str | os.PathLike, *, fov_deg: float | None = None, watchdog_s: float = DEFAULT_WATCHDOG_S,
                   beacon: BeaconConfig | None = None, engine: Engine | None = None,
-                  visual_yaw: bool = True) -> Pipeline:
+                  visual_yaw: bool = True, threads: int = 1) -> Pipeline:
     """The demo's pipeline for ``bundle``: its :class:`Engine` (``fov_deg``: the camera's
     horizontal FOV, None = the bundle's per orientation; or the given ``engine``), the bundle's
     decision config with ``watchdog_s`` as the stale-frame period, ``beacon`` (default
-    :class:`BeaconConfig`) and turns read from the frames unless ``visual_yaw`` is False. The
-    live and the offline demo both build theirs here."""
-    engine = engine or Engine(bundle, fov_deg=fov_deg)
+    :class:`BeaconConfig`) and turns read from the frames unless ``visual_yaw`` is False;
+    ``threads``: onnxruntime's for a new engine (0: its default). The live and the offline demo
+    both build theirs here."""
+    engine = engine or Engine(bundle, fov_deg=fov_deg, threads=threads)
     return Pipeline(engine, engine.decision_config(watchdog_s=watchdog_s), beacon or BeaconConfig(),
                     visual_yaw=visual_yaw)
 
