@@ -189,7 +189,9 @@ def eval_parser() -> argparse.ArgumentParser:
     p.add_argument("--scan", type=float, default=0.0, metavar="DEG_PER_S",
                    help="bundles: also play each photo as a user scanning for the crossing, the camera turned "
                         "0 -> +20 -> -20 -> 0 deg at this rate (e.g. 30), the turn told to the decision logic by a "
-                        "gyroscope, read from the frames (the default without one) and not at all; judged per frame")
+                        "gyroscope, read from the frames (the default without one) and not at all; judged per frame; "
+                        "with --portrait also by a narrow camera (the middle 3:4 window), with --negatives those "
+                        "frames scanned too")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the MC-dropout masks (onnxruntime for bundles, torch for --samples > 1): "
                         "the same seed gives the same figures")
