@@ -455,22 +455,23 @@ function gyroFollowed() {
  * on (this guidance), and the user is told once, spoken whole and shown. */
 function gyroWrong(t) {
   record({ kind: 'gyro_check', t, verdict: 'wrong', turns: app.gyroCheck.turns.slice() });
-  view.status(GYRO_WRONG_TEXT, '');
-  $('notice').textContent = GYRO_WRONG_TEXT;
-  $('notice').hidden = false;
-  app.speaker.say(GYRO_WRONG_TEXT, { urgent: true });
-  record({ kind: 'speech', t, text: GYRO_WRONG_TEXT });
+  notice(t, GYRO_WRONG_TEXT);
 }
 
-/** The tilt sensor gives nothing: guidance goes on unlevelled, and the user is told, in words
- * spoken (whole: routine sentences wait for it) and shown (a line kept until guidance ends). */
+/** Something the user must know for the rest of this guidance: spoken whole (routine sentences
+ * wait for it) and shown in a line kept until guidance ends. */
+function notice(t, text) {
+  view.status(text, '');
+  $('notice').textContent = text;
+  $('notice').hidden = false;
+  app.speaker.say(text, { urgent: true });
+  record({ kind: 'speech', t, text });
+}
+
+/** The tilt sensor gives nothing: guidance goes on unlevelled, and the user is told (notice). */
 function noTiltSensor(t) {
   record({ kind: 'no_tilt', t, permission: app.sensors?.tilt ?? null });
-  view.status(NO_TILT_TEXT, '');
-  $('notice').textContent = NO_TILT_TEXT;
-  $('notice').hidden = false;
-  app.speaker.say(NO_TILT_TEXT, { urgent: true });
-  record({ kind: 'speech', t, text: NO_TILT_TEXT });
+  notice(t, NO_TILT_TEXT);
 }
 
 /** The helper view's tilt sensor line. */
