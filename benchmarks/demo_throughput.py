@@ -33,7 +33,7 @@ import numpy as np  # noqa: E402
 
 from crossing_assist.bundle import BundleError  # noqa: E402
 from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer, cue_for  # noqa: E402
-from crossing_assist.runtime.demo import DEFAULT_BUNDLE, DEFAULT_CLIP  # noqa: E402
+from crossing_assist.runtime.demo import DEFAULT_BUNDLE, DEFAULT_CLIP, MAX_THREADS  # noqa: E402
 from crossing_assist.runtime.engine import Engine  # noqa: E402
 from crossing_assist.runtime.pipeline import Pipeline, cached_loop  # noqa: E402
 from crossing_assist.runtime.sources import SourceError, VideoSource  # noqa: E402
@@ -101,8 +101,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="onnxruntime threads for the model, each measured (default 1); the first is the baseline")
     ap.add_argument("--json", action="store_true", help="also print one JSON line (the first thread count)")
     a = ap.parse_args(argv)
-    if any(not 1 <= n <= 64 for n in a.threads):
-        print(f"error: --threads {a.threads} invalid; valid: 1..64 each", file=sys.stderr)
+    if any(not 1 <= n <= MAX_THREADS for n in a.threads):
+        print(f"error: --threads {a.threads} invalid; valid: 1..{MAX_THREADS} each", file=sys.stderr)
         return 2
     cv2.setNumThreads(1)
     bundle = a.bundle or DEFAULT_BUNDLE

@@ -220,10 +220,10 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         out, m = evaluate(cfg)
         print(f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f}), "
               f"bin MAE {m['bin_mae']:.3f} -> {out / 'metrics.json'}")
+        f = lambda x, p=".3f": "n/a" if x is None else format(x, p)  # noqa: E731  (a figure, or n/a)
         for name in ("landscape", "portrait", "portrait_window"):
             v = m.get("listen", {}).get(name)
             if v:
-                f = lambda x, p=".3f": "n/a" if x is None else format(x, p)  # noqa: E731
                 kinds = v.get("orientations") or {}
                 label = name if name != "landscape" or set(kinds) <= {"landscape"} else \
                     "as taken (" + ", ".join(f"{n} {o}" for o, n in sorted(kinds.items())) + ")"
@@ -246,7 +246,6 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
 
             print(f"{'scan':>15} ({scan['photos']} photos, each turned 0 -> +{scan['amplitude_deg']:g} -> "
                   f"-{scan['amplitude_deg']:g} -> 0 deg at {scan['rate_dps']:g} deg/s; every frame after the first second)")
-            f = lambda x, p=".3f": "n/a" if x is None else format(x, p)  # noqa: E731
 
             def judged(s: dict) -> None:
                 for k, name in SCAN_YAW_INPUTS.items():

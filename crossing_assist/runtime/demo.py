@@ -73,7 +73,7 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
                     help="do not follow the camera's turns read from the frames (without a gyroscope, the "
                          "direction then stays where it was while the phone turns)")
     ap.add_argument("--threads", type=int, default=1, metavar="N",
-                    help=f"onnxruntime threads for the model, 1..{MAX_THREADS} (default 1, as a phone's app runs it; "
+                    help=f"onnxruntime threads for the model, 0..{MAX_THREADS} (default 1, as a phone's app runs it; "
                          "0 = onnxruntime's default, all cores)")
     ap.add_argument("--debug", action="store_true", help="show the traceback of an unexpected error")
     a = ap.parse_args(argv)
