@@ -41,18 +41,18 @@ from prepared_data import draw, open_manifest  # noqa: E402  (a sibling script: 
 from crossing_assist.bundle import BundleError
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.fileio import atomic_write_text
-from crossing_assist.models.evaluate import scan_clips
+from crossing_assist.models.evaluate import SCAN_WINDOW_ASPECT, scan_clips
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
 from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.listen import SCAN_FPS, SCAN_YAW_INPUTS, Listener, judge_scans, scan_yaw
 
 
-def play(engine: Engine, images, rows, psi: np.ndarray) -> tuple[Listener, np.ndarray, np.ndarray]:
+def play(engine: Engine, images, rows, psi: np.ndarray, window: float | None = None) -> tuple[Listener, np.ndarray, np.ndarray]:
     """Each photo scanned: its predictions (a :class:`Listener`'s clips, which it saves and loads),
     the goal's strip and the yaw rate read from the frames, per frame [photo, frame]."""
     lis, labels, rates = Listener(engine, len(psi) / SCAN_FPS, SCAN_FPS), [], []
     for i, (r, img) in enumerate(zip(rows, images)):
-        preds, labs, seen = scan_clips(engine, img, r.far_x, r.label, psi)
+        preds, labs, seen = scan_clips(engine, img, r.far_x, r.label, psi, window=window)
         lis.clips.append(preds)
         lis.labels.append(r.label)
         labels.append(labs)
@@ -71,6 +71,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--amplitude", type=float, default=20.0, help="degrees either side of straight ahead (default 20)")
     ap.add_argument("--rate", type=float, default=30.0, help="turn rate, degrees per second (default 30)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--window", action="store_true",
+                    help="a narrow camera: the middle 3:4 window of each turned view (crossing-eval --scan --portrait)")
     ap.add_argument("--cache", type=Path, help="the model's outputs: written after playing, read with --replay")
     ap.add_argument("--replay", action="store_true", help="decide again from --cache without running the model")
     ap.add_argument("--out", type=Path, help="write the figures as JSON here")
@@ -101,7 +103,8 @@ def main(argv: list[str] | None = None) -> int:
         rng = np.random.default_rng(a.seed)
         rows = draw(rows, a.photos, rng)
         psi = scan_yaw(a.amplitude, a.rate)
-        lis, labels, rates = play(engine, [load_frame(ds.image_path(r), r.flags) for r in rows], rows, psi)
+        lis, labels, rates = play(engine, [load_frame(ds.image_path(r), r.flags) for r in rows], rows, psi,
+                                  SCAN_WINDOW_ASPECT if a.window else None)
         if a.cache:
             a.cache.parent.mkdir(parents=True, exist_ok=True)
             lis.save(a.cache, scan_labels=labels, psi=psi, camera_rates=rates)

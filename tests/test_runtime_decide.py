@@ -193,6 +193,46 @@ def test_yaw_moves_the_held_heading_and_the_belief():
     assert out[-1].heading_deg == pytest.approx(heading(7) - turned, abs=2.0)
 
 
+def test_an_edge_strip_means_at_the_edge_or_beyond_so_turning_towards_it_places_nothing():
+    """A goal seen in an edge strip may lie far beyond the edge (out of view but inferable is
+    labelled so). Turning towards it must not carry the belief or the hold inward to one place:
+    a narrow camera scanning PTL photos played goals held so 2 strips and more off (1.5 % of its
+    frames, two thirds of them from the hold; 0.5 % with this rule, scripts/pan_probe.py --window)."""
+    edge = np.zeros(13)
+    edge[12] = 1.0
+    tiny = bf.yaw_shift(edge, 1e-9, 41.0)                  # continuous: a tiny turn leaves it at the edge
+    assert tiny[12] == pytest.approx(1.0)
+    step = x_to_heading(bin_center_x(12), 41.0) - x_to_heading(bin_center_x(9), 41.0)
+    moved = bf.yaw_shift(edge, step, 41.0)                 # its centre moved 3 strips in: anywhere in 9..12
+    assert moved.sum() == pytest.approx(1.0) and moved[1:9].sum() == pytest.approx(0.0, abs=1e-12)
+    assert moved[10] == pytest.approx(moved[11]) and moved[9] == pytest.approx(moved[12])
+    assert moved[10] > moved[9] > 0.0
+    inner = np.zeros(13)
+    inner[11] = 1.0                                        # a strip inside the view moves as before
+    assert bf.yaw_shift(inner, step, 41.0)[7:10].sum() == pytest.approx(1.0)
+    away = bf.yaw_shift(edge, -10.0, 41.0)                 # turning away: out of view, unknown
+    assert away[0] == pytest.approx(1.0)
+
+    cfg = DecisionConfig(fov_deg=41.0)
+    d = Decider(cfg)
+    run(d, [obs_bin(12, 0.95)] * 30)
+    nothing = [obs_bin(0, 0.8)] * 45                       # frames that see no goal: no evidence
+    out = run(d, nothing, t0=30 / FPS, yaw=30.0)           # 1.5 s turning right at 30 deg/s
+    strip = lambda o: 1 + int(12 * (0.5 + math.tan(math.radians(o.heading_deg)) / (2 * math.tan(math.radians(20.5)))))  # noqa: E731
+    assert all(o.stop or strip(o) >= 11 for o in out), "the beacon carried an edge goal inward"
+    assert any(o.hold_heading is None for o in out)
+    before = Decider(cfg)                                  # the rule off: the hold is carried 45 degrees in
+    run(before, [obs_bin(12, 0.95)] * 30)
+    before.hold_edge = 0
+    kept = [before.step(30 / FPS + i / FPS, nothing[0], 30.0) for i in range(10)]
+    assert kept[-1].hold_heading is not None and kept[-1].hold_heading < heading(12) - 4.0
+
+    d = Decider(cfg)                                       # a goal seen at the left edge, the user turns right:
+    run(d, [obs_bin(1, 0.95)] * 30)                        # away from it, so the hold stays at the left edge
+    out = run(d, nothing, t0=30 / FPS, yaw=30.0)
+    assert all(o.hold_heading is not None and o.hold_heading < -19.0 for o in out[:20])
+
+
 def test_stale_input_stops_within_the_watchdog_period_and_failures_stop_at_once():
     d = Decider(DecisionConfig(watchdog_s=0.5))
     run(d, [obs_bin(5)] * 30)

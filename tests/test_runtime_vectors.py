@@ -138,7 +138,7 @@ def test_a_turn_without_yaw_input_does_not_keep_the_old_direction(stored):
 
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == 12
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == 13
     assert "decision steps" in capsys.readouterr().out
 
 

@@ -9,7 +9,10 @@ android_demo/test_vectors.json, so change nothing here without regenerating the 
 * yaw shift: the user turned right by ``psi = yaw_rate * dt`` degrees, so every bin centre
   ``x_k`` moves to ``x' = heading_to_x(x_to_heading(x_k) - psi)`` (pinhole camera, bundle FOV);
   its mass is split linearly between the two nearest bin centres; mass leaving the frame
-  (``x' < 0`` or ``x' > 1``, or ``|heading| >= 90``) goes to ``unknown``.
+  (``x' < 0`` or ``x' > 1``, or ``|heading| >= 90``) goes to ``unknown``. An edge strip (1 or 12)
+  means "at this edge or beyond it" (a goal out of view but inferable is labelled so), so a turn
+  towards it does not bring its mass in to one known place: that mass is spread evenly between
+  its moved centre and the edge strip's own centre (:func:`spread_edge`).
 * diffusion: ``d = 0.25 (1 - exp(-dt / tau_diffuse))``; ``b_k <- (1-2d) b_k + d b_{k-1} + d b_{k+1}``
   over bins 1..12 with reflecting edges (``b_0 := b_1``, ``b_13 := b_12`` inside the sum).
 * forgetting: ``lam = exp(-dt / tau_forget)``; ``b <- lam b + (1 - lam) / 13``: without evidence a
@@ -65,6 +68,9 @@ def yaw_shift(b: np.ndarray, psi_deg: float, fov_deg: float) -> np.ndarray:
             out[0] += b[k]
             continue
         x = heading_to_x(h, fov_deg)
+        if (k == N_BINS and psi_deg > 0.0) or (k == 1 and psi_deg < 0.0):
+            spread_edge(out, k, N_BINS * x - 0.5, b[k])
+            continue
         if x < 0.0 or x > 1.0:
             out[0] += b[k]
             continue
@@ -77,6 +83,27 @@ def yaw_shift(b: np.ndarray, psi_deg: float, fov_deg: float) -> np.ndarray:
             out[i + 1] += (1.0 - f) * b[k]
             out[i + 2] += f * b[k]
     return out
+
+
+def spread_edge(out: np.ndarray, k: int, z: float, mass: float) -> None:
+    """Add an edge bin's ``mass`` to ``out`` after a turn moved its centre inward to ``z`` (a
+    0-based continuous bin index, unclipped): spread evenly over the interval from ``z`` to the
+    edge bin's own centre, each bin taking the share its cell ``[i - 0.5, i + 0.5]`` covers, the
+    part beyond the far edge of the frame to unknown. A goal seen at an edge may lie anywhere
+    beyond it, so after the turn it may be anywhere from ``z`` back out to the edge."""
+    e = float(k - 1)
+    lo, hi = min(z, e), max(z, e)
+    span = hi - lo
+    if not span > 1e-12:
+        out[k] += mass
+        return
+    inside = 0.0
+    for i in range(N_BINS):
+        share = min(hi, i + 0.5) - max(lo, i - 0.5)
+        if share > 0.0:
+            out[i + 1] += mass * share / span
+            inside += share
+    out[0] += mass * max(0.0, span - inside) / span
 
 
 def diffuse(b: np.ndarray, dt: float, tau_s: float) -> np.ndarray:

@@ -92,6 +92,14 @@ is no shift); ``sequence`` (frames at times and FOVs through one ``VisualYaw`` o
 the yaw rate after each: a turn right, left, a missing frame or FOV that starts afresh, a turn
 too fast to believe, a new size).
 The scenarios are those of version 11.
+
+Version 13: an edge strip means "at this edge or beyond it": a turn towards it spreads the
+belief's edge mass from its moved centre back out to the edge
+(:func:`crossing_assist.runtime.belief.spread_edge`), and a hold taken in an edge strip is
+dropped once such a turn carries it out of that strip (step 3). Scenarios ``edge_goal_turned_towards``
+(a goal seen in strip 12, then the user turns right with frames that see nothing) and
+``edge_goal_turned_away`` (seen in strip 1, then the same turn right: the hold stays) are
+appended; every earlier scenario whose turns move an edge strip's mass inward changes with it.
 """
 
 from __future__ import annotations
@@ -120,7 +128,7 @@ from crossing_assist.runtime import visual_yaw as vy
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 12
+VERSION = 13
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -221,6 +229,14 @@ def _scenarios(rng: np.random.Generator) -> list[tuple[str, DecisionConfig, list
     pan = [(i / FPS, 0.0, _frame(13, 9, 0.95, rng)) for i in range(30)]
     pan += [((30 + i) / FPS, 0.0, _frame(13, 3, 0.3, rng)) for i in range(30)]
     out.append(("pan_without_yaw_input", base, pan))
+    # version 13 (its own draws, so the scenarios after it keep theirs): a goal seen at an edge,
+    # then a turn right at 30 deg/s with frames that see nothing
+    r13 = np.random.default_rng(13)
+    nothing = [((30 + i) / FPS, 30.0, _frame(13, 0, 0.8, r13)) for i in range(45)]
+    out.append(("edge_goal_turned_towards", base, [(i / FPS, 0.0, _frame(13, 12, 0.95, r13)) for i in range(30)]
+                + nothing))
+    out.append(("edge_goal_turned_away", base, [(i / FPS, 0.0, _frame(13, 1, 0.95, r13)) for i in range(30)]
+                + nothing))
     return out
 
 

@@ -60,6 +60,10 @@ export function yawShift(b, psiDeg, fovDeg) {
       continue;
     }
     const x = headingToX(h, fovDeg);
+    if ((k === N_BINS && psiDeg > 0) || (k === 1 && psiDeg < 0)) {
+      spreadEdge(out, k, N_BINS * x - 0.5, b[k]);
+      continue;
+    }
     if (x < 0 || x > 1) {
       out[0] += b[k];
       continue;
@@ -75,6 +79,31 @@ export function yawShift(b, psiDeg, fovDeg) {
     }
   }
   return out;
+}
+
+/**
+ * An edge bin's mass after a turn moved its centre inward to z (0-based continuous bin index):
+ * "at this edge or beyond", so spread evenly from z back out to the edge bin's own centre, each
+ * bin taking its cell's share, the part beyond the frame's far edge to unknown.
+ */
+export function spreadEdge(out, k, z, mass) {
+  const e = k - 1;
+  const lo = Math.min(z, e);
+  const hi = Math.max(z, e);
+  const span = hi - lo;
+  if (!(span > 1e-12)) {
+    out[k] += mass;
+    return;
+  }
+  let inside = 0;
+  for (let i = 0; i < N_BINS; i += 1) {
+    const share = Math.min(hi, i + 0.5) - Math.max(lo, i - 0.5);
+    if (share > 0) {
+      out[i + 1] += (mass * share) / span;
+      inside += share;
+    }
+  }
+  out[0] += (mass * Math.max(0, span - inside)) / span;
 }
 
 /** Spread bin mass to neighbours (reflecting edges); unknown untouched. */
@@ -282,6 +311,7 @@ export class Decider {
     this.holdHeading = null;
     this.holdT = 0;
     this.holdTurned = 0;
+    this.holdEdge = 0;
   }
 
   /**
@@ -300,6 +330,14 @@ export class Decider {
     }
   }
 
+  /** +1 / -1 when a heading lies in the right / left edge strip (or beyond it), else 0. */
+  edgeSide(heading) {
+    if (!(Math.abs(heading) < 90)) return 0;
+    const x = headingToX(heading, this.cfg.fov_deg);
+    if (x >= (N_BINS - 1) / N_BINS) return 1;
+    return x <= 1 / N_BINS ? -1 : 0;
+  }
+
   /**
    * Advance to time t (s) with this frame's outputs, obs = {probs: number[A], uncertainty,
    * ok} (null = no new frame: a tick). Returns the decision (same fields as the Python
@@ -314,6 +352,10 @@ export class Decider {
     if (this.holdHeading !== null) {
       this.holdHeading -= psi;
       this.holdTurned += Math.abs(psi);
+      // an edge hold ("at this edge or beyond") turned towards: where the goal is now is unknown
+      if (this.holdEdge !== 0 && psi * this.holdEdge > 0 && this.edgeSide(this.holdHeading) !== this.holdEdge) {
+        this.holdHeading = null;
+      }
     }
     if (obs && this.tLastOk !== null && t - this.tLastOk > cfg.watchdog_s) {
       // 4a: the first frame after a stall meets a fresh belief and no hold
@@ -349,6 +391,7 @@ export class Decider {
         this.holdHeading = hL;
         this.holdT = t;
         this.holdTurned = 0;
+        this.holdEdge = this.edgeSide(hL);
       }
     }
     const stop = reason !== REASON_OK;
