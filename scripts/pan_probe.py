@@ -20,8 +20,12 @@ many of the wrong frames the heading hold played; with the goal out of view, the
 to the wrong side. The model's outputs are cached (``--cache``), so ``--replay`` decides again
 (after a change to the decision logic) without running the model.
 
-    .venv/bin/python scripts/pan_probe.py [--photos 100] [--amplitude 20] [--rate 30] \\
+    .venv/bin/python scripts/pan_probe.py [--photos 100] [--amplitude 20] [--rate 30] [--window] \\
         [--cache runs/pan/preds.npz] [--replay] [--out runs/pan/pan.json]
+
+``--window``: a narrow camera scans instead, seeing the middle 3:4 window of each turned view at
+the window's own FOV (40.8 deg from PTL's 67), as ``crossing-eval --scan --portrait`` plays it;
+a goal beside the window but still in the photo is its edge strip.
 
 A missing manifest, an empty split or an unusable bundle is one line and exit 1.
 """

@@ -50,3 +50,27 @@ def test_scans_replay_from_the_cache(tmp_path, toy_bundle):  # noqa: F811
 def test_replay_without_a_cache_is_one_line(tmp_path, toy_bundle, capsys):  # noqa: F811
     assert pp.main(["--bundle", str(toy_bundle), "--replay", "--cache", str(tmp_path / "none.npz")]) == 1
     assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_a_narrow_camera_scans_the_middle_window(tmp_path, toy_bundle):  # noqa: F811
+    """--window: the same scans seen by a narrow camera (the middle 3:4 window of each turned view,
+    at the window's FOV), as crossing-eval --scan --portrait plays them; goals beside the window
+    but in the photo are its edge strips, so as many frames have the goal in view."""
+    from crossing_assist.runtime.engine import Engine
+    from crossing_assist.runtime.listen import Listener
+
+    data = bar_dataset(tmp_path / "data", n=4)
+    args = ["--bundle", str(toy_bundle), "--data", str(data), "--photos", "4"]
+    wide, narrow = tmp_path / "w.npz", tmp_path / "n.npz"
+    assert pp.main([*args, "--cache", str(wide), "--out", str(tmp_path / "w.json")]) == 0
+    assert pp.main([*args, "--window", "--cache", str(narrow), "--out", str(tmp_path / "n.json")]) == 0
+    engine = Engine(toy_bundle, threads=1)
+    fov = lambda path: {round(p.fov_deg, 1) for c in Listener.load(engine, path)[0].clips for p in c}  # noqa: E731
+    (f_wide,), (f_narrow,) = fov(wide), fov(narrow)
+    assert f_narrow < 0.75 * f_wide   # the toy camera 90 deg, its 3:4 window ~59
+    res_w, res_n = (json.loads((tmp_path / f).read_text()) for f in ("w.json", "n.json"))
+    assert res_n["gyro"]["in_view"] == res_w["gyro"]["in_view"]
+    with np.load(narrow) as z:
+        edge = np.isin(z["scan_labels"], (1, 12)).mean()
+    with np.load(wide) as z:
+        assert edge > np.isin(z["scan_labels"], (1, 12)).mean()   # the window's edges hold more goals
