@@ -332,15 +332,26 @@ test('gyroscope: turning right is a positive yaw rate in every screen orientatio
   assert.equal(yawRateFromRotation({ alpha: null, beta: null, gamma: null }, 0), 0);
 });
 
-test('gyroscope: the integrator gives the mean turn rate between two steps', () => {
+test('gyroscope: the integrator gives the mean turn rate between two capture times', () => {
   const y = new YawIntegrator();
   // 60 Hz samples; each rate covers the interval before its sample: 14 intervals at 20 deg/s, 16 at 40
   for (let i = 0; i <= 30; i += 1) y.add(i < 15 ? 20 : 40, i / 60);
-  assert.ok(Math.abs(y.take(0.5) - (20 * 14 + 40 * 16) / 60 / 0.5) < 1e-9);
-  assert.equal(y.take(0.1), 0); // reset by take()
-  y.add(10, 1.0); // after a 0.5 s sensor gap: at most 0.2 s is integrated
-  assert.ok(Math.abs(y.take(1) - 10 * 0.2) < 1e-9);
-  assert.equal(y.take(0), 0);
+  assert.ok(Math.abs(y.between(0, 0.5) - (20 * 14 + 40 * 16) / 60 / 0.5) < 1e-9);
+  assert.ok(Math.abs(y.between(0.1, 0.2) - 20) < 1e-9); // any window, asked again: nothing is used up
+  assert.ok(Math.abs(y.between(0.1, 0.2) - 20) < 1e-9);
+  assert.ok(Math.abs(y.between(0.25, 0.5) - 40) < 1e-9);
+  // a frame captured at 0.2 s whose decision comes 0.15 s later (the model ran): the turn after its
+  // capture is not its turn (taken at the decision, it was: 40 deg/s for half the window)
+  assert.ok(Math.abs(y.between(0.1, 0.2) - y.between(0.25, 0.35)) > 19);
+  assert.equal(y.between(0.5, 0.5), 0);
+  assert.equal(y.between(0.6, 0.9), 0); // no sample covers it
+  y.add(10, 1.0); // after a 0.5 s sensor gap: at most MAX_SAMPLE_GAP_S (0.2 s) is integrated
+  assert.ok(Math.abs(y.between(0.5, 1.0) - (10 * 0.2) / 0.5) < 1e-9);
+  y.add(99, 0.9); // out of order: ignored
+  y.add(Number.NaN, 1.1);
+  assert.ok(Math.abs(y.between(0.8, 1.0) - 10) < 1e-9);
+  for (let i = 1; i <= 400; i += 1) y.add(5, 1.0 + i / 60); // old samples are dropped, recent ones kept
+  assert.ok(y.samples.length < 200 && Math.abs(y.between(6.0, 7.0) - 5) < 1e-9);
 });
 
 // ----------------------------------------------------------------------------- visual yaw (vectors version 12)

@@ -325,7 +325,7 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   if (!app.running || app.paused || generation !== app.generation) return;
   let yaw = yawSource === 'camera' ? cameraTurn : 0;
   if (yawSource === 'gyro') {
-    const gyro = app.yaw.take(dt);
+    const gyro = app.yaw.between(captured - dt, captured); // since the frame before, not since the last decision
     if (picture && app.gyroCheck.add(gyro, cameraTurn) === 'wrong') {
       gyroWrong(captured);
       yawSource = 'camera';
@@ -532,7 +532,7 @@ function onOrientation(e) {
 
 function onMotion(e) {
   const rate = yawRateFromRotation(e.rotationRate, screen.orientation?.angle ?? 0);
-  app.yaw?.add(rate, e.timeStamp / 1000);
+  app.yaw?.add(rate, (e.timeStamp - app.t0) / 1000); // the clock of the frames' capture times (performance.now())
   app.turnRate = rate;
 }
 
