@@ -261,8 +261,7 @@ async function fullPhases(page, context, server, args, result) {
   await sleep(300);
   result.states.tutorial = await page.evaluate(screenState);
   await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'tutorial_done'), null, 30000, 'the tutorial');
-  await page.evaluate(() => setInterval(() => window.dispatchEvent(new DeviceMotionEvent('devicemotion',
-    { rotationRate: { alpha: 0, beta: 0, gamma: -3 }, interval: 16 })), 16));
+  await steadyGyro(page, 3);
   await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'frame'), null, 30000, 'the first frame decision');
   const samples = [];
   await guide(page, args.runS, samples);
@@ -520,6 +519,13 @@ async function sidewaysPhase(page, result) {
   result.sideways = { t_spoken: tSpoken };
 }
 
+/** A gyroscope reading a steady turn of `rate` deg/s (+ right) at 60 Hz: an upright phone turns
+ * about its y axis, right being negative. */
+async function steadyGyro(page, rate) {
+  await page.evaluate((r) => setInterval(() => window.dispatchEvent(new DeviceMotionEvent('devicemotion',
+    { rotationRate: { alpha: 0, beta: 0, gamma: -r }, interval: 16 })), 16), rate);
+}
+
 async function shortPhases(page, server, args, result) {
   // no sensor setting stored and no URL flag for them: the app's defaults (tilt sensor on)
   await page.addInitScript(() => localStorage.setItem('crossing-assist-settings',
@@ -534,10 +540,7 @@ async function shortPhases(page, server, args, result) {
   result.first_load = server.requests.slice();
   result.states = { ready: await page.evaluate(screenState) };
   await control(page).click();
-  if (args.gyro !== undefined) {   // a portrait phone's gyroscope reading a steady turn (+ right: rotation about y, negative)
-    await page.evaluate((rate) => setInterval(() => window.dispatchEvent(new DeviceMotionEvent('devicemotion',
-      { rotationRate: { alpha: 0, beta: 0, gamma: -rate }, interval: 16 })), 16), args.gyro);
-  }
+  if (args.gyro !== undefined) await steadyGyro(page, args.gyro);
   await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'frame'), null, 60000, 'the first frame decision');
   const samples = [];
   await guide(page, args.runS, samples);

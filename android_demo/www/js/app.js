@@ -106,9 +106,14 @@ const app = {
 window.crossingAssist = app;
 const view = new HelperView(document);
 
+/** A performance.now() time (ms: a frame's capture, a sensor event's timeStamp) on the Decider's clock (s). */
+function appTime(ms) {
+  return (ms - app.t0) / 1000;
+}
+
 /** Seconds since the page loaded (the Decider's clock). */
 function now() {
-  return (performance.now() - app.t0) / 1000;
+  return appTime(performance.now());
 }
 
 function record(entry) {
@@ -384,7 +389,7 @@ async function runLoop() {
       const frame = app.grabber.grab();
       if (!frame) continue;
       // the frame's own capture time (camera.js), on the app's clock: it may have waited for a model run
-      const captured = Math.min(grabbed, (frame.timeMs - app.t0) / 1000);
+      const captured = Math.min(grabbed, appTime(frame.timeMs));
       if (sameFrame(prev, frame)) {
         // A frozen camera repeats its last frame: not fresh; let the watchdog act.
         record({ kind: 'frozen', t: captured, seq: frame.seq });
@@ -532,7 +537,7 @@ function onOrientation(e) {
 
 function onMotion(e) {
   const rate = yawRateFromRotation(e.rotationRate, screen.orientation?.angle ?? 0);
-  app.yaw?.add(rate, (e.timeStamp - app.t0) / 1000); // the clock of the frames' capture times (performance.now())
+  app.yaw?.add(rate, appTime(e.timeStamp)); // the clock of the frames' capture times
   app.turnRate = rate;
 }
 
