@@ -21,7 +21,14 @@ to the wrong side. The model's outputs are cached (``--cache``), so ``--replay``
 (after a change to the decision logic) without running the model.
 
     .venv/bin/python scripts/pan_probe.py [--photos 100] [--amplitude 20] [--rate 30] [--window] \\
-        [--cache runs/pan/preds.npz] [--replay] [--out runs/pan/pan.json]
+        [--heard-after 0.2] [--cache runs/pan/preds.npz] [--replay] [--out runs/pan/pan.json]
+
+``--heard-after S``: judge each decision when the user hears it, S seconds after its frame's
+capture (whole frames), not at the capture: a phone answers after the model's run and plays the
+answer until the next one, so while the user turns it lags their facing. Two more readings,
+``gyro turned`` and ``camera turned``, are those decisions with the beacon turned by the
+gyroscope's turn since the capture, as the app plays them (``runtime.decide.turned``: the
+gyroscope followed, or the picture followed and the gyroscope confirmed by it).
 
 ``--window``: a narrow camera scans instead, seeing the middle 3:4 window of each turned view at
 the window's own FOV (40.8 deg from PTL's 67), as ``crossing-eval --scan --portrait`` plays it;
@@ -48,7 +55,7 @@ from crossing_assist.fileio import atomic_write_text
 from crossing_assist.models.evaluate import SCAN_WINDOW_ASPECT, scan_clips
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
 from crossing_assist.runtime.engine import Engine
-from crossing_assist.runtime.listen import SCAN_FPS, SCAN_YAW_INPUTS, Listener, judge_scans, scan_yaw
+from crossing_assist.runtime.listen import SCAN_FPS, Listener, judge_scans, scan_yaw
 
 
 def play(engine: Engine, images, rows, psi: np.ndarray, window: float | None = None) -> tuple[Listener, np.ndarray, np.ndarray]:
@@ -77,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--window", action="store_true",
                     help="a narrow camera: the middle 3:4 window of each turned view (crossing-eval --scan --portrait)")
+    ap.add_argument("--heard-after", type=float, default=0.0, metavar="S",
+                    help="judge each decision S seconds after its frame's capture, when it is heard (default 0)")
     ap.add_argument("--cache", type=Path, help="the model's outputs: written after playing, read with --replay")
     ap.add_argument("--replay", action="store_true", help="decide again from --cache without running the model")
     ap.add_argument("--out", type=Path, help="write the figures as JSON here")
@@ -112,13 +121,18 @@ def main(argv: list[str] | None = None) -> int:
         if a.cache:
             a.cache.parent.mkdir(parents=True, exist_ok=True)
             lis.save(a.cache, scan_labels=labels, psi=psi, camera_rates=rates)
+    try:
+        judged = judge_scans(engine, lis.clips, labels, psi, rates, heard_after_s=a.heard_after)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     res = {"bundle": str(a.bundle), "photos": len(lis.clips), "frames_per_scan": int(len(psi)),
            "amplitude_deg": float(np.abs(psi).max()), "rate_dps": float(np.abs(np.diff(psi)).max() * SCAN_FPS),
-           **judge_scans(engine, lis.clips, labels, psi, rates)}
+           "heard_after_s": round(a.heard_after * SCAN_FPS) / SCAN_FPS, **judged}
     print("| scan | goal-in-view frames | beacon on | confidently wrong | of them by the hold | "
           "goal out of view: on | wrong side |\n|---|---|---|---|---|---|---|")
-    pct = lambda v: "–" if v is None else f"{100 * v:.1f} %"  # noqa: E731
-    for name in SCAN_YAW_INPUTS:
+    pct = lambda v: "–" if v is None else f"{100 * v:.2f} %"  # noqa: E731
+    for name in judged:
         g = res[name]
         print(f"| {name.replace('_', ' ')} | {g['in_view']} | {pct(g['beacon_on'])} | {pct(g['confidently_wrong'])} | "
               f"{pct(g['wrong_by_hold'])} | {pct(g['out_of_view_on'])} | {pct(g['out_of_view_wrong_side'])} |")

@@ -52,7 +52,7 @@ import pytest
 
 from crossing_assist import inference
 from crossing_assist.geometry import Geometry, orientation, view_rows
-from crossing_assist.runtime.decide import Decider, Observation
+from crossing_assist.runtime.decide import Decider, Observation, edge_side
 from crossing_assist.runtime.engine import Engine, measure_value
 from crossing_assist.runtime.status import STATUS_STOP, status_message
 from crossing_assist.testing import toy_bundle
@@ -314,6 +314,27 @@ def test_gyroscope_turn_reaches_the_decider(run: dict) -> None:
     yaws = [e["yaw_rate_dps"] for e in frames[1:] if e["t"] < run["result"]["samples"][-1]["t"]]
     assert 2.5 <= float(np.median(yaws)) <= 3.5, np.percentile(yaws, [10, 50, 90])
     assert {e["yaw_source"] for e in frames} == {"gyro"}   # ?gyro=1: the gyroscope wins over the camera picture
+
+
+def test_the_beacon_turns_with_the_gyroscope_until_the_next_decision(run: dict) -> None:
+    """Decision step 10 in the app: a decision is played turned by the gyroscope's turn since its
+    frame's capture (here 3 deg/s right), when it is decided and again at each gyroscope sample
+    until another cue plays, as decide.turned computes it."""
+    trace = run["result"]["trace"]
+    frames = {e["id"]: e for e in trace if e["kind"] == "frame"}
+    turned = [e for e in trace if e["kind"] == "turned" and e["frame"] in frames]
+    assert turned, "no decision was played turned with the gyroscope"
+    per_decision = np.bincount([e["frame"] for e in turned])
+    assert np.median(per_decision[per_decision > 0]) >= 3, "the beacon is not followed between decisions"
+    close = 0
+    for e in turned:
+        f = frames[e["frame"]]
+        assert f["fresh"] and not f["decision"]["stop"] and f["yaw_source"] == "gyro", f
+        h, fov = f["decision"]["heading_deg"], f["decision_fov_deg"]
+        want = h - (e["turn_deg"] / 2 if edge_side(h, fov) * e["turn_deg"] > 0 else e["turn_deg"])
+        assert abs(e["heading_deg"] - want) <= 1e-9, (e, f["decision"])
+        close += abs(e["turn_deg"] - 3.0 * (e["t"] - f["t"])) <= 0.1   # the turn since the capture
+    assert close >= 0.95 * len(turned), f"{close}/{len(turned)} turns match 3 deg/s since the capture"
 
 
 def test_no_tilt_sensor_is_said_once_per_start_and_guidance_goes_on(run: dict) -> None:
@@ -1068,25 +1089,34 @@ def test_visualyaw_0_follows_no_turn_and_says_so(narrow_video: dict) -> None:
     assert "visualYaw" not in json.loads(r["stored_settings"])
 
 
-@pytest.fixture(scope="module")
-def wrong_gyro(tmp_path_factory) -> dict:
+def _panning_run(tmp: Path, *driver_args: str, bars: bool = False) -> dict:
     """The toy bundle, a portrait camera panning right over a textured scene (6 px a frame at 10
-    fps: about 30 deg/s at the portrait FOV), and a gyroscope that reads the same turn as a turn
-    left (?gyro=1): its sign is wrong on this phone."""
+    fps: about 30 deg/s at the portrait FOV), 6 s of the short phases. ``bars``: the texture dimmed
+    and a bright bar every 150 px, so the toy (a brightness detector) sees a goal most of the time."""
     clip = _clip_tool()
-    tmp = tmp_path_factory.mktemp("android_e2e_gyro")
     bundle = toy_bundle.make_toy_bundle(tmp / "bundle", toy_bundle.APP_TOY, geometry=APP_GEOMETRY)
     rng = np.random.default_rng(7)
     h, w, step = 160, 120, 6
     scene = rng.uniform(0, 255, (h, w + step * 80, 3))
     for axis in (0, 1):   # a smooth random scene: enough texture for the picture's turn
         scene = sum(np.roll(scene, k, axis=axis) for k in range(-3, 4)) / 7
-    scene = np.clip((scene - scene.mean()) * 4 + 128, 0, 255).astype(np.uint8)
+    scene = np.clip((scene - scene.mean()) * 4 + 128, 0, 255)
+    if bars:
+        scene *= 0.5
+        for x in range(100, scene.shape[1], 150):
+            scene[:, x:x + 8] = 255
+    scene = scene.astype(np.uint8)
     frames = [np.ascontiguousarray(scene[:, step * k:step * k + w]) for k in range(80)]
     clip.write_y4m(tmp / "clip.y4m", frames, 10)
-    result = _drive(tmp, _build(tmp, bundle), tmp / "clip.y4m", 6.0, "--phases", "short", "--viewport", "390x844",
-                    "--gyro", "-30")
-    return {"result": result}
+    return _drive(tmp, _build(tmp, bundle), tmp / "clip.y4m", 6.0, "--phases", "short", "--viewport", "390x844",
+                  *driver_args)
+
+
+@pytest.fixture(scope="module")
+def wrong_gyro(tmp_path_factory) -> dict:
+    """The panning camera, and a gyroscope that reads its turn as a turn left (?gyro=1): its sign
+    is wrong on this phone."""
+    return {"result": _panning_run(tmp_path_factory.mktemp("android_e2e_gyro"), "--gyro", "-30")}
 
 
 def test_a_gyroscope_turning_the_wrong_way_is_found_out_and_left(wrong_gyro: dict) -> None:
@@ -1108,6 +1138,30 @@ def test_a_gyroscope_turning_the_wrong_way_is_found_out_and_left(wrong_gyro: dic
     spoken = [e["text"] for e in r["trace"] if e["kind"] == "speech" and "gyroscope" in e["text"]]
     assert spoken == ["The gyroscope reads turns the wrong way: turns are followed from the camera picture."], spoken
     assert r["turning_text"].endswith("(camera picture)"), r["turning_text"]
+
+
+@pytest.fixture(scope="module")
+def confirmed_gyro(tmp_path_factory) -> dict:
+    """The panning camera with the app's own settings (turns read from the picture), and a
+    gyroscope that reads the same turn right."""
+    return {"result": _panning_run(tmp_path_factory.mktemp("android_e2e_gyro_ok"), "--motion", "30", bars=True)}
+
+
+def test_a_gyroscope_the_picture_confirms_turns_the_beacon_but_not_the_decisions(confirmed_gyro: dict) -> None:
+    """By default the Decider follows the turn read from the picture. A gyroscope is listened to
+    as well: once the picture has confirmed its turns (GyroCheck 'ok'), each decision is played
+    turned by the gyroscope's turn since its frame's capture (step 10), never before."""
+    r = confirmed_gyro["result"]
+    assert "gyro=1" not in r["page_url"]
+    frames = {e["id"]: e for e in r["trace"] if e["kind"] == "frame"}
+    assert len(frames) >= 15 and {e["yaw_source"] for e in frames.values()} == {"camera"}
+    checks = [e for e in r["trace"] if e["kind"] == "gyro_check"]
+    assert [e["verdict"] for e in checks] == ["ok"], checks
+    turned = [e for e in r["trace"] if e["kind"] == "turned" and e["frame"] in frames]
+    assert turned, "a confirmed gyroscope never turned the beacon"
+    assert all(frames[e["frame"]]["t"] >= checks[0]["t"] for e in turned), "turned before the picture confirmed it"
+    assert all(e["turn_deg"] >= 0 for e in turned) and max(e["turn_deg"] for e in turned) > 2.0   # 30 deg/s right
+    assert not any("gyroscope" in e.get("text", "") for e in r["trace"] if e["kind"] == "speech")
 
 
 # ----------------------------------------------------------------------------- the shipped bundle

@@ -45,6 +45,14 @@ def test_scans_replay_from_the_cache(tmp_path, toy_bundle):  # noqa: F811
     assert len(set(labels[0].tolist())) > 2   # the bar moved across strips as the camera turned
     turning = np.abs(np.diff(pp.scan_yaw(30.0, 30.0))) > 0
     assert np.median(np.abs(rates[:, 1:][:, turning])) > 15   # read from the frames: ~30 deg/s while turning
+    # --heard-after: judged 0.3 s after capture (9 deg at 30 deg/s, ~2 of the toy's 7.5 deg strips)
+    late = tmp_path / "late.json"
+    assert pp.main(["--bundle", str(toy_bundle), "--cache", str(cache), "--replay", "--heard-after", "0.3",
+                    "--out", str(late)]) == 0
+    res = json.loads(late.read_text())
+    assert res["heard_after_s"] == 0.3 and res["gyro"]["confidently_wrong"] > 0.1
+    assert res["gyro_turned"]["confidently_wrong"] < 0.25 * res["gyro"]["confidently_wrong"]
+    assert pp.main(["--bundle", str(toy_bundle), "--cache", str(cache), "--replay", "--heard-after", "60"]) == 1
 
 
 def test_replay_without_a_cache_is_one_line(tmp_path, toy_bundle, capsys):  # noqa: F811

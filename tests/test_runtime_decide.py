@@ -1,13 +1,14 @@
 """The decision logic: Bayes filter, UPMS gate, freshness (pure; no model, no audio)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from crossing_assist.actions import bin_center_x, get_space, x_to_heading
 from crossing_assist.runtime import belief as bf
-from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
+from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation, edge_side, turned
 from crossing_assist.runtime.gate import GATE_HOLD, GATE_LEARNER, GATE_STOP, GateConfig, alpha, mix
 from crossing_assist.runtime.listen import heard_strip
 
@@ -226,6 +227,27 @@ def test_an_edge_strip_means_at_the_edge_or_beyond_so_turning_towards_it_places_
     run(d, [obs_bin(1, 0.95)] * 30)                        # away from it, so the hold stays at the left edge
     out = run(d, nothing, t0=30 / FPS, yaw=30.0)
     assert all(o.hold_heading is not None and o.hold_heading < -19.0 for o in out[:20])
+
+
+def test_a_decision_heard_after_a_turn_points_where_the_goal_is_then():
+    """Step 10: a decision plays after its frame's capture; turned with the gyroscope's turn since
+    then, its heading stays on the goal in the world. A heading in an edge strip ("at the edge or
+    beyond") turned towards moves half the turn; a stop stays a stop."""
+    d = Decider(DecisionConfig(fov_deg=67.0))
+    dec = run(d, [obs_bin(5, 0.95)] * 30)[-1]
+    assert not dec.stop
+    right = turned(dec, 6.0, 67.0)                        # turned right: the goal is further left
+    assert right.heading_deg == pytest.approx(dec.heading_deg - 6.0)
+    assert right.pan == pytest.approx((dec.heading_deg - 6.0) / 33.5) and right.rate_hz == dec.rate_hz
+    assert turned(dec, 0.0, 67.0) is dec and turned(dec, math.nan, 67.0) is dec
+    edge = replace(dec, heading_deg=x_to_heading(bin_center_x(12), 67.0))
+    assert edge_side(edge.heading_deg, 67.0) == 1
+    assert turned(edge, 6.0, 67.0).heading_deg == pytest.approx(edge.heading_deg - 3.0)   # towards: half
+    assert turned(edge, -6.0, 67.0).heading_deg == pytest.approx(edge.heading_deg + 6.0)  # away: all of it
+    far = turned(dec, -60.0, 67.0)                         # beyond the view: the pan says "turn further"
+    assert far.pan == 1.0
+    stop = Decider(DecisionConfig()).step(0.0, obs_bin(0, 0.9))
+    assert stop.stop and turned(stop, 10.0, 67.0) is stop
 
 
 def test_stale_input_stops_within_the_watchdog_period_and_failures_stop_at_once():

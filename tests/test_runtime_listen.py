@@ -468,6 +468,38 @@ def test_judge_scans_counts_each_frame_against_the_goal_in_that_frame(toy_bundle
     assert g["confidently_wrong"] == 0.5 and g["out_of_view_wrong_side"] == 1.0
 
 
+def test_judge_scans_heard_late_counts_the_turn_since_the_capture(toy_bundle):  # noqa: F811
+    """The model places a still goal exactly in every frame of a 60 deg/s turn (strip 12 at the
+    start, one strip less each ~5.6 deg). Judged 0.2 s after each capture, the beacon lags the turn
+    by two strips; turned with the gyroscope's turn since the capture (``gyro_turned``) it does not.
+    (The toy's scan has no texture to read the turn from: ``camera`` is judged, not tested.)"""
+    import numpy as np
+    import pytest
+
+    from crossing_assist.actions import heading_to_x, x_to_bin
+    from crossing_assist.runtime.engine import Prediction
+    from crossing_assist.runtime.listen import TURNED_READINGS, judge_scans
+
+    engine = Engine(toy_bundle)
+    psi = np.asarray([0.0] * 10 + [6.0 * i for i in range(1, 11)])
+    labels = np.asarray([[x_to_bin(heading_to_x(28.0 - a, 67.0)) for a in psi]])
+
+    def pred(k):
+        p = np.full(13, 0.001)
+        p[k] = 1 - 0.012
+        return Prediction(ok=True, probs=p, uncertainty=0.0, action=k, fov_deg=67.0, orientation="landscape")
+
+    clip = [pred(int(k)) for k in labels[0]]
+    now = judge_scans(engine, [clip], labels, psi, np.zeros((1, 20)))
+    assert not set(TURNED_READINGS) & set(now) and now["gyro"]["confidently_wrong"] == 0.0
+    late = judge_scans(engine, [clip], labels, psi, np.zeros((1, 20)), heard_after_s=0.2)
+    assert late["gyro"]["in_view"] == 8 and late["gyro"]["confidently_wrong"] > 0.5
+    assert late["gyro_turned"]["beacon_on"] == late["gyro"]["beacon_on"] == 1.0
+    assert late["gyro_turned"]["confidently_wrong"] == 0.0
+    with pytest.raises(ValueError, match="heard_after_s"):
+        judge_scans(engine, [clip], labels, psi, np.zeros((1, 20)), heard_after_s=5.0)
+
+
 def test_the_embedded_bundle_is_never_written_into(tmp_path, monkeypatch):
     """crossing-eval --bundle <the embedded default> without --out writes runs/default_bundle/eval_val
     under the working folder (it wrote into the installed package); another bundle keeps BUNDLE/eval_val."""

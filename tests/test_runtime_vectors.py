@@ -16,6 +16,7 @@ from crossing_assist.runtime.live import is_fresh, same_frame
 from crossing_assist.geometry import view_rows
 from crossing_assist.runtime.camera import camera_fov, gate_threshold
 from crossing_assist.testing.vectors import (
+    VERSION,
     ASPECT_SIZES,
     FRAME_SIZES,
     GEOMETRY_V2,
@@ -136,9 +137,27 @@ def test_a_turn_without_yaw_input_does_not_keep_the_old_direction(stored):
     assert after[-1]["stop"]
 
 
+def test_turned_cases_move_by_the_turn_or_half_of_it_towards_an_edge(stored):
+    """Version 14, step 10: the stored cases hold whole turns, half turns (an edge strip turned
+    towards), beyond-the-view pans and stops, so a port is checked on each branch."""
+    cases = stored["turned"]
+    moved = {"whole": 0, "half": 0, "stop": 0, "saturated": 0}
+    for c in cases:
+        e = c["expect"]
+        if c["heading_deg"] is None:
+            assert e["heading_deg"] is None and e["pan"] is None
+            moved["stop"] += 1
+            continue
+        delta = c["heading_deg"] - e["heading_deg"]
+        assert delta == pytest.approx(c["turn_deg"]) or delta == pytest.approx(c["turn_deg"] / 2)
+        moved["half" if c["turn_deg"] and delta == pytest.approx(c["turn_deg"] / 2) else "whole"] += 1
+        moved["saturated"] += abs(e["pan"]) == 1.0
+    assert all(n > 0 for n in moved.values()), moved
+
+
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == 13
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == VERSION == 14
     assert "decision steps" in capsys.readouterr().out
 
 

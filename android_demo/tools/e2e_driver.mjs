@@ -70,7 +70,8 @@ function parseArgs(argv) {
     else if (k === '--sensor-stops') args.sensorStops = v === '1';
     else if (k === '--sideways-after') args.sidewaysAfter = Number(v);
     else if (k === '--visual-yaw') args.visualYaw = v;
-    else if (k === '--gyro') args.gyro = Number(v);
+    else if (k === '--gyro') args.gyro = Number(v); // ?gyro=1 and a steady gyroscope at this rate (deg/s, + right)
+    else if (k === '--motion') args.motion = Number(v); // the same gyroscope, the app's own settings
     else throw new Error(`unknown argument ${k}`);
   }
   if (!args.clip || !args.out) throw new Error('usage: e2e_driver.mjs --clip clip.y4m --out result.json [--run-s S] [--www DIR]');
@@ -540,7 +541,7 @@ async function shortPhases(page, server, args, result) {
   result.first_load = server.requests.slice();
   result.states = { ready: await page.evaluate(screenState) };
   await control(page).click();
-  if (args.gyro !== undefined) await steadyGyro(page, args.gyro);
+  if (args.gyro !== undefined || args.motion !== undefined) await steadyGyro(page, args.gyro ?? args.motion);
   await waitFor(page, () => window.crossingAssist.trace.some((e) => e.kind === 'frame'), null, 60000, 'the first frame decision');
   const samples = [];
   await guide(page, args.runS, samples);

@@ -10,7 +10,7 @@ the belief, the hold, and three times; nothing depends on wall clocks or randomn
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -120,6 +120,33 @@ def frame_weight(obs: Observation, c_frame: float, threshold: float) -> float:
     return alpha(obs.uncertainty, c_frame)
 
 
+def edge_side(heading_deg: float, fov_deg: float) -> int:
+    """+1 / -1 when ``heading_deg`` lies in the right / left edge strip of a camera ``fov_deg``
+    across (or beyond it, short of 90 degrees), else 0."""
+    if not abs(heading_deg) < 90.0:
+        return 0
+    x = heading_to_x(heading_deg, fov_deg)
+    return 1 if x >= (N_BINS - 1) / N_BINS else -1 if x <= 1.0 / N_BINS else 0
+
+
+def turned(decision: Decision, turn_deg: float, fov_deg: float) -> Decision:
+    """Step 10 (docs/runtime.md): ``decision`` as it is played once the camera has turned
+    ``turn_deg`` (a gyroscope's, + = right) since its frame's capture.
+
+    A decision is made from a frame the model took time to read, and it plays until the next
+    one, so while the user turns it lags their facing by the turn since that capture. The
+    heading moves by the turn (the goal stays put in the world), except that a heading in an
+    edge strip turned towards moves by half of it: an edge strip means "at this edge or beyond",
+    so after the turn the goal lies anywhere from the moved heading back out to the edge
+    (:func:`~crossing_assist.runtime.belief.spread_edge`), whose middle this is. A stop stays a
+    stop; a turn that is not a finite number turns nothing."""
+    if decision.heading_deg is None or not math.isfinite(turn_deg) or turn_deg == 0.0:
+        return decision
+    side = edge_side(decision.heading_deg, fov_deg)
+    h = decision.heading_deg - (turn_deg / 2.0 if side * turn_deg > 0 else turn_deg)
+    return replace(decision, heading_deg=h, pan=heading_to_pan(h, fov_deg / 2.0))
+
+
 class Decider:
     """The stateful decision step. Call :meth:`step` with non-decreasing ``t``."""
 
@@ -171,16 +198,12 @@ class Decider:
             self.hold_heading = None
 
     def _edge_side(self, heading: float) -> int:
-        """+1 / -1 when ``heading`` lies in the right / left edge strip (or beyond it), else 0.
-
-        A hold taken there means "at this edge or beyond" (a goal out of view but inferable is
-        labelled so), as the belief's edge strips do (:func:`~crossing_assist.runtime.belief.spread_edge`):
-        step 3 drops it once a turn towards that edge carries it out of the strip, since the goal
-        may still lie beyond the edge. Turning away keeps it."""
-        if not abs(heading) < 90.0:
-            return 0
-        x = heading_to_x(heading, self.cfg.fov_deg)
-        return 1 if x >= (N_BINS - 1) / N_BINS else -1 if x <= 1.0 / N_BINS else 0
+        """A hold taken in an edge strip means "at this edge or beyond" (a goal out of view but
+        inferable is labelled so), as the belief's edge strips do
+        (:func:`~crossing_assist.runtime.belief.spread_edge`): step 3 drops it once a turn towards
+        that edge carries it out of the strip, since the goal may still lie beyond the edge.
+        Turning away keeps it."""
+        return edge_side(heading, self.cfg.fov_deg)
 
     def _hold(self, t: float) -> tuple[float | None, float, float]:
         """Step 6: the hold's heading (None when unusable), uncertainty and coefficient."""

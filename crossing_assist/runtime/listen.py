@@ -25,7 +25,7 @@ import numpy as np
 from crossing_assist.actions import UNKNOWN, heading_to_x, x_to_bin, x_to_heading
 from crossing_assist.fileio import atomic_path
 from crossing_assist.runtime.belief import PROBS_MEASURES
-from crossing_assist.runtime.decide import Decider, DecisionConfig
+from crossing_assist.runtime.decide import Decider, DecisionConfig, turned
 from crossing_assist.runtime.engine import Engine, Prediction
 from crossing_assist.runtime.gate import GATE_HOLD
 
@@ -280,24 +280,43 @@ def scan_yaw(amplitude_deg: float = 20.0, rate_dps: float = 30.0, fps: float = S
 SCAN_YAW_INPUTS = {"gyro": "turn from a gyroscope", "camera": "turn read from the frames", "no_yaw": "no turn input"}
 
 
+#: The extra readings :func:`judge_scans` gives when decisions are heard late: the decisions of a
+#: :data:`SCAN_YAW_INPUTS` reading, each played turned by the gyroscope's turn since its frame's
+#: capture (:func:`~crossing_assist.runtime.decide.turned`; the app's ``followTurn``: the
+#: gyroscope followed, or the picture followed and the gyroscope confirmed by it).
+TURNED_READINGS = {"gyro_turned": "gyro", "camera_turned": "camera"}
+
+
 def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
-                psi: np.ndarray, camera_rates: np.ndarray, fps: float = SCAN_FPS) -> dict:
+                psi: np.ndarray, camera_rates: np.ndarray, fps: float = SCAN_FPS,
+                heard_after_s: float = 0.0) -> dict:
     """Replay the decision logic over scanned clips (``clips[i][j]``: photo ``i`` seen with the
     camera turned ``psi[j]`` degrees; ``labels[i, j]`` its goal's strip then, 0 once out of view)
     once per :data:`SCAN_YAW_INPUTS`: told the turn, told the rates ``camera_rates[i, j]`` read from
     the frames, told nothing. Every frame after the still second is judged against the goal in
     *that* frame: with the goal in view, beacon on and confidently wrong, and how many of the
     wrong frames the heading hold played; with the goal out of view, the beacon on and pointing
-    to the side the goal did not leave by."""
+    to the side the goal did not leave by.
+
+    ``heard_after_s`` (rounded to whole frames): each decision is judged when it is heard, that
+    long after its frame's capture (the model's run, then playing until the next decision),
+    against the goal and the camera's turn then; a phone answers ~0.15 s after capture and
+    plays that answer for a frame, so ~0.2 s is what a user hears. It adds :data:`TURNED_READINGS`:
+    a reading's decisions with the beacon turned by the gyroscope's turn since the capture."""
     psi = np.asarray(psi, float)
-    gyro = np.diff(psi, prepend=psi[0]) * fps
-    rates = {"gyro": np.broadcast_to(gyro, (len(clips), len(psi))), "camera": np.asarray(camera_rates, float),
-             "no_yaw": np.zeros((len(clips), len(psi)))}
-    return {k: _judge_scan_input(engine, clips, labels, psi, rates[k], fps) for k in SCAN_YAW_INPUTS}
+    lag = int(round(heard_after_s * fps))
+    if not 0 <= lag < len(psi):
+        raise ValueError(f"Invalid heard_after_s: {heard_after_s}; valid: 0 <= s < {len(psi) / fps:g} (the scan)")
+    gyro = np.broadcast_to(np.diff(psi, prepend=psi[0]) * fps, (len(clips), len(psi)))
+    rates = {"gyro": gyro, "camera": np.asarray(camera_rates, float), "no_yaw": np.zeros((len(clips), len(psi)))}
+    res = {k: _judge_scan_input(engine, clips, labels, psi, rates[k], fps, lag) for k in SCAN_YAW_INPUTS}
+    for name, reading in TURNED_READINGS.items() if lag else ():
+        res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, follow_turn=True)
+    return res
 
 
 def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
-                      psi: np.ndarray, rates: np.ndarray, fps: float) -> dict:
+                      psi: np.ndarray, rates: np.ndarray, fps: float, lag: int = 0, follow_turn: bool = False) -> dict:
     start = int(round(SCAN_STILL_S * fps))
     c = dict.fromkeys(("in_view", "on", "wrong", "wrong_hold", "out_of_view", "out_on", "out_wrong_side"), 0)
     for clip, labs, clip_rates in zip(clips, labels, rates):
@@ -306,9 +325,12 @@ def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], lab
         fov = decider.cfg.fov_deg
         for j, p in enumerate(clip):
             d = decider.step(j / fps, p.observation(), float(clip_rates[j]))
-            if j < start:
+            h = j + lag    # the frame whose moment the decision is heard at
+            if j < start or h >= len(clip):
                 continue
-            label = int(labs[j])
+            if follow_turn:
+                d = turned(d, float(psi[h] - psi[j]), fov)
+            label = int(labs[h])
             if label != UNKNOWN:
                 c["in_view"] += 1
                 c["on"] += int(not d.stop)
@@ -319,7 +341,7 @@ def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], lab
                 c["out_of_view"] += 1
                 c["out_on"] += int(not d.stop)
                 # turned right (psi > 0), the goal left the view on the left: a beacon to the right is wrong
-                c["out_wrong_side"] += int(not d.stop and (d.heading_deg > 0) == (psi[j] > 0))
+                c["out_wrong_side"] += int(not d.stop and (d.heading_deg > 0) == (psi[h] > 0))
     rate = lambda k, n: c[k] / c[n] if c[n] else None  # noqa: E731
     return {**c, "beacon_on": rate("on", "in_view"), "confidently_wrong": rate("wrong", "in_view"),
             "wrong_by_hold": rate("wrong_hold", "wrong"), "out_of_view_on": rate("out_on", "out_of_view"),

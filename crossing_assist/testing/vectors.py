@@ -100,6 +100,11 @@ dropped once such a turn carries it out of that strip (step 3). Scenarios ``edge
 (a goal seen in strip 12, then the user turns right with frames that see nothing) and
 ``edge_goal_turned_away`` (seen in strip 1, then the same turn right: the hold stays) are
 appended; every earlier scenario whose turns move an edge strip's mass inward changes with it.
+
+Version 14: ``turned``, step 10 (:func:`crossing_assist.runtime.decide.turned`): a decision's
+``heading_deg`` and ``pan`` (null: a stop) at a camera ``fov_deg`` across, once the camera turned
+``turn_deg`` since its frame's capture, and the heading and pan then played (``expect``). The
+scenarios are those of version 13.
 """
 
 from __future__ import annotations
@@ -120,7 +125,7 @@ from crossing_assist.geometry import FOV_RANGE_DEG, PAD_RGB, level_angle, orient
 from crossing_assist.runtime.beacon import BeaconConfig, itd_seconds, pan_gains
 from crossing_assist.runtime.belief import entropy
 from crossing_assist.runtime.camera import camera_fov, gate_threshold, geometry_of
-from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
+from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation, turned
 from crossing_assist.runtime.engine import measure_value
 from crossing_assist.runtime.live import is_fresh, same_frame
 from crossing_assist.runtime.status import STATUS_STOP, status_message
@@ -128,7 +133,7 @@ from crossing_assist.runtime import visual_yaw as vy
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 13
+VERSION = 14
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -501,6 +506,21 @@ def _visual_yaw_vectors(rng: np.random.Generator) -> dict:
             "sequence": {"width": width, "steps": seq}}
 
 
+def _turned_vectors() -> list[dict]:
+    """Step 10 (:func:`turned`): a decision's heading and pan once the camera turned since its
+    capture, inside the frame and in either edge strip, turned towards and away, and a stop."""
+    d0 = Decider(DecisionConfig()).step(0.0, Observation(_probs_for(13, 6, 0.9), 0.1), 0.0)
+    cases = []
+    for fov in (67.0, 40.8):
+        for h in (None, -31.0, -25.0, -10.0, 0.0, 12.5, 17.9, 33.4, 60.0):
+            d = dataclasses.replace(d0, stop=h is None, heading_deg=h, pan=None if h is None else heading_to_pan(h, fov / 2))
+            for turn in (-20.0, -5.0, 0.0, 3.0, 7.5, 40.0):
+                t = turned(d, turn, fov)
+                cases.append({"heading_deg": h, "pan": d.pan, "turn_deg": turn, "fov_deg": fov,
+                              "expect": {"heading_deg": t.heading_deg, "pan": t.pan}})
+    return cases
+
+
 def build_vectors(seed: int = 20240601) -> dict:
     """All scenarios and beacon vectors as one JSON-ready dict."""
     rng = np.random.default_rng(seed)
@@ -536,6 +556,7 @@ def build_vectors(seed: int = 20240601) -> dict:
         "actions": {str(n): [list(g) for g in get_space(n).groups] for n in (4, 8, 13)},
         "guards": _guards(rng),
         "status": _status_vectors(),
+        "turned": _turned_vectors(),
         "visual_yaw": _visual_yaw_vectors(np.random.default_rng([seed, 12])),
         "geometry": {"fov_range_deg": list(FOV_RANGE_DEG), "fov_choice": _fov_choices(),
                      "view_rows": {"geometry": GEOMETRY_V3, "cases": _view_rows()},

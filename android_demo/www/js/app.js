@@ -67,7 +67,7 @@ import { cameraFov, defaultFovText, FovError, frameView, gateKind, gateThreshold
 import { Haptics } from './haptics.js';
 import { GYRO_WRONG_TEXT, GyroCheck, isFresh, NO_TILT_TEXT, sameFrame, SidewaysHint, TiltSilence, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator,
   yawRateFromRotation } from './live.js';
-import { argmax, configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN } from './logic.js';
+import { argmax, configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN, turnedDecision } from './logic.js';
 import { fetchBundle, openBest } from './model.js';
 import { loadSettings, saveSettings, urlOverrides } from './settings.js';
 import { Speaker, SpeechPolicy } from './speech.js';
@@ -102,6 +102,7 @@ const app = {
   perf: { frames: 0, busyS: 0, startedS: 0, recentMs: 0 },
   visualYaw: new VisualYaw(), // turns read from the camera picture (without the gyroscope)
   cameraTurn: null, // its last rate (deg/s) for the helper view; null while it is not the source
+  turning: null, // the decision played turned with the gyroscope (followTurn), until another cue plays
 };
 window.crossingAssist = app;
 const view = new HelperView(document);
@@ -329,13 +330,18 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   // paused, ended, or the decisions reset while the model ran (e.g. hidden and shown again): drop it
   if (!app.running || app.paused || generation !== app.generation) return;
   let yaw = yawSource === 'camera' ? cameraTurn : 0;
-  if (yawSource === 'gyro') {
-    const gyro = app.yaw.between(captured - dt, captured); // since the frame before, not since the last decision
-    if (picture && app.gyroCheck.add(gyro, cameraTurn) === 'wrong') {
-      gyroWrong(captured);
+  if (app.yaw) {
+    // the gyroscope's turn since the frame before (not since the last decision), checked against
+    // the picture's whether or not it is followed: the picture confirms it before it turns the beacon
+    const gyro = app.yaw.between(captured - dt, captured);
+    const before = app.gyroCheck.verdict;
+    const verdict = picture ? app.gyroCheck.add(gyro, cameraTurn) : before;
+    if (verdict !== before) record({ kind: 'gyro_check', t: captured, verdict, turns: app.gyroCheck.turns.slice() });
+    if (yawSource === 'gyro' && verdict === 'wrong') {
+      notice(captured, GYRO_WRONG_TEXT); // found out by the picture: not followed for the rest of this guidance
       yawSource = 'camera';
       yaw = cameraTurn;
-    } else {
+    } else if (yawSource === 'gyro') {
       yaw = gyro;
     }
   }
@@ -344,8 +350,14 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   const fresh = isFresh(decided, captured);
   if (fresh) app.watchdog.beat(captured);
   app.last = d;
+  app.turning = null;
   if (!app.audioFailed) {
-    app.audio.render(fresh ? cueFor(d) : STOP_CUE);
+    if (fresh && d.heading_deg !== null && gyroTurnsBeacon()) {
+      app.turning = { id: (app.frameId || 0) + 1, d, captured, fov: decider.cfg.fov_deg, rendered: null };
+      followTurn(); // the turn made while the model ran
+    } else {
+      app.audio.render(fresh ? cueFor(d) : STOP_CUE);
+    }
     // a frame the camera gave but the model answered too late for: the phone is too slow
     // the model placed a crossing somewhere on this frame (not unsure because nothing is one)
     const seeing = obs.ok && argmax(obs.probs) !== 0;
@@ -354,7 +366,7 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   }
   app.frameId = (app.frameId || 0) + 1; // unique over restarts (seq restarts with the camera)
   record({ kind: 'frame', id: app.frameId, t: captured, grabbed, decided, seq: frame.seq, fresh, latency_ms: latencyMs, yaw_rate_dps: yaw, yaw_source: yawSource, obs, decision: d,
-    fov_deg: cam.fov, width: frame.width, height: frame.height, view_rows: [seen.top, seen.rows], roll_deg: frame.roll_deg ?? 0,
+    fov_deg: cam.fov, decision_fov_deg: decider.cfg.fov_deg, width: frame.width, height: frame.height, view_rows: [seen.top, seen.rows], roll_deg: frame.roll_deg ?? 0,
     outputs: outputs && plain(outputs) });
   if (TEST) {
     app.frames.push({ id: app.frameId, seq: frame.seq, width: frame.width, height: frame.height, rgb: frame.rgb.slice() });
@@ -451,16 +463,18 @@ function poll() {
   }
 }
 
-/** The gyroscope is on and not found out by the camera picture (GyroCheck). */
+/** The gyroscope is on ("Follow turns with the gyroscope") and not found out by the camera picture (GyroCheck). */
 function gyroFollowed() {
-  return Boolean(app.yaw) && app.gyroCheck.verdict !== 'wrong';
+  return sensorOn('gyro') && Boolean(app.yaw) && app.gyroCheck.verdict !== 'wrong';
 }
 
-/** The camera picture contradicts the gyroscope: turns are followed from the picture from now
- * on (this guidance), and the user is told once, spoken whole and shown. */
-function gyroWrong(t) {
-  record({ kind: 'gyro_check', t, verdict: 'wrong', turns: app.gyroCheck.turns.slice() });
-  notice(t, GYRO_WRONG_TEXT);
+/**
+ * The beacon turns with the gyroscope between decisions (followTurn): when the gyroscope is
+ * followed, and otherwise (turns read from the camera picture, the default) once the picture has
+ * confirmed the gyroscope's turns (GyroCheck 'ok'), for as long as it does.
+ */
+function gyroTurnsBeacon() {
+  return gyroFollowed() || (Boolean(app.yaw) && sensorOn('visualYaw') && app.gyroCheck.verdict === 'ok');
 }
 
 /** Something the user must know for the rest of this guidance: spoken whole (routine sentences
@@ -539,6 +553,29 @@ function onMotion(e) {
   const rate = yawRateFromRotation(e.rotationRate, screen.orientation?.angle ?? 0);
   app.yaw?.add(rate, appTime(e.timeStamp)); // the clock of the frames' capture times
   app.turnRate = rate;
+  if (app.turning) followTurn();
+}
+
+/**
+ * The beacon turned with the user (decision step 10, logic.js turnedDecision; docs/android.md).
+ * A decision is played from its model run's end until the next one, ~0.15-0.3 s after its frame's
+ * capture, so while the user turns it lags their facing by the turn since that capture. With the
+ * gyroscope followed, the decision is played turned by the gyroscope's turn since the capture,
+ * at its decision and again at each gyroscope sample until the next decision. Only while the
+ * cue it played is still the one playing: any other cue (a stop, the watchdog's, a pause) ends it.
+ */
+function followTurn() {
+  const f = app.turning;
+  if (!app.audio || app.audioFailed || (f.rendered !== null && (app.audio.cue !== f.rendered || !gyroTurnsBeacon()))) {
+    app.turning = null;
+    return;
+  }
+  const t = now();
+  const turn = t > f.captured ? app.yaw.between(f.captured, t) * (t - f.captured) : 0;
+  const played = turnedDecision(f.d, turn, f.fov);
+  app.audio.render(cueFor(played));
+  f.rendered = app.audio.cue;
+  record({ kind: 'turned', t, frame: f.id, turn_deg: turn, heading_deg: played.heading_deg });
 }
 
 /** A sensor setting for this visit: the URL flag's (?gyro=1, ?tilt=0, ?visualyaw=0) else the kept setting. */
@@ -564,7 +601,8 @@ function askSensors() {
   };
   return {
     tilt: sensorOn('tilt') ? ask(globalThis.DeviceOrientationEvent) : Promise.resolve('off'),
-    motion: sensorOn('gyro') ? ask(globalThis.DeviceMotionEvent) : Promise.resolve('off'),
+    // the gyroscope turns the beacon once the picture confirms it, so it is asked with the tilt sensor too
+    motion: sensorOn('gyro') || sensorOn('tilt') ? ask(globalThis.DeviceMotionEvent) : Promise.resolve('off'),
   };
 }
 
@@ -584,7 +622,7 @@ async function startSensors(asked) {
     window.addEventListener('devicemotion', onMotion);
     app.yaw = new YawIntegrator();
     app.gyroCheck = new GyroCheck();
-  } else if (motion === 'denied') {
+  } else if (motion === 'denied' && sensorOn('gyro')) {
     showError('The gyroscope was not allowed: turns are not followed.');
   }
 }

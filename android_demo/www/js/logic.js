@@ -330,12 +330,9 @@ export class Decider {
     }
   }
 
-  /** +1 / -1 when a heading lies in the right / left edge strip (or beyond it), else 0. */
+  /** A hold in an edge strip means "at this edge or beyond" (step 3). */
   edgeSide(heading) {
-    if (!(Math.abs(heading) < 90)) return 0;
-    const x = headingToX(heading, this.cfg.fov_deg);
-    if (x >= (N_BINS - 1) / N_BINS) return 1;
-    return x <= 1 / N_BINS ? -1 : 0;
+    return edgeSide(heading, this.cfg.fov_deg);
   }
 
   /**
@@ -436,6 +433,28 @@ export function observationFromOutputs(outputs, measure) {
 export const KIND_BEACON = 'beacon';
 export const KIND_STOP = 'stop';
 export const KIND_SILENCE = 'silence';
+
+/** +1 / -1 when a heading lies in the right / left edge strip of a camera fovDeg across (or beyond it, short of 90 deg), else 0 (decide.edge_side). */
+export function edgeSide(heading, fovDeg) {
+  if (!(Math.abs(heading) < 90)) return 0;
+  const x = headingToX(heading, fovDeg);
+  if (x >= (N_BINS - 1) / N_BINS) return 1;
+  return x <= 1 / N_BINS ? -1 : 0;
+}
+
+/**
+ * Step 10 (decide.turned): the decision as it is played once the camera has turned turnDeg (the
+ * gyroscope's, + = right) since its frame's capture. The heading moves by the turn (the goal stays
+ * put in the world); a heading in an edge strip turned towards moves by half of it (the goal lies
+ * anywhere from the moved heading back out to the edge). A stop stays a stop; a turn that is not a
+ * finite number turns nothing.
+ */
+export function turnedDecision(decision, turnDeg, fovDeg) {
+  if (decision.heading_deg === null || !Number.isFinite(turnDeg) || turnDeg === 0) return decision;
+  const side = edgeSide(decision.heading_deg, fovDeg);
+  const h = decision.heading_deg - (side * turnDeg > 0 ? turnDeg / 2 : turnDeg);
+  return { ...decision, heading_deg: h, pan: headingToPan(h, fovDeg / 2) };
+}
 
 /** The cue of a decision (beacon.cue_for): {kind, pan, heading_deg, rate_hz}. */
 export function cueFor(decision) {

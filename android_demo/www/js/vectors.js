@@ -9,11 +9,11 @@
 import { headingToPan, spaceGroups } from './actions.js';
 import { cameraFov, FovError, gateThreshold, levelAngle, orientation, PAD_RGB, rolledTooFar, viewRows } from './geometry.js';
 import { isFresh, sameFrame, Watchdog } from './live.js';
-import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains } from './logic.js';
+import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains, turnedDecision } from './logic.js';
 import { statusMessage } from './view.js';
 import * as visualYaw from './visualyaw.js';
 
-const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13];
+const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14];
 
 function close(a, b, tol) {
   return Math.abs(a - b) <= tol * Math.max(1, Math.abs(b));
@@ -200,6 +200,13 @@ export function replayVectors(vectors) {
     if ('too_far' in v && rolledTooFar(v.roll_deg) !== v.too_far) {
       fail({ scenario: 'geometry.level', field: `too_far ${v.roll_deg}`, got: rolledTooFar(v.roll_deg), expected: v.too_far });
     }
+  }
+  // version 14: step 10, a decision played after the camera turned since its frame's capture
+  for (const v of vectors.turned || []) {
+    checks += 1;
+    const got = turnedDecision({ stop: v.heading_deg === null, heading_deg: v.heading_deg, pan: v.pan }, v.turn_deg, v.fov_deg);
+    const bad = compareDecision(got, v.expect, tol);
+    if (bad.length) fail({ scenario: 'turned', field: `heading ${v.heading_deg} turn ${v.turn_deg} fov ${v.fov_deg}`, got: bad[0].got, expected: bad[0].expected });
   }
   checks += replayVisualYaw(vectors.visual_yaw, tol, fail);
   return { version: vectors.version, scenarios: vectors.scenarios.length, steps, checks, failures, nFailures, maxRelDiff };
