@@ -1147,16 +1147,21 @@ def confirmed_gyro(tmp_path_factory) -> dict:
     return {"result": _panning_run(tmp_path_factory.mktemp("android_e2e_gyro_ok"), "--motion", "30", bars=True)}
 
 
-def test_a_gyroscope_the_picture_confirms_turns_the_beacon_but_not_the_decisions(confirmed_gyro: dict) -> None:
+def test_a_gyroscope_the_picture_confirms_is_followed_by_default(confirmed_gyro: dict) -> None:
     """By default the Decider follows the turn read from the picture. A gyroscope is listened to
-    as well: once the picture has confirmed its turns (GyroCheck 'ok'), each decision is played
-    turned by the gyroscope's turn since its frame's capture (step 10), never before."""
+    as well: once the picture has confirmed its turns (GyroCheck), it is followed instead, and each
+    decision is played turned by the gyroscope's turn since its frame's capture (step 10), never
+    before; nothing is said."""
     r = confirmed_gyro["result"]
     assert "gyro=1" not in r["page_url"]
     frames = {e["id"]: e for e in r["trace"] if e["kind"] == "frame"}
-    assert len(frames) >= 15 and {e["yaw_source"] for e in frames.values()} == {"camera"}
     checks = [e for e in r["trace"] if e["kind"] == "gyro_check"]
     assert [e["verdict"] for e in checks] == ["ok"], checks
+    before = [e for e in frames.values() if e["t"] <= checks[0]["t"]]
+    after = [e for e in frames.values() if e["t"] > checks[0]["t"]]
+    assert len(before) >= 8 and {e["yaw_source"] for e in before} == {"camera"}   # 8 clear turns first
+    assert len(after) >= 15 and {e["yaw_source"] for e in after} == {"gyro"}
+    assert all(25 <= e["yaw_rate_dps"] <= 35 for e in after[1:]), [e["yaw_rate_dps"] for e in after]
     turned = [e for e in r["trace"] if e["kind"] == "turned" and e["frame"] in frames]
     assert turned, "a confirmed gyroscope never turned the beacon"
     assert all(frames[e["frame"]]["t"] >= checks[0]["t"] for e in turned), "turned before the picture confirmed it"

@@ -352,6 +352,9 @@ test('gyroscope: the integrator gives the mean turn rate between two capture tim
   assert.ok(Math.abs(y.between(0.8, 1.0) - 10) < 1e-9);
   for (let i = 1; i <= 400; i += 1) y.add(5, 1.0 + i / 60); // old samples are dropped, recent ones kept
   assert.ok(y.samples.length < 200 && Math.abs(y.between(6.0, 7.0) - 5) < 1e-9);
+  // still reporting within MAX_SAMPLE_GAP_S of the last sample (at 1 + 400/60 s), not after
+  const last = 1.0 + 400 / 60;
+  assert.ok(y.reporting(last + 0.19) && !y.reporting(last + 0.21) && !new YawIntegrator().reporting(0));
 });
 
 // ----------------------------------------------------------------------------- visual yaw (vectors version 12)
@@ -823,4 +826,21 @@ test('a gyroscope the camera picture contradicts is found out; passing buses and
   // right most of the time after a bad start: ok again (never wrong)
   const start = run([...turns(5, -30, 30), ...turns(12, 30, 30)]);
   assert.ok(!start.includes('wrong') && start.at(-1) === 'ok');
+});
+
+test('a gyroscope is confirmed by the picture only by clear agreement', () => {
+  const check = (pairs) => {
+    const g = new GyroCheck();
+    pairs.forEach(([gyro, cam]) => g.add(gyro, cam));
+    return g;
+  };
+  const turns = (n, gyro, cam) => Array.from({ length: n }, () => [gyro, cam]);
+  assert.ok(check(turns(GYRO_CHECK.least, 28, 30)).confirmed());
+  assert.ok(!check(turns(GYRO_CHECK.least - 1, 28, 30)).confirmed()); // too few turns seen by both
+  assert.ok(!check(turns(40, 2, 30)).confirmed()); // blind to yaw: never counted
+  assert.ok(!check(turns(GYRO_CHECK.least, -30, 30)).confirmed()); // the wrong way
+  // ok (not condemned) but one turn in three against the picture: not vouched for
+  const mixed = check(Array.from({ length: 30 }, (_, i) => (i % 3 === 0 ? [25, -40] : [25, 25])));
+  assert.equal(mixed.verdict, 'ok');
+  assert.ok(!mixed.confirmed());
 });

@@ -332,7 +332,7 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   let yaw = yawSource === 'camera' ? cameraTurn : 0;
   if (app.yaw) {
     // the gyroscope's turn since the frame before (not since the last decision), checked against
-    // the picture's whether or not it is followed: the picture confirms it before it turns the beacon
+    // the picture's whether or not it is followed: by default the picture confirms it first
     const gyro = app.yaw.between(captured - dt, captured);
     const before = app.gyroCheck.verdict;
     const verdict = picture ? app.gyroCheck.add(gyro, cameraTurn) : before;
@@ -352,7 +352,7 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   app.last = d;
   app.turning = null;
   if (!app.audioFailed) {
-    if (fresh && d.heading_deg !== null && gyroTurnsBeacon()) {
+    if (fresh && d.heading_deg !== null && gyroFollowed()) {
       app.turning = { id: (app.frameId || 0) + 1, d, captured, fov: decider.cfg.fov_deg, rendered: null };
       followTurn(); // the turn made while the model ran
     } else {
@@ -463,18 +463,16 @@ function poll() {
   }
 }
 
-/** The gyroscope is on ("Follow turns with the gyroscope") and not found out by the camera picture (GyroCheck). */
-function gyroFollowed() {
-  return sensorOn('gyro') && Boolean(app.yaw) && app.gyroCheck.verdict !== 'wrong';
-}
-
 /**
- * The beacon turns with the gyroscope between decisions (followTurn): when the gyroscope is
- * followed, and otherwise (turns read from the camera picture, the default) once the picture has
- * confirmed the gyroscope's turns (GyroCheck 'ok'), for as long as it does.
+ * The gyroscope's turn is followed (the Decider's yaw rate, and the beacon turned between
+ * decisions: followTurn) while the camera picture has not found it out (GyroCheck): when it is
+ * turned on ("Follow turns with the gyroscope"), and by default (turns read from the picture)
+ * once the picture has confirmed it, for as long as it does and the gyroscope keeps reporting.
+ * Otherwise the picture's turn.
  */
-function gyroTurnsBeacon() {
-  return gyroFollowed() || (Boolean(app.yaw) && sensorOn('visualYaw') && app.gyroCheck.verdict === 'ok');
+function gyroFollowed() {
+  if (!app.yaw || app.gyroCheck.verdict === 'wrong') return false;
+  return sensorOn('gyro') || (sensorOn('visualYaw') && app.gyroCheck.confirmed() && app.yaw.reporting(now()));
 }
 
 /** Something the user must know for the rest of this guidance: spoken whole (routine sentences
@@ -566,7 +564,7 @@ function onMotion(e) {
  */
 function followTurn() {
   const f = app.turning;
-  if (!app.audio || app.audioFailed || (f.rendered !== null && (app.audio.cue !== f.rendered || !gyroTurnsBeacon()))) {
+  if (!app.audio || app.audioFailed || (f.rendered !== null && (app.audio.cue !== f.rendered || !gyroFollowed()))) {
     app.turning = null;
     return;
   }
@@ -601,7 +599,7 @@ function askSensors() {
   };
   return {
     tilt: sensorOn('tilt') ? ask(globalThis.DeviceOrientationEvent) : Promise.resolve('off'),
-    // the gyroscope turns the beacon once the picture confirms it, so it is asked with the tilt sensor too
+    // the gyroscope is followed once the picture confirms it, so it is asked with the tilt sensor too
     motion: sensorOn('gyro') || sensorOn('tilt') ? ask(globalThis.DeviceMotionEvent) : Promise.resolve('off'),
   };
 }

@@ -115,6 +115,12 @@ export class YawIntegrator {
     while (this.samples.length > 2 && this.samples[1][0] < t - KEEP_S) this.samples.shift();
   }
 
+  /** Whether a sample came within MAX_SAMPLE_GAP_S before time t (a sensor still reporting). */
+  reporting(t) {
+    const last = this.samples.at(-1);
+    return Boolean(last) && t - last[0] <= MAX_SAMPLE_GAP_S;
+  }
+
   /** Mean turn rate (deg/s) over [t0, t1] (0 when t1 <= t0; a stretch no sample covers adds nothing). */
   between(t0, t1) {
     if (!(t1 > t0)) return 0;
@@ -166,6 +172,17 @@ export class GyroCheck {
       this.verdict = bad >= c.contradicted ? 'wrong' : 'ok';
     }
     return this.verdict;
+  }
+
+  /**
+   * The picture vouches for the gyroscope: at least `least` counted frames, and as large a share
+   * of the last `window` confirming as `contradicted` is of them contradicting for 'wrong'. Then
+   * the app follows the gyroscope even when it was not turned on (app.js gyroFollowed).
+   */
+  confirmed() {
+    const c = this.cfg;
+    return this.verdict === 'ok' && this.turns.length >= c.least
+      && this.turns.filter(Boolean).length >= c.contradicted * this.turns.length;
   }
 }
 

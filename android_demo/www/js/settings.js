@@ -13,8 +13,9 @@
 // * `gyro` (DeviceMotionEvent): turns followed with the gyroscope (the Decider's yaw rate). OFF
 //   by default: its sign on a given phone needs a sighted check ("turning right must read right");
 //   the camera picture checks it as well, and one found turning the wrong way is left (live.js
-//   GyroCheck). Off, the gyroscope is still listened to while `tilt` is on, only to turn the beacon
-//   between decisions once the picture has confirmed it (app.js followTurn, decision step 10).
+//   GyroCheck). Off, the gyroscope is still listened to while `tilt` is on, and followed (the
+//   Decider's yaw rate, the beacon turned between decisions: decision step 10) once the picture
+//   has confirmed it (GyroCheck.confirmed, app.js gyroFollowed).
 // Without the gyroscope, `visualYaw` (ON by default) follows turns read from the camera picture
 // itself (visualyaw.js: consecutive frames' sideways shift; no sensor, no sign to check). In a
 // 30 deg/s scan (scripts/pan_probe.py) the beacon was 2 strips or more off on 0.68 % of the
