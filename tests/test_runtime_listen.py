@@ -445,6 +445,22 @@ def test_crossing_eval_scan_judges_every_frame_of_a_turning_camera(tmp_path, toy
                        capture_output=True, text=True)
     assert r.returncode != 0 and r.stderr.strip().count("\n") == 0 and "--scan" in r.stderr
 
+    # --heard-after: each decision judged when heard (0.3 s: 9 deg of a 30 deg/s turn, over a strip
+    # of the toy's 90 deg camera), and played turned with the gyroscope
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(toy_bundle),
+                        "--data", str(data), "--split", "val", "--portrait", "0", "--scan", "30", "--heard-after", "0.3",
+                        "--examples", "0", "--clip-seconds", "0.5", "--out", str(out), "--quiet"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    late = json.loads((out / "metrics.json").read_text())["listen"]["scan"]
+    assert late["heard_after_s"] == 0.3 and late["gyro"]["confidently_wrong"] > scan["gyro"]["confidently_wrong"] + 0.05
+    assert late["gyro_turned"]["confidently_wrong"] <= 0.05 and late["camera_turned"]["in_view"] > 0
+    assert "judged 0.3 s after its frame's capture" in r.stdout and "the beacon turned with it until heard" in r.stdout
+    r = subprocess.run([sys.executable, "-m", "crossing_assist.models.cli", "eval", "--bundle", str(toy_bundle),
+                        "--data", str(data), "--split", "val", "--scan", "30", "--heard-after", "5", "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode != 0 and r.stderr.strip().count("\n") == 0 and "--heard-after" in r.stderr
+
 
 def test_judge_scans_counts_each_frame_against_the_goal_in_that_frame(toy_bundle):  # noqa: F811
     """A hand-made scan: the model always sees strip 9 (it ignores the turn); after the still second

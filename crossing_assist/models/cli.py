@@ -192,6 +192,10 @@ def eval_parser() -> argparse.ArgumentParser:
                         "gyroscope, read from the frames (the default without one) and not at all; judged per frame; "
                         "with --portrait also by a narrow camera (the middle 3:4 window), with --negatives those "
                         "frames scanned too")
+    p.add_argument("--heard-after", type=float, default=0.0, metavar="S",
+                   help="with --scan: judge each decision S seconds after its frame's capture, when the user hears "
+                        "it (a phone: ~0.2; whole frames), and add the readings with the beacon turned by a "
+                        "gyroscope's turn since the capture (decision step 10); default 0, at the capture")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the MC-dropout masks (onnxruntime for bundles, torch for --samples > 1): "
                         "the same seed gives the same figures")
@@ -215,7 +219,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         cfg = EvalConfig(run=a.run, bundle=a.bundle, data=a.data, split=a.split, out=a.out, samples=a.samples,
                          examples=a.examples, tta_mirror=a.tta_mirror, actions=a.actions, listen=a.listen,
                          portrait=a.portrait, negatives=a.negatives, clip_seconds=a.clip_seconds,
-                         fov_deg=a.fov, scan_dps=a.scan, seed=a.seed, threads=a.threads, cache_dir=a.cache_dir,
+                         fov_deg=a.fov, scan_dps=a.scan, scan_heard_s=a.heard_after, seed=a.seed, threads=a.threads, cache_dir=a.cache_dir,
                          progress=not a.quiet)
         out, m = evaluate(cfg)
         print(f"{cfg.split}: accuracy {m['accuracy']:.3f} (majority {m['majority_accuracy']:.3f}), "
@@ -242,13 +246,18 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                           f"{e['median']:.1f} deg, mean {e['mean']:.1f} deg, p90 {e['p90']:.1f} deg")
         scan = m.get("listen", {}).get("scan")
         if scan:
-            from ..runtime.listen import SCAN_YAW_INPUTS
+            from ..runtime.listen import SCAN_YAW_INPUTS, TURNED_READINGS
 
+            names = {**SCAN_YAW_INPUTS, **{k: name for k, (_, name) in TURNED_READINGS.items()}}
+            heard = scan.get("heard_after_s") or 0
             print(f"{'scan':>15} ({scan['photos']} photos, each turned 0 -> +{scan['amplitude_deg']:g} -> "
-                  f"-{scan['amplitude_deg']:g} -> 0 deg at {scan['rate_dps']:g} deg/s; every frame after the first second)")
+                  f"-{scan['amplitude_deg']:g} -> 0 deg at {scan['rate_dps']:g} deg/s; every frame after the first second, "
+                  + (f"each decision judged {heard:g} s after its frame's capture)" if heard else "judged at its capture)"))
 
             def judged(s: dict) -> None:
-                for k, name in SCAN_YAW_INPUTS.items():
+                for k, name in names.items():
+                    if k not in s:
+                        continue
                     g = s[k]
                     print(f"{'':>15} {name}: beacon on {f(g['beacon_on'])}, confidently wrong "
                           f"{f(g['confidently_wrong'], '.4f')} of {g['in_view']} frames with the goal in view "
@@ -265,7 +274,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             if "no_crossing" in scan:
                 n = scan["no_crossing"]
                 print(f"{'':>15} {n['photos']} no-crossing frames scanned the same way, beacon off: "
-                      + ", ".join(f"{name} {f(n[k]['silence'])}" for k, name in SCAN_YAW_INPUTS.items()))
+                      + ", ".join(f"{name} {f(n[k]['silence'])}" for k, name in names.items() if k in n))
         if "conformal" in m:
             c = m["conformal"]
             print(f"conformal sets: coverage {c['coverage']:.3f} (target {c['target_coverage']:.2f}), "

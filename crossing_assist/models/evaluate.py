@@ -52,6 +52,7 @@ class EvalConfig:
     fov_deg: float | None = None    # bundles: the frames' camera FOV (a row's fov= flag wins; None: the bundle's)
     scan_dps: float = 0.0           # bundles: > 0 also plays each photo as a scan at this turn rate (deg/s)
     scan_deg: float = 20.0          # the scan's amplitude either side of straight ahead
+    scan_heard_s: float = 0.0       # judge each scan decision this long after its frame's capture (when heard)
     seed: int = 0                   # the MC-dropout masks' seed (onnxruntime / torch): a rerun gives the same figures
     threads: int = 2
     cache_dir: str = "runs/.cache"
@@ -75,6 +76,8 @@ class EvalConfig:
         if self.scan_dps < 0 or (self.scan_dps and not (0 < self.scan_deg < 60 and self.scan_dps <= 360)):
             raise ConfigError(f"Invalid --scan {self.scan_dps:g} deg/s by {self.scan_deg:g} deg; valid: 0 (off) or "
                               "up to 360 deg/s, by 0..60 deg")
+        if not 0 <= self.scan_heard_s <= 1:
+            raise ConfigError(f"Invalid --heard-after {self.scan_heard_s:g} s; valid: 0..1 s after the frame's capture")
         if self.fov_deg is not None:
             if self.run is not None:
                 raise ConfigError("Invalid arguments: --fov is the camera the runtime plays a bundle's frames at; "
@@ -251,7 +254,7 @@ def _listen_scans(cfg: EvalConfig, engine, part: Dataset) -> dict:
     should be silent)."""
     from tqdm import tqdm
 
-    from ..runtime.listen import SCAN_YAW_INPUTS, judge_scans, scan_yaw
+    from ..runtime.listen import SCAN_YAW_INPUTS, TURNED_READINGS, judge_scans, scan_yaw
 
     psi = scan_yaw(cfg.scan_deg, cfg.scan_dps)
 
@@ -269,12 +272,12 @@ def _listen_scans(cfg: EvalConfig, engine, part: Dataset) -> dict:
             return {"photos": 0}
         fovs = Counter(round(p.fov_deg, 1) for c in clips for p in c[:1] if p.fov_deg is not None)
         return {"photos": len(clips), "camera_fov_deg": {f"{k:g}": n for k, n in sorted(fovs.items())},
-                **judge_scans(engine, clips, np.asarray(labels), psi, np.asarray(rates))}
+                **judge_scans(engine, clips, np.asarray(labels), psi, np.asarray(rates), heard_after_s=cfg.scan_heard_s)}
 
     rows = [(part, r) for r in part.rows if r.far_x is not None and r.label != 0]
     if not rows:
         return {}
-    out = {"rate_dps": cfg.scan_dps, "amplitude_deg": cfg.scan_deg, "frames": len(psi),
+    out = {"rate_dps": cfg.scan_dps, "amplitude_deg": cfg.scan_deg, "frames": len(psi), "heard_after_s": cfg.scan_heard_s,
            **play(rows, "listen scans")}
     # a narrow camera is cut from photos of the bundle's own camera only (as the portrait views are)
     wide = [(ds, r) for ds, r in rows if _fov(cfg, ds, r) is None]
@@ -282,8 +285,9 @@ def _listen_scans(cfg: EvalConfig, engine, part: Dataset) -> dict:
         out["portrait_window"] = narrow
     if negatives := _negative_rows(cfg):
         out["no_crossing"] = none = play(negatives, "listen scans, no crossing")
-        for k in SCAN_YAW_INPUTS:   # every judged frame is out of view: silence is the beacon off on them
-            none[k]["silence"] = 1.0 - none[k]["out_of_view_on"]
+        for k in (*SCAN_YAW_INPUTS, *TURNED_READINGS):   # every judged frame is out of view: silence is the beacon off
+            if k in none:
+                none[k]["silence"] = 1.0 - none[k]["out_of_view_on"]
     return out
 
 

@@ -284,7 +284,8 @@ SCAN_YAW_INPUTS = {"gyro": "turn from a gyroscope", "camera": "turn read from th
 #: :data:`SCAN_YAW_INPUTS` reading, each played turned by the gyroscope's turn since its frame's
 #: capture (:func:`~crossing_assist.runtime.decide.turned`; the app's ``followTurn``: the
 #: gyroscope followed, or the picture followed and the gyroscope confirmed by it).
-TURNED_READINGS = {"gyro_turned": "gyro", "camera_turned": "camera"}
+TURNED_READINGS = {"gyro_turned": ("gyro", "turn from a gyroscope, the beacon turned with it until heard"),
+                   "camera_turned": ("camera", "turn read from the frames, the beacon turned by a gyroscope until heard")}
 
 
 def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
@@ -310,7 +311,7 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
     gyro = np.broadcast_to(np.diff(psi, prepend=psi[0]) * fps, (len(clips), len(psi)))
     rates = {"gyro": gyro, "camera": np.asarray(camera_rates, float), "no_yaw": np.zeros((len(clips), len(psi)))}
     res = {k: _judge_scan_input(engine, clips, labels, psi, rates[k], fps, lag) for k in SCAN_YAW_INPUTS}
-    for name, reading in TURNED_READINGS.items() if lag else ():
+    for name, (reading, _) in TURNED_READINGS.items() if lag else ():
         res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, follow_turn=True)
     return res
 

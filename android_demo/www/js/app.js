@@ -352,16 +352,17 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   app.last = d;
   app.turning = null;
   if (!app.audioFailed) {
+    let heard = d; // what the beacon plays now, which the direction vibration and speech follow
     if (fresh && d.heading_deg !== null && gyroFollowed()) {
       app.turning = { id: (app.frameId || 0) + 1, d, captured, fov: decider.cfg.fov_deg, rendered: null };
-      followTurn(); // the turn made while the model ran
+      heard = followTurn(); // turned by the turn made while the model ran
     } else {
       app.audio.render(fresh ? cueFor(d) : STOP_CUE);
     }
     // a frame the camera gave but the model answered too late for: the phone is too slow
     // the model placed a crossing somewhere on this frame (not unsure because nothing is one)
     const seeing = obs.ok && argmax(obs.probs) !== 0;
-    feedback(now(), !fresh ? { ...d, stop: true, reason: 'slow', heading_deg: null } : tooRolled ? { ...d, reason: 'rolled' } : d,
+    feedback(now(), !fresh ? { ...d, stop: true, reason: 'slow', heading_deg: null } : tooRolled ? { ...d, reason: 'rolled' } : heard,
       seeing);
   }
   app.frameId = (app.frameId || 0) + 1; // unique over restarts (seq restarts with the camera)
@@ -561,12 +562,13 @@ function onMotion(e) {
  * gyroscope followed, the decision is played turned by the gyroscope's turn since the capture,
  * at its decision and again at each gyroscope sample until the next decision. Only while the
  * cue it played is still the one playing: any other cue (a stop, the watchdog's, a pause) ends it.
+ * Returns the decision as played (null once ended).
  */
 function followTurn() {
   const f = app.turning;
   if (!app.audio || app.audioFailed || (f.rendered !== null && (app.audio.cue !== f.rendered || !gyroFollowed()))) {
     app.turning = null;
-    return;
+    return null;
   }
   const t = now();
   const turn = t > f.captured ? app.yaw.between(f.captured, t) * (t - f.captured) : 0;
@@ -574,6 +576,7 @@ function followTurn() {
   app.audio.render(cueFor(played));
   f.rendered = app.audio.cue;
   record({ kind: 'turned', t, frame: f.id, turn_deg: turn, heading_deg: played.heading_deg });
+  return played;
 }
 
 /** A sensor setting for this visit: the URL flag's (?gyro=1, ?tilt=0, ?visualyaw=0) else the kept setting. */
