@@ -557,8 +557,8 @@ function onMotion(e) {
 
 /**
  * The beacon turned with the user (decision step 10, logic.js turnedDecision; docs/android.md).
- * A decision is played from its model run's end until the next one, ~0.15-0.3 s after its frame's
- * capture, so while the user turns it lags their facing by the turn since that capture. With the
+ * A decision is played from its model run's end until the next one, 0.28-0.51 s after its frame's
+ * capture in the e2e run, so while the user turns it lags their facing by the turn since that capture. With the
  * gyroscope followed, the decision is played turned by the gyroscope's turn since the capture,
  * at its decision and again at each gyroscope sample until the next decision. Only while the
  * cue it played is still the one playing: any other cue (a stop, the watchdog's, a pause) ends it.
