@@ -194,7 +194,7 @@ def eval_parser() -> argparse.ArgumentParser:
                         "frames scanned too")
     p.add_argument("--heard-after", type=float, default=0.0, metavar="S",
                    help="with --scan: judge each decision S seconds after its frame's capture, when the user hears "
-                        "it (a phone: ~0.2; whole frames), and add the readings with the beacon turned by a "
+                        "it (the app: 0.28-0.51 after capture in its e2e run; whole frames), and add the readings with the beacon turned by a "
                         "gyroscope's turn since the capture (decision step 10); default 0, at the capture")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the MC-dropout masks (onnxruntime for bundles, torch for --samples > 1): "

@@ -301,8 +301,8 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
 
     ``heard_after_s`` (rounded to whole frames): each decision is judged when it is heard, that
     long after its frame's capture (the model's run, then playing until the next decision),
-    against the goal and the camera's turn then; a phone answers ~0.15 s after capture and
-    plays that answer for a frame, so ~0.2 s is what a user hears. It adds :data:`TURNED_READINGS`:
+    against the goal and the camera's turn then (the phone app, in its e2e run: heard 0.28 s to
+    0.51 s after capture; docs/results.md, "Heard when it plays"). It adds :data:`TURNED_READINGS`:
     a reading's decisions with the beacon turned by the gyroscope's turn since the capture."""
     psi = np.asarray(psi, float)
     lag = int(round(heard_after_s * fps))
