@@ -1167,6 +1167,7 @@ def test_a_gyroscope_the_picture_confirms_is_followed_by_default(confirmed_gyro:
     assert all(frames[e["frame"]]["t"] >= checks[0]["t"] for e in turned), "turned before the picture confirmed it"
     assert all(e["turn_deg"] >= 0 for e in turned) and max(e["turn_deg"] for e in turned) > 2.0   # 30 deg/s right
     assert not any("gyroscope" in e.get("text", "") for e in r["trace"] if e["kind"] == "speech")
+    assert r["turning_text"].endswith("(gyroscope)"), r["turning_text"]   # the helper view says which
 
 
 # ----------------------------------------------------------------------------- the shipped bundle
