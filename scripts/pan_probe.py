@@ -90,6 +90,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--replay", action="store_true", help="decide again from --cache without running the model")
     ap.add_argument("--out", type=Path, help="write the figures as JSON here")
     a = ap.parse_args(argv)
+    if not 0 <= a.heard_after <= 1:   # before a play that takes minutes (crossing-eval's range)
+        print(f"error: --heard-after {a.heard_after:g} s invalid; valid: 0..1 s after the frame's capture", file=sys.stderr)
+        return 1
     try:
         engine = Engine(a.bundle, threads=1)
     except BundleError as exc:

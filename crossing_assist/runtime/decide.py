@@ -197,14 +197,6 @@ class Decider:
         if abs(heading_to_x(self.hold_heading, self.cfg.fov_deg) - seen) * N_BINS > self.cfg.gate.contradict_strips:
             self.hold_heading = None
 
-    def _edge_side(self, heading: float) -> int:
-        """A hold taken in an edge strip means "at this edge or beyond" (a goal out of view but
-        inferable is labelled so), as the belief's edge strips do
-        (:func:`~crossing_assist.runtime.belief.spread_edge`): step 3 drops it once a turn towards
-        that edge carries it out of the strip, since the goal may still lie beyond the edge.
-        Turning away keeps it."""
-        return edge_side(heading, self.cfg.fov_deg)
-
     def _hold(self, t: float) -> tuple[float | None, float, float]:
         """Step 6: the hold's heading (None when unusable), uncertainty and coefficient."""
         if self.hold_heading is None or not abs(self.hold_heading) < 90.0:
@@ -225,8 +217,11 @@ class Decider:
         if self.hold_heading is not None:  # 3
             self.hold_heading -= psi
             self.hold_turned += abs(psi)
-            if self.hold_edge and psi * self.hold_edge > 0 and self._edge_side(self.hold_heading) != self.hold_edge:
-                self.hold_heading = None  # an edge hold turned towards: where the goal is now is unknown
+            # a hold taken in an edge strip means "at this edge or beyond" (as the belief's edge
+            # strips, bf.spread_edge): turned towards that edge out of the strip, where the goal is
+            # now is unknown; turning away keeps it
+            if self.hold_edge and psi * self.hold_edge > 0 and edge_side(self.hold_heading, cfg.fov_deg) != self.hold_edge:
+                self.hold_heading = None
         if obs is not None and self.t_last_ok is not None and t - self.t_last_ok > cfg.watchdog_s:
             # 4a: the first frame after a stall: what was believed before it is stale (the user
             # may have turned or walked on), so the frame meets a fresh belief and no hold
@@ -246,7 +241,7 @@ class Decider:
             reason = REASON_UNCERTAIN if m.state == GATE_STOP else REASON_OK
             if h_l is not None and al_l >= cfg.gate.alpha_min:  # refresh the hold from fresh evidence
                 self.hold_heading, self.hold_t, self.hold_turned = h_l, t, 0.0
-                self.hold_edge = self._edge_side(h_l)
+                self.hold_edge = edge_side(h_l, cfg.fov_deg)
         stop = reason != REASON_OK  # 9
         heading = None if stop else m.heading_deg
         q = (m.confidence - cfg.gate.alpha_min) / (1.0 - cfg.gate.alpha_min)

@@ -311,8 +311,9 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
     gyro = np.broadcast_to(np.diff(psi, prepend=psi[0]) * fps, (len(clips), len(psi)))
     rates = {"gyro": gyro, "camera": np.asarray(camera_rates, float), "no_yaw": np.zeros((len(clips), len(psi)))}
     res = {k: _judge_scan_input(engine, clips, labels, psi, rates[k], fps, lag) for k in SCAN_YAW_INPUTS}
-    for name, (reading, _) in TURNED_READINGS.items() if lag else ():
-        res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, follow_turn=True)
+    if lag:
+        for name, (reading, _) in TURNED_READINGS.items():
+            res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, follow_turn=True)
     return res
 
 

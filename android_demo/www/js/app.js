@@ -571,7 +571,7 @@ function followTurn() {
     return null;
   }
   const t = now();
-  const turn = t > f.captured ? app.yaw.between(f.captured, t) * (t - f.captured) : 0;
+  const turn = app.yaw.between(f.captured, t) * (t - f.captured); // 0 before the capture
   const played = turnedDecision(f.d, turn, f.fov);
   app.audio.render(cueFor(played));
   f.rendered = app.audio.cue;

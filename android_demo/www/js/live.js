@@ -125,7 +125,9 @@ export class YawIntegrator {
   between(t0, t1) {
     if (!(t1 > t0)) return 0;
     let angle = 0;
-    for (let i = 1; i < this.samples.length; i += 1) {
+    // newest first: a sample at or before t0 covers nothing after it (called at every gyroscope
+    // sample while a decision plays, so only the samples since its capture are visited)
+    for (let i = this.samples.length - 1; i >= 1 && this.samples[i][0] > t0; i -= 1) {
       const [t, rate] = this.samples[i];
       const from = Math.max(this.samples[i - 1][0], t - MAX_SAMPLE_GAP_S);
       const overlap = Math.min(t, t1) - Math.max(from, t0);
@@ -180,9 +182,8 @@ export class GyroCheck {
    * the app follows the gyroscope even when it was not turned on (app.js gyroFollowed).
    */
   confirmed() {
-    const c = this.cfg;
-    return this.verdict === 'ok' && this.turns.length >= c.least
-      && this.turns.filter(Boolean).length >= c.contradicted * this.turns.length;
+    // 'ok' is only given once `least` frames were counted, and the window never shrinks
+    return this.verdict === 'ok' && this.turns.filter(Boolean).length >= this.cfg.contradicted * this.turns.length;
   }
 }
 

@@ -330,11 +330,6 @@ export class Decider {
     }
   }
 
-  /** A hold in an edge strip means "at this edge or beyond" (step 3). */
-  edgeSide(heading) {
-    return edgeSide(heading, this.cfg.fov_deg);
-  }
-
   /**
    * Advance to time t (s) with this frame's outputs, obs = {probs: number[A], uncertainty,
    * ok} (null = no new frame: a tick). Returns the decision (same fields as the Python
@@ -350,7 +345,7 @@ export class Decider {
       this.holdHeading -= psi;
       this.holdTurned += Math.abs(psi);
       // an edge hold ("at this edge or beyond") turned towards: where the goal is now is unknown
-      if (this.holdEdge !== 0 && psi * this.holdEdge > 0 && this.edgeSide(this.holdHeading) !== this.holdEdge) {
+      if (this.holdEdge !== 0 && psi * this.holdEdge > 0 && edgeSide(this.holdHeading, cfg.fov_deg) !== this.holdEdge) {
         this.holdHeading = null;
       }
     }
@@ -388,7 +383,7 @@ export class Decider {
         this.holdHeading = hL;
         this.holdT = t;
         this.holdTurned = 0;
-        this.holdEdge = this.edgeSide(hL);
+        this.holdEdge = edgeSide(hL, cfg.fov_deg);
       }
     }
     const stop = reason !== REASON_OK;
