@@ -37,11 +37,16 @@ INPUT_SIZE=${INPUT_SIZE:-192x256}   # HxW of the canvas: 192x256 since 2026-12-0
 # ablations (scripts/augment_ablation.py): field-view steps left out, and whether negatives are added
 FIELD_WITHOUT=${FIELD_WITHOUT:-}   # e.g. roll or corruption (crossing-train --field-without)
 NEGATIVES=${NEGATIVES:-1}          # 0: no synthetic corners and no PTL negatives
+LOOKALIKES=${LOOKALIKES:-0}        # 1: the synthetic corners with zebra look-alikes (runs/data/synth_look: half of
+                                   # those without a crossing show stairs or a crossing's picture; measured
+                                   # 2026-12-06, docs/models.md "Look-alikes in training")
 FIELD_ZOOM=${FIELD_ZOOM:-}   # e.g. 1.7: half the field views magnified by 1..1.7 (crossing-train --field-zoom; measured
                              # 2026-12-02, not shipped: docs/models.md, "Magnified views")
 scripts/prepare_default_data.sh "$PTL"
 EXTRA=()
-if [ "$NEGATIVES" = 1 ]; then EXTRA+=(--extra-data runs/data/synth --extra-data runs/data/neg_half); fi
+SYNTH=runs/data/synth
+if [ "$LOOKALIKES" = 1 ]; then SYNTH=runs/data/synth_look; fi
+if [ "$NEGATIVES" = 1 ]; then EXTRA+=(--extra-data "$SYNTH" --extra-data runs/data/neg_half); fi
 if [ -n "$FIELD_WITHOUT" ]; then EXTRA+=(--field-without "$FIELD_WITHOUT"); fi
 if [ -n "$FEATURE_STRIDE" ]; then EXTRA+=(--feature-stride "$FEATURE_STRIDE"); fi
 if [ -n "$SOFT_X" ]; then EXTRA+=(--soft-x "$SOFT_X"); fi

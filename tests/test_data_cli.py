@@ -31,8 +31,8 @@ def test_cli_defaults_match_configs():
         (d.mirror, d.yaw_deg, d.fov_deg, d.out_of_frame, d.splits, d.drop_unknown_yaw)
     a = _parse("synth", "--out", "o")
     s, c = SynthConfig(Path(".")), ClipConfig(Path("c.mp4"))
-    assert (a.frames, a.seed, a.fov, a.unknown_fraction, a.val_fraction, a.supersample) == \
-        (s.frames, s.seed, s.fov_deg, s.unknown_fraction, s.val_fraction, s.supersample)
+    assert (a.frames, a.seed, a.fov, a.unknown_fraction, a.val_fraction, a.supersample, a.lookalike_fraction) == \
+        (s.frames, s.seed, s.fov_deg, s.unknown_fraction, s.val_fraction, s.supersample, s.lookalike_fraction)
     assert (a.seconds, a.fps) == (c.seconds, c.fps)
 
 

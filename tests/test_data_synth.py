@@ -12,8 +12,9 @@ import pytest
 
 from crossing_assist.actions import parse_label, x_to_bin
 from crossing_assist.data_tools.manifest import read_manifest
-from crossing_assist.data_tools.synth import ClipConfig, SynthConfig, synth_clip, synth_frame
-from crossing_assist.data_tools.synth_scene import Camera, Occluder, goal_label, project, render, sample_scene
+from crossing_assist.data_tools.synth import ClipConfig, SynthConfig, sample_lookalike, synth_clip, synth_frame
+from crossing_assist.data_tools.synth_scene import (Camera, Occluder, Poster, Stairs, goal_label, project, render,
+                                                   sample_scene)
 
 ASSETS = Path(__file__).resolve().parents[1] / "crossing_assist" / "assets"
 SMALL = SynthConfig(Path("."), width=48, height=36, supersample=1)
@@ -83,6 +84,81 @@ def test_labels_are_consistent_and_unknown_fraction_is_honoured():
     assert {f for r in unknown for f in r.flags} >= {"view=away", "view=wall"}
 
 
+def test_lookalikes_replace_only_frames_without_a_crossing():
+    """Frames with a crossing stay byte for byte; every frame without one becomes stairs or a
+    crossing's picture, labelled unknown, each kind drawn."""
+    cfg = replace(SMALL, unknown_fraction=0.5)
+    plain = [synth_frame(3, i, cfg) for i in range(24)]
+    look = [synth_frame(3, i, replace(cfg, lookalike_fraction=1.0)) for i in range(24)]
+    kinds = set()
+    for (a_img, a_row), (b_img, b_row) in zip(plain, look):
+        views = [f for f in a_row.flags if f.startswith("view=")]
+        if not views:   # a crossing in view (or out of the frame at its edge): unchanged
+            assert a_row == b_row
+            np.testing.assert_array_equal(a_img, b_img)
+            continue
+        view = next(f for f in b_row.flags if f.startswith("view="))[5:]
+        assert view in ("stairs_up", "stairs_down", "poster") and b_row.label == 0 and b_row.far_x is None
+        kinds.add(view)
+    assert kinds == {"stairs_up", "stairs_down", "poster"}
+
+
+def _bands(profile: np.ndarray) -> int:
+    """Bright bands along a luminance profile (runs above its midrange); none in a profile of
+    less than 40 grey levels (texture and shading, not bars)."""
+    if np.ptp(profile) < 40:
+        return 0
+    bright = profile > (profile.min() + profile.max()) / 2
+    return int(np.sum(bright[1:] & ~bright[:-1]))
+
+
+@pytest.mark.parametrize("down", [False, True])
+def test_stairs_are_seen_as_bars_across_the_view(down):
+    scene = replace(sample_scene(np.random.default_rng(2)), has_road=False, occluders=(), theta=0.0, lighting="day")
+    stairs = Stairs(start=1.0 if down else 2.0, centre=0.0, width=4.0, steps=8, rise=0.16, tread=0.32, landing=2.0,
+                    down=down, color=(0.3, 0.3, 0.3), nosing=(0.95, 0.95, 0.95), nosing_depth=0.04)
+    scene = replace(scene, near=stairs.end - 1.5, stairs=stairs)
+    cam = Camera(yaw=0.0, pitch=30.0 if down else 5.0, roll=0.0, fov_deg=60.0)
+    img, plain = (render(s, cam, 160, 240, rng=np.random.default_rng(0), supersample=2, noise=0).astype(float)
+                  for s in (scene, replace(scene, stairs=None)))
+    column, column_plain = img[:, 78:82].mean(axis=(1, 2)), plain[:, 78:82].mean(axis=(1, 2))
+    flight = np.abs(column - column_plain) > 10          # the rows the flight covers
+    assert flight.sum() > 30 and _bands(column[flight]) >= 6   # a bright edge a step
+
+
+def test_a_poster_shows_a_picture_of_a_crossing():
+    base = replace(sample_scene(np.random.default_rng(5)), has_road=False, occluders=(), theta=0.0, lighting="day")
+    inner = replace(sample_scene(np.random.default_rng(6)), has_road=True, marking="zebra", lighting="day", occluders=())
+    shot = Camera(yaw=inner.theta, pitch=15.0, fov_deg=60.0)
+    poster = Poster(a=4.0, b0=-1.2, b1=1.2, y0=0.5, y1=2.3, scene=inner, camera=shot, bezel=0.05,
+                    frame_color=(0.05, 0.05, 0.05), stand=False)
+    scene = replace(base, near=4.02 - 1.5, poster=poster)
+    cam = Camera(yaw=0.0, pitch=0.0, roll=0.0, height=1.4, fov_deg=60.0)
+    w, h = 240, 180
+    img = render(scene, cam, w, h, rng=np.random.default_rng(0), supersample=2, noise=0).astype(float)
+    (x0, y0), (x1, y1) = (project(cam, np.array(c), w, h) for c in ((-1.2, 2.3, 4.0), (1.2, 0.5, 4.0)))
+    crop = img[int(y0 * h) + 3:int(y1 * h) - 3, int(x0 * w) + 3:int(x1 * w) - 3].mean(axis=2)
+    picture = render(inner, shot, 160, 120, rng=np.random.default_rng(inner.texture_seed), supersample=1,
+                     noise=0.5).astype(float).mean(axis=2)
+    picture = cv2.resize(picture, (crop.shape[1], crop.shape[0]), interpolation=cv2.INTER_AREA)
+    def corr(p):
+        return np.corrcoef(crop.ravel(), p.ravel())[0, 1]
+    assert corr(picture) > 0.7                                        # the picture, upright and unmirrored
+    assert max(corr(picture[::-1]), corr(picture[:, ::-1])) < 0.3
+
+
+def test_sampled_lookalikes_face_the_user():
+    """Each sampled look-alike fills a fair part of the frame (the phone points at it)."""
+    for i in range(9):
+        rng = np.random.default_rng([11, i])
+        scene, cam, kind = sample_lookalike(rng, 60.0)
+        assert scene.goal() is None
+        plain = replace(scene, stairs=None, poster=None)
+        a = render(scene, cam, 64, 48, rng=np.random.default_rng(0), supersample=1, noise=0).astype(int)
+        b = render(plain, cam, 64, 48, rng=np.random.default_rng(0), supersample=1, noise=0).astype(int)
+        assert (np.abs(a - b).max(axis=2) > 8).mean() > 0.03, (i, kind)
+
+
 def test_synth_cli_writes_a_valid_dataset_and_extends_with_more_frames(tmp_path):
     proc = _cli("synth", "--out", tmp_path / "a", "--frames", 4, "--seed", 2, "--size", "40x30",
                 "--supersample", 1, "--quiet")
@@ -98,6 +174,7 @@ def test_synth_cli_writes_a_valid_dataset_and_extends_with_more_frames(tmp_path)
     (["--video", "--out", "clip.avi"], "expected a file name ending in .mp4"),
     (["--out", "d", "--size", "4x4"], "size 4x4 invalid"),
     (["--out", "d", "--frames", "0"], "frames=0 invalid"),
+    (["--out", "d", "--lookalike-fraction", "1.5"], "lookalike_fraction=1.5 invalid"),
 ])
 def test_synth_cli_rejects_bad_settings(tmp_path, args, message):
     proc = _cli("synth", *[tmp_path / a if a in ("clip.avi", "d") else a for a in args])

@@ -84,7 +84,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
         return 0
     h, w = args.size or (168, 224)
     cfg = synth.SynthConfig(Path(args.out), args.frames, args.seed, w, h, args.fov, args.unknown_fraction,
-                            args.val_fraction, args.supersample, not args.quiet)
+                            args.val_fraction, args.supersample, not args.quiet, args.lookalike_fraction)
     path = synth.synth_dataset(cfg)
     print(f"wrote {path} ({args.frames} synthetic frames, seed {args.seed})")
     return 0
@@ -246,6 +246,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fov", type=float, default=d_frames.fov_deg, help="horizontal field of view, degrees")
     p.add_argument("--unknown-fraction", type=float, default=d_frames.unknown_fraction,
                    help="share of frames with no crossing in view (labelled unknown)")
+    p.add_argument("--lookalike-fraction", type=float, default=d_frames.lookalike_fraction,
+                   help="share of the no-crossing frames showing a zebra look-alike (stairs up or down, a "
+                        "crossing's picture on a poster, screen or billboard); the other frames are unchanged")
     p.add_argument("--val-fraction", type=float, default=d_frames.val_fraction,
                    help="share of scenes put in the val split")
     p.add_argument("--supersample", type=int, choices=(1, 2, 3), default=d_frames.supersample,

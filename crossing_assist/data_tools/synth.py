@@ -29,7 +29,8 @@ from tqdm import tqdm
 from crossing_assist.actions import DEFAULT_FOV_DEG, format_label
 from crossing_assist.data_tools.images import save_rgb
 from crossing_assist.data_tools.manifest import Row, atomic_write_text, write_manifest
-from crossing_assist.data_tools.synth_scene import Camera, Occluder, Scene, goal_label, project, render, sample_scene
+from crossing_assist.data_tools.synth_scene import (Camera, Occluder, Poster, Scene, Stairs, goal_label, project, render,
+                                                   sample_scene)
 from crossing_assist.errors import UserError
 
 
@@ -49,6 +50,7 @@ class SynthConfig:
     val_fraction: float = 0.2
     supersample: int = 2
     progress: bool = True
+    lookalike_fraction: float = 0.0   # share of the no-crossing frames showing stairs or a crossing's picture
 
 
 @dataclass(frozen=True)
@@ -92,6 +94,56 @@ def sample_view(scene: Scene, rng: np.random.Generator, fov_deg: float, away: bo
                   height=float(rng.uniform(1.2, 1.6)), fov_deg=fov_deg)
 
 
+LOOKALIKES = ("stairs_up", "stairs_down", "poster")
+
+
+def sample_lookalike(rng: np.random.Generator, fov_deg: float) -> tuple[Scene, Camera, str]:
+    """A scene with no crossing but something striped like one, the phone facing it: a flight
+    of stairs up or down, or a picture of a zebra crossing on a poster, screen or billboard.
+    Returns (scene, camera, kind); the label is unknown."""
+    kind = str(rng.choice(LOOKALIKES))
+    base = replace(sample_scene(rng), has_road=False, occluders=())
+    yaw = base.theta + float(np.clip(rng.normal(0, 12), -30, 30))
+    cam = Camera(yaw=yaw, pitch=float(rng.uniform(3, 22)), roll=float(rng.normal(0, 2.5)),
+                 height=float(rng.uniform(1.2, 1.6)), fov_deg=fov_deg)
+    if kind == "poster":
+        wall = float(rng.uniform(2.5, 8.0))
+        inner = replace(sample_scene(rng), has_road=True, marking="zebra",
+                        lighting=str(rng.choice(["day", "overcast", "sunny", "dusk"])))
+        if rng.random() < 0.3:        # a billboard: wide, high
+            w, y0 = float(rng.uniform(3.0, 6.0)), float(rng.uniform(1.8, 3.5))
+            h = w * float(rng.uniform(0.4, 0.6))
+        elif rng.random() < 0.5:      # a shop or station screen: landscape
+            w, y0 = float(rng.uniform(0.8, 2.2)), float(rng.uniform(0.6, 1.8))
+            h = w * float(rng.uniform(0.5, 0.75))
+        else:                         # a shelter or street ad: portrait
+            w, y0 = float(rng.uniform(0.9, 1.4)), float(rng.uniform(0.2, 0.7))
+            h = w * float(rng.uniform(1.3, 1.6))
+        stand = bool(rng.random() < 0.5)
+        a = float(rng.uniform(1.0, wall - 0.3)) if stand else wall - 0.02
+        centre = a * math.tan(math.radians(yaw - base.theta)) + float(rng.normal(0, w / 3))
+        frame = (0.05, 0.05, 0.06) if rng.random() < 0.5 else tuple(rng.uniform(0.3, 0.9, 3))
+        shot = replace(sample_view(inner, rng, 60.0, False), pitch=float(rng.uniform(8, 28)))   # the zebra fills it
+        poster = Poster(a, centre - w / 2, centre + w / 2, y0, y0 + h, inner, shot,
+                        float(rng.uniform(0.02, 0.12)), frame, stand)
+        scene = replace(base, near=wall - 1.5, poster=poster)
+        return scene, replace(cam, pitch=float(rng.uniform(-8, 12))), kind
+    down = kind == "stairs_down"
+    steps = int(rng.integers(4, 15))
+    start = float(rng.uniform(0.6, 3.0) if down else rng.uniform(1.0, 6.0))
+    grey = float(rng.uniform(0.35, 0.8))
+    color = tuple(np.clip(grey * np.array([1.0, 0.98, 0.94]) + rng.normal(0, 0.04, 3), 0, 1))
+    nosing = (tuple(np.clip(np.array(color) * rng.uniform(0.5, 1.3), 0, 1)) if rng.random() < 0.4
+              else tuple(rng.choice([(0.95, 0.85, 0.1), (0.92, 0.92, 0.9), (0.1, 0.1, 0.1), (0.6, 0.55, 0.3)])))
+    centre = float(rng.uniform(-2.0, 2.0))
+    stairs = Stairs(start, centre, float(rng.uniform(1.2, 8.0)), steps,
+                    float(rng.uniform(0.12, 0.19)), float(rng.uniform(0.25, 0.42)), float(rng.uniform(1.0, 5.0)),
+                    down, color, nosing, float(rng.uniform(0.03, 0.12)))
+    yaw = base.theta + math.degrees(math.atan2(centre, start + 2.0)) + float(np.clip(rng.normal(0, 10), -25, 25))
+    pitch = float(rng.uniform(15, 45) if down else rng.uniform(-5, 18))
+    return replace(base, near=stairs.end - 1.5, stairs=stairs), replace(cam, yaw=yaw, pitch=pitch), kind
+
+
 def synth_frame(seed: int, index: int, cfg: SynthConfig) -> tuple[np.ndarray, Row]:
     """Frame ``index`` of ``seed``: (H×W×3 uint8 RGB, its manifest row with image ``images/…``)."""
     rng = np.random.default_rng([seed, index])
@@ -101,12 +153,19 @@ def synth_frame(seed: int, index: int, cfg: SynthConfig) -> tuple[np.ndarray, Ro
     if wall:
         scene = replace(scene, has_road=False)
     cam = sample_view(scene, rng, cfg.fov_deg, away=no_crossing and not wall)
+    lookalike = None
+    if no_crossing and cfg.lookalike_fraction > 0:   # its own draws: frames that stay are unchanged
+        look_rng = np.random.default_rng([seed, index, 1])
+        if look_rng.random() < cfg.lookalike_fraction:
+            scene, cam, lookalike = sample_lookalike(look_rng, cfg.fov_deg)
     image = render(scene, cam, cfg.width, cfg.height, rng=rng, supersample=cfg.supersample)
     far_x, label, blocked = goal_label(scene, cam, cfg.width, cfg.height)
     flags = ["synthetic", f"marking={scene.marking if scene.has_road else 'none'}", f"lighting={scene.lighting}"]
     if far_x is not None:   # the goal's height too, as PTL rows carry it: a rolled training view turns it exactly
         flags.append(f"far_y={project(cam, scene.goal(), cfg.width, cfg.height)[1]:.4f}")
-    if wall:
+    if lookalike:
+        flags.append(f"view={lookalike}")
+    elif wall:
         flags.append("view=wall")
     elif no_crossing:
         flags.append("view=away")
@@ -122,7 +181,8 @@ def synth_dataset(cfg: SynthConfig) -> Path:
     _check_size(cfg.width, cfg.height, cfg.fov_deg)
     if cfg.frames < 1:
         raise SynthError(f"frames={cfg.frames} invalid; expected >= 1")
-    for name, v in (("unknown_fraction", cfg.unknown_fraction), ("val_fraction", cfg.val_fraction)):
+    for name, v in (("unknown_fraction", cfg.unknown_fraction), ("val_fraction", cfg.val_fraction),
+                    ("lookalike_fraction", cfg.lookalike_fraction)):
         if not 0 <= v <= 1:
             raise SynthError(f"{name}={v} invalid; valid: 0..1")
     out = Path(cfg.out_dir)

@@ -39,6 +39,50 @@ class Occluder:
 
 
 @dataclass(frozen=True)
+class Stairs:
+    """A flight of ``steps`` steps (``rise`` × ``tread`` m, ``width`` wide) running along the
+    crossing direction ``n`` from across-road ``start``, centred at along-road ``centre``, then a
+    ``landing`` to the wall; ``down`` descends from the ground. Seen from a few metres its
+    edges are bright bars across the view, as a zebra's are: a look-alike labelled unknown."""
+
+    start: float
+    centre: float
+    width: float
+    steps: int
+    rise: float
+    tread: float
+    landing: float
+    down: bool
+    color: tuple[float, float, float]
+    nosing: tuple[float, float, float]   # the strip along each step's edge
+    nosing_depth: float
+
+    @property
+    def end(self) -> float:
+        """Across-road position of the wall behind the landing."""
+        return self.start + self.steps * self.tread + self.landing
+
+
+@dataclass(frozen=True)
+class Poster:
+    """A picture of a crossing on an upright panel facing the user at across-road ``a``
+    (a poster, shop screen or billboard): ``scene`` seen by ``camera`` fills along-road
+    [b0, b1] and heights [y0, y1], inside a ``bezel``-wide frame; ``stand`` adds a post to the
+    ground. A look-alike: the crossing is not there."""
+
+    a: float
+    b0: float
+    b1: float
+    y0: float
+    y1: float
+    scene: "Scene"
+    camera: "Camera"
+    bezel: float
+    frame_color: tuple[float, float, float]
+    stand: bool
+
+
+@dataclass(frozen=True)
 class Scene:
     """A street corner. Lengths in metres, angles in degrees, colours RGB in 0..1."""
 
@@ -59,6 +103,8 @@ class Scene:
     facade: tuple[float, float, float]
     occluders: tuple[Occluder, ...]
     texture_seed: int
+    stairs: Stairs | None = None   # zebra look-alikes (scenes without a road)
+    poster: Poster | None = None
 
     @property
     def n(self) -> np.ndarray:
@@ -243,6 +289,75 @@ def _light(scene: Scene, rgb: np.ndarray, rng: np.random.Generator) -> np.ndarra
     return np.clip(out, 0, 1)
 
 
+def _hit_rect(o: np.ndarray, r: np.ndarray, axis: int, value: float, lo: tuple, hi: tuple,
+              nearest: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rays (origin ``o`` (3,), directions ``r`` (…×3), both in road coordinates (a, b, y)) against
+    the rectangle where coordinate ``axis`` is ``value`` and the other two lie in [lo, hi]:
+    ``(hit, t, point)``, a hit only nearer than ``nearest``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (value - o[axis]) / r[..., axis]
+        p = o + t[..., None] * r
+        hit = (t > 1e-6) & (t < nearest)
+        for i in range(3):
+            if i != axis:
+                hit &= (p[..., i] >= lo[i]) & (p[..., i] <= hi[i])
+    return hit, t, p
+
+
+def _draw_lookalikes(scene: Scene, o: np.ndarray, r: np.ndarray, nearest: np.ndarray, rgb: np.ndarray,
+                     dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Paint the scene's stairs and poster over ``rgb`` where they are nearer than ``nearest``."""
+    def paint(hit, t, col):
+        nonlocal rgb, dist, nearest
+        rgb = np.where(hit[..., None], col, rgb)
+        dist = np.where(hit, t, dist)
+        nearest = np.where(hit, t, nearest)
+
+    s = scene.stairs
+    if s is not None:
+        b0, b1 = s.centre - s.width / 2, s.centre + s.width / 2
+        base = np.array(s.color)
+        sign = -1.0 if s.down else 1.0
+        for k in range(s.steps):
+            a_k = s.start + k * s.tread
+            a_next = a_k + s.tread if k < s.steps - 1 else s.end
+            y = sign * (k + 1) * s.rise
+            hit, t, p = _hit_rect(o, r, 2, y, (a_k, b0, 0), (a_next, b1, 0), nearest)
+            tex = _value_noise(p[..., 0], p[..., 1], scene.texture_seed + 11, 0.3) - 0.5
+            edge = (a_next - p[..., 0] if s.down else p[..., 0] - a_k) < s.nosing_depth
+            col = np.where(edge[..., None], np.array(s.nosing), base) * (1 + 0.2 * tex)[..., None]
+            paint(hit, t, col)
+            if not s.down:   # a riser faces the user only going up
+                hit, t, _ = _hit_rect(o, r, 0, a_k, (0, b0, k * s.rise), (0, b1, (k + 1) * s.rise), nearest)
+                paint(hit, t, base * 0.62)
+        for b in (b0, b1):   # the flight's sides, stepped like the treads
+            lo, hi = (-s.steps * s.rise, 0.0) if s.down else (0.0, s.steps * s.rise)
+            hit, t, p = _hit_rect(o, r, 1, b, (s.start, 0, lo), (s.end, 0, hi), nearest)
+            step = np.clip(np.floor((p[..., 0] - s.start) / s.tread) + 1, 1, s.steps) * s.rise
+            hit &= (p[..., 2] >= -step) if s.down else (p[..., 2] <= step)
+            paint(hit, t, base * 0.8)
+    q = scene.poster
+    if q is not None:
+        e = q.bezel
+        hit, t, p = _hit_rect(o, r, 0, q.a, (0, q.b0 - e, q.y0 - e), (0, q.b1 + e, q.y1 + e), nearest)
+        if q.stand:
+            mid = (q.b0 + q.b1) / 2
+            post, t2, _ = _hit_rect(o, r, 0, q.a, (0, mid - 0.12, 0), (0, mid + 0.12, q.y0), nearest)
+            hit, t = hit | post, np.where(post, t2, t)
+        paint(hit, t, np.array(q.frame_color))
+        hit, t, p = _hit_rect(o, r, 0, q.a - 1e-3, (0, q.b0, q.y0), (0, q.b1, q.y1), nearest)
+        tw = 160 if q.b1 - q.b0 >= q.y1 - q.y0 else 120
+        th = 280 - tw
+        picture = render(q.scene, q.camera, tw, th, rng=np.random.default_rng(q.scene.texture_seed),
+                         supersample=1, noise=0.5).astype(np.float64) / 255
+        u = np.clip((p[..., 1] - q.b0) / (q.b1 - q.b0), 0, 1 - 1e-9)
+        v = np.clip((q.y1 - p[..., 2]) / (q.y1 - q.y0), 0, 1 - 1e-9)
+        with np.errstate(invalid="ignore"):
+            col = picture[np.nan_to_num(v * th).astype(int), np.nan_to_num(u * tw).astype(int)]
+        paint(hit, t, col)
+    return rgb, dist
+
+
 def render(scene: Scene, camera: Camera, width: int, height: int, *, rng: np.random.Generator,
            supersample: int = 2, noise: float = 1.0) -> np.ndarray:
     """Ray-cast the scene: an H×W×3 uint8 RGB frame. ``rng`` drives only exposure, sensor noise
@@ -262,6 +377,12 @@ def render(scene: Scene, camera: Camera, width: int, height: int, *, rng: np.ran
     n_dot = rays @ scene.n
     a0 = origin @ scene.n
     b_org, b_dir = origin @ scene.u, rays @ scene.u
+    stairs = scene.stairs
+    bottom = -stairs.steps * stairs.rise if stairs is not None and stairs.down else 0.0
+    if bottom < 0:   # a stairwell is a hole in the ground
+        with np.errstate(invalid="ignore"):
+            hole = (a0 + t_g * n_dot >= stairs.start) & (np.abs(b_org + t_g * b_dir - stairs.centre) <= stairs.width / 2)
+        t_g = np.where(hole, np.inf, t_g)
     planes = [("facade", -scene.back_depth, -1e9, 1e9, scene.facade_height, None)]
     if scene.has_road:
         planes.append(("facade", scene.far + scene.kerb_width + scene.sidewalk_depth, -1e9, 1e9,
@@ -274,7 +395,7 @@ def render(scene: Scene, camera: Camera, width: int, height: int, *, rng: np.ran
             t = np.where(np.abs(n_dot) > 1e-6, (a_p - a0) / np.where(np.abs(n_dot) > 1e-6, n_dot, 1.0), np.inf)
             y = origin[1] + t * rays[..., 1]
             b = b_org + t * b_dir
-            hit = (t > 0) & (t < dist) & (y >= 0) & (y <= top) & (b >= b0) & (b <= b1) & (t < t_g)
+            hit = (t > 0) & (t < dist) & (y >= bottom) & (y <= top) & (b >= b0) & (b <= b1) & (t < t_g)
             if kind == "facade":
                 col = _facade_color(scene, b, y)
             else:
@@ -283,6 +404,10 @@ def render(scene: Scene, camera: Camera, width: int, height: int, *, rng: np.ran
                 col = np.where((y < 0.7)[..., None] & (top < 2.0) & (b1 - b0 > 2), np.array([0.05] * 3), col)
             rgb = np.where(hit[..., None], col, rgb)
             dist = np.where(hit, t, dist)
+    if stairs is not None or scene.poster is not None:
+        o = np.array([a0, b_org, origin[1]])
+        r = np.stack([n_dot, b_dir, rays[..., 1]], -1)
+        rgb, dist = _draw_lookalikes(scene, o, r, np.minimum(dist, t_g), rgb, dist)
     ground = down & (t_g < dist)
     gx = origin[0] + t_g * rays[..., 0]
     gz = origin[2] + t_g * rays[..., 2]
