@@ -2,7 +2,8 @@
 
 Not photo-real, and honest about it: every frame made here is flagged ``synthetic``. What is
 exact is the geometry: the scene is a ground plane with a road, kerbs, crossing markings, a
-far facade and flat occluders, ray-cast per pixel through a pinhole camera (horizontal field
+far facade and flat occluders (and, for zebra look-alikes, stairs or a crossing's picture on a
+panel), ray-cast per pixel through a pinhole camera (horizontal field
 of view ``fov_deg``, square pixels), so the goal (the far end of the crossing's midline, on
 the far kerb) projects to a known ``far_x``.
 
@@ -75,8 +76,8 @@ class Poster:
     b1: float
     y0: float
     y1: float
-    scene: "Scene"
-    camera: "Camera"
+    scene: Scene
+    camera: Camera
     bezel: float
     frame_color: tuple[float, float, float]
     stand: bool
@@ -330,8 +331,8 @@ def _draw_lookalikes(scene: Scene, o: np.ndarray, r: np.ndarray, nearest: np.nda
             if not s.down:   # a riser faces the user only going up
                 hit, t, _ = _hit_rect(o, r, 0, a_k, (0, b0, k * s.rise), (0, b1, (k + 1) * s.rise), nearest)
                 paint(hit, t, base * 0.62)
+        lo, hi = (-s.steps * s.rise, 0.0) if s.down else (0.0, s.steps * s.rise)
         for b in (b0, b1):   # the flight's sides, stepped like the treads
-            lo, hi = (-s.steps * s.rise, 0.0) if s.down else (0.0, s.steps * s.rise)
             hit, t, p = _hit_rect(o, r, 1, b, (s.start, 0, lo), (s.end, 0, hi), nearest)
             step = np.clip(np.floor((p[..., 0] - s.start) / s.tread) + 1, 1, s.steps) * s.rise
             hit &= (p[..., 2] >= -step) if s.down else (p[..., 2] <= step)
@@ -346,8 +347,7 @@ def _draw_lookalikes(scene: Scene, o: np.ndarray, r: np.ndarray, nearest: np.nda
             hit, t = hit | post, np.where(post, t2, t)
         paint(hit, t, np.array(q.frame_color))
         hit, t, p = _hit_rect(o, r, 0, q.a - 1e-3, (0, q.b0, q.y0), (0, q.b1, q.y1), nearest)
-        tw = 160 if q.b1 - q.b0 >= q.y1 - q.y0 else 120
-        th = 280 - tw
+        tw, th = (160, 120) if q.b1 - q.b0 >= q.y1 - q.y0 else (120, 160)   # the picture's pixels
         picture = render(q.scene, q.camera, tw, th, rng=np.random.default_rng(q.scene.texture_seed),
                          supersample=1, noise=0.5).astype(np.float64) / 255
         u = np.clip((p[..., 1] - q.b0) / (q.b1 - q.b0), 0, 1 - 1e-9)
