@@ -4,6 +4,7 @@ atomically. The graph itself is left as it is.
 
     .venv/bin/python scripts/stamp_bundle.py SRC OUT --cv runs/default/cv --gate-json gate_mirror.json
         [--rescale-gate [--narrow-fov 42]] [--view-crop] [--sensor-aspect 4:3]
+    .venv/bin/python scripts/stamp_bundle.py SRC OUT --gate-from crossing_assist/assets/default_bundle
 
 * Always: ``metrics.leave_one_photographer_out`` from ``CV/cv.json`` (the folds' checkpoints),
   ``metrics.leave_one_photographer_out_bundle`` from ``CV/cv_bundles_mirror.json`` (the folds'
@@ -19,6 +20,10 @@ atomically. The graph itself is left as it is.
   (``portrait_window``: a ~41 deg camera, what 9:16 portrait video gives) becomes
   ``narrow_threshold``, for portrait frames at most DEG across (``narrow_fov_deg``); without it a
   rescaled bundle has none.
+* ``--gate-from REF``: the gate of bundle REF (its ``calibration.uncertainty``: measure and
+  thresholds) replaces SRC's, so two models are judged at one gate, e.g. a candidate at the
+  default's thresholds (docs/models.md, "Look-alikes in training"). Not with ``--rescale-gate``;
+  REF must share SRC's canvas and geometry.
 * ``--view-crop``: upgrade a letterbox bundle to the current schema with ``geometry.view_crop``
   (consumers crop rows beyond the training camera's view, crossing_assist/geometry.py): right for
   models trained on windows of the training photos at their own scale, as the default is.
@@ -69,35 +74,9 @@ def _number_or_ratio(text: str) -> float | str:
         return text
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("src", type=Path)
-    ap.add_argument("out", type=Path)
-    ap.add_argument("--cv", type=Path, required=True, help="the --cv source run folder")
-    ap.add_argument("--gate-json", default="gate.json", help="choose_gate.py's result in CV")
-    ap.add_argument("--rescale-gate", action="store_true", help="thresholds = fitted x the held-out scales")
-    ap.add_argument("--narrow-fov", type=float, metavar="DEG",
-                    help="with --rescale-gate: portrait frames at most DEG across take the threshold chosen on the "
-                         "3:4 windows (calibration.uncertainty.narrow_threshold, narrow_fov_deg)")
-    ap.add_argument("--view-crop", action="store_true", help="current schema, geometry.view_crop true")
-    ap.add_argument("--sensor-aspect", metavar="X", help="geometry.sensor_aspect = X (long / short side of the "
-                    "sensor camera_fov_deg describes, 1..3; a number or a ratio such as 4:3)")
-    a = ap.parse_args(argv)
-    if a.narrow_fov is not None and not a.rescale_gate:
-        ap.error("--narrow-fov needs --rescale-gate")
-    if a.narrow_fov is not None and not FOV_RANGE_DEG[0] <= a.narrow_fov <= FOV_RANGE_DEG[1]:
-        ap.error(f"--narrow-fov {a.narrow_fov:g}: valid {FOV_RANGE_DEG[0]:g}..{FOV_RANGE_DEG[1]:g} degrees")
-    try:
-        aspect = None if a.sensor_aspect is None else check_sensor_aspect(_number_or_ratio(a.sensor_aspect))
-    except GeometryError as exc:
-        print(f"error: --sensor-aspect: {exc}", file=sys.stderr)
-        return 2
-    try:
-        b = read_bundle(a.src)
-    except BundleError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    meta = json.loads((a.src / "bundle.json").read_text())
+def stamp_held_out(a: argparse.Namespace, b, meta: dict) -> list[str] | None:
+    """Stamp the held-out figures in ``a.cv`` into ``meta`` (and, with ``--rescale-gate``, its gate):
+    what was stamped, or None after an error line."""
     old_gate = meta["metrics"].get("gate_held_out")
     shipped, gate_path = a.cv / f"cv_bundles{tag(b.mc.mirror)}.json", a.cv / a.gate_json
     read = [p.name for p in (a.cv / "cv.json", shipped, gate_path) if p.is_file()]
@@ -117,7 +96,7 @@ def main(argv=None) -> int:
         if a.narrow_fov is not None and not (window and window.get("targets_met")):
             print(f"error: --narrow-fov: {gate_path} has no 3:4-window choice that meets the targets "
                   "(run scripts/choose_gate.py with --portrait)", file=sys.stderr)
-            return 2
+            return None
         if a.rescale_gate and "threshold" in g:   # choose_gate.py --measure: absolute thresholds of that measure
             views = {"landscape": g, **{k: g[k] for k in ("portrait",) if k in g},
                      **({f"portrait frames at most {a.narrow_fov:g} deg": window} if a.narrow_fov is not None else {})}
@@ -131,13 +110,13 @@ def main(argv=None) -> int:
             if (chosen := g.get("measure", "entropy")) != unc["measure"]:
                 print(f"error: {gate_path} chose scales of {chosen}, {a.src} gates with {unc['measure']}",
                       file=sys.stderr)
-                return 2
+                return None
             fitted = unc.get("fitted_threshold")
             if fitted is None:   # exported before bundles recorded it: undo the recorded scale
                 if not old_gate:
                     print(f"error: {a.src} records neither its fitted gate threshold nor a held-out gate scale; "
                           "re-export it instead", file=sys.stderr)
-                    return 2
+                    return None
                 fitted = unc["threshold"] / old_gate["scale"]
             unc["fitted_threshold"] = fitted
             unc["threshold"] = fitted * g["scale"]
@@ -152,7 +131,59 @@ def main(argv=None) -> int:
                               if a.narrow_fov is not None else ""))
     elif a.rescale_gate:
         print(f"error: {gate_path} not found (run scripts/choose_gate.py {a.cv})", file=sys.stderr)
+        return None
+    return stamped
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("src", type=Path)
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--cv", type=Path, help="the --cv source run folder (its held-out figures are stamped)")
+    ap.add_argument("--gate-json", default="gate.json", help="choose_gate.py's result in CV")
+    ap.add_argument("--rescale-gate", action="store_true", help="thresholds = fitted x the held-out scales")
+    ap.add_argument("--narrow-fov", type=float, metavar="DEG",
+                    help="with --rescale-gate: portrait frames at most DEG across take the threshold chosen on the "
+                         "3:4 windows (calibration.uncertainty.narrow_threshold, narrow_fov_deg)")
+    ap.add_argument("--gate-from", type=Path, metavar="REF",
+                    help="the gate (calibration.uncertainty) of bundle REF instead of SRC's: two models at one gate")
+    ap.add_argument("--view-crop", action="store_true", help="current schema, geometry.view_crop true")
+    ap.add_argument("--sensor-aspect", metavar="X", help="geometry.sensor_aspect = X (long / short side of the "
+                    "sensor camera_fov_deg describes, 1..3; a number or a ratio such as 4:3)")
+    a = ap.parse_args(argv)
+    if a.narrow_fov is not None and not a.rescale_gate:
+        ap.error("--narrow-fov needs --rescale-gate")
+    if a.rescale_gate and a.cv is None:
+        ap.error("--rescale-gate needs --cv")
+    if a.rescale_gate and a.gate_from is not None:
+        ap.error("--gate-from and --rescale-gate: one gate at a time")
+    if a.cv is None and a.gate_from is None and not a.view_crop and a.sensor_aspect is None:
+        ap.error("nothing to stamp: give --cv, --gate-from, --view-crop or --sensor-aspect")
+    if a.narrow_fov is not None and not FOV_RANGE_DEG[0] <= a.narrow_fov <= FOV_RANGE_DEG[1]:
+        ap.error(f"--narrow-fov {a.narrow_fov:g}: valid {FOV_RANGE_DEG[0]:g}..{FOV_RANGE_DEG[1]:g} degrees")
+    try:
+        aspect = None if a.sensor_aspect is None else check_sensor_aspect(_number_or_ratio(a.sensor_aspect))
+    except GeometryError as exc:
+        print(f"error: --sensor-aspect: {exc}", file=sys.stderr)
         return 2
+    try:
+        b = read_bundle(a.src)
+        ref = None if a.gate_from is None else read_bundle(a.gate_from)
+    except BundleError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    meta = json.loads((a.src / "bundle.json").read_text())
+    stamped = stamp_held_out(a, b, meta) if a.cv is not None else []
+    if stamped is None:
+        return 2
+    if ref is not None:
+        if (ref.input.size, ref.geometry) != (b.input.size, b.geometry):
+            print(f"error: --gate-from {a.gate_from}: its canvas or geometry differs from {a.src}'s; "
+                  "a gate carries only between bundles that fit frames alike", file=sys.stderr)
+            return 2
+        meta["calibration"]["uncertainty"] = json.loads((a.gate_from / "bundle.json").read_text())["calibration"]["uncertainty"]
+        stamped.append(f"gate of {a.gate_from} ({meta['calibration']['uncertainty']['measure']}, "
+                       f"threshold {meta['calibration']['uncertainty']['threshold']:.4g})")
     if a.view_crop:
         if b.geometry.fit != "letterbox":
             print(f"error: {a.src} is not letterboxed (geometry.fit = {b.geometry.fit}); no view crop", file=sys.stderr)

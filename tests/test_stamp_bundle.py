@@ -192,3 +192,33 @@ def test_narrow_fov_stamps_the_windows_threshold_for_narrow_portrait_frames(ship
     r = _stamp(src, tmp_path / "bad", "--cv", cv, "--narrow-fov", 45)
     assert r.returncode == 2 and "--narrow-fov needs --rescale-gate" in r.stderr
     assert not (tmp_path / "bad").exists()
+
+
+def test_gate_from_judges_a_bundle_at_another_bundles_gate(shipped, tmp_path):
+    """``--gate-from REF`` (no CV needed) gives SRC REF's gate, measure and thresholds, in bundle.json
+    and the graph's copy alike, and leaves SRC's figures alone; a REF that fits frames otherwise, or
+    --rescale-gate beside it, or nothing to stamp at all, is refused in one line and writes nothing."""
+    from crossing_assist.runtime.engine import Engine
+
+    src, cv = shipped
+    fm = _far_mass_gate
+    (cv / "gate_far_mass.json").write_text(json.dumps(fm(0.007) | {"portrait": fm(0.015)}))
+    assert _stamp(src, tmp_path / "ref", "--cv", cv, "--rescale-gate", "--gate-json", "gate_far_mass.json").returncode == 0
+    r = _stamp(src, tmp_path / "out", "--gate-from", tmp_path / "ref")
+    assert r.returncode == 0, r.stderr
+    assert f"gate of {tmp_path / 'ref'} (far_mass, threshold 0.007)" in r.stdout
+    b = read_bundle(tmp_path / "out")
+    assert b.calibration.uncertainty == read_bundle(tmp_path / "ref").calibration.uncertainty
+    assert b.metrics == read_bundle(src).metrics        # no held-out figures without --cv
+    cfg = Engine(tmp_path / "out").decision_config("portrait")
+    assert (cfg.measure, cfg.threshold) == ("far_mass", 0.015)
+    stretch = make_toy_bundle(tmp_path / "s", geometry=Geometry(fit="stretch"))
+    for args, says in (((stretch, tmp_path / "a", "--gate-from", tmp_path / "ref"), "geometry differs"),
+                       ((src, tmp_path / "a", "--gate-from", tmp_path / "ref", "--cv", cv, "--rescale-gate"),
+                        "one gate at a time"),
+                       ((src, tmp_path / "a", "--rescale-gate"), "needs --cv"),
+                       ((src, tmp_path / "a"), "nothing to stamp")):
+        r = _stamp(*args)
+        last = r.stderr.strip().splitlines()[-1]   # argparse's usage lines come before its error line
+        assert r.returncode == 2 and last.count("error:") == 1 and says in last, r.stderr
+    assert not (tmp_path / "a").exists()
