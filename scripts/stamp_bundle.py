@@ -6,7 +6,7 @@ atomically. The graph itself is left as it is.
         [--rescale-gate [--narrow-fov 42]] [--view-crop] [--sensor-aspect 4:3]
     .venv/bin/python scripts/stamp_bundle.py SRC OUT --gate-from crossing_assist/assets/default_bundle
 
-* Always: ``metrics.leave_one_photographer_out`` from ``CV/cv.json`` (the folds' checkpoints),
+* ``--cv CV``: ``metrics.leave_one_photographer_out`` from ``CV/cv.json`` (the folds' checkpoints),
   ``metrics.leave_one_photographer_out_bundle`` from ``CV/cv_bundles_mirror.json`` (the folds'
   bundles, scripts/cv_bundles.py; ``cv_bundles.json`` for a bundle without mirror TTA) and
   ``metrics.gate_held_out`` from ``CV/GATE_JSON`` (scripts/choose_gate.py), where present.
