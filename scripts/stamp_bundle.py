@@ -172,18 +172,18 @@ def main(argv=None) -> int:
     except BundleError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if ref is not None and (ref.input.size, ref.geometry) != (b.input.size, b.geometry):
+        print(f"error: --gate-from {a.gate_from}: its canvas or geometry differs from {a.src}'s; "
+              "a gate carries only between bundles that fit frames alike", file=sys.stderr)
+        return 2
     meta = json.loads((a.src / "bundle.json").read_text())
     stamped = stamp_held_out(a, b, meta) if a.cv is not None else []
     if stamped is None:
         return 2
     if ref is not None:
-        if (ref.input.size, ref.geometry) != (b.input.size, b.geometry):
-            print(f"error: --gate-from {a.gate_from}: its canvas or geometry differs from {a.src}'s; "
-                  "a gate carries only between bundles that fit frames alike", file=sys.stderr)
-            return 2
-        meta["calibration"]["uncertainty"] = json.loads((a.gate_from / "bundle.json").read_text())["calibration"]["uncertainty"]
-        stamped.append(f"gate of {a.gate_from} ({meta['calibration']['uncertainty']['measure']}, "
-                       f"threshold {meta['calibration']['uncertainty']['threshold']:.4g})")
+        gate = json.loads((a.gate_from / "bundle.json").read_text())["calibration"]["uncertainty"]
+        meta["calibration"]["uncertainty"] = gate
+        stamped.append(f"gate of {a.gate_from} ({gate['measure']}, threshold {gate['threshold']:.4g})")
     if a.view_crop:
         if b.geometry.fit != "letterbox":
             print(f"error: {a.src} is not letterboxed (geometry.fit = {b.geometry.fit}); no view crop", file=sys.stderr)
