@@ -125,7 +125,7 @@ def _build(tmp: Path, bundle: Path) -> Path:
 def _drive(tmp: Path, www: Path, clip_path: Path, run_s: float, *extra: str) -> dict:
     cmd = [NODE, "tools/e2e_driver.mjs", "--clip", str(clip_path), "--out", str(tmp / "result.json"),
            "--run-s", str(run_s), "--www", str(www), "--chromium", CHROMIUM, *extra]
-    proc = subprocess.run(cmd, cwd=DEMO, capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(cmd, cwd=DEMO, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     result = json.loads((tmp / "result.json").read_text())
     deliberate = ("NotReadableError: Could not start video source",   # the driver's failed start
@@ -1246,7 +1246,7 @@ try {
     });
     await page.goto(`${url}?test=1&bundle=${name}/`);
     await page.waitForFunction(() => window.crossingAssist && (window.crossingAssist.ready || window.crossingAssist.error),
-      null, { timeout: 60000 });
+      null, { timeout: 180000 });
     const ready = await page.evaluate(() => window.crossingAssist.ready);
     if (!ready) await page.locator('#control').click({ force: true, timeout: 2000 }).catch(() => null);
     await page.waitForTimeout(500);

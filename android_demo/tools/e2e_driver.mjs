@@ -117,7 +117,22 @@ function stopServer(proc) {
   });
 }
 
+const APP_TIMEOUT_MS = 240000; // the first load, cold: see waitForApp
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+/**
+ * Wait for the app to be ready with its service worker holding it. A worker that failed is
+ * reported at once with the page's reason; the wait itself is long, since a cold Chromium on
+ * a slow machine (first start, first WASM compile) takes far longer than a warm one.
+ */
+async function waitForApp(page, timeoutMs = APP_TIMEOUT_MS) {
+  const state = await waitFor(page, () => {
+    const a = window.crossingAssist;
+    if (!a?.ready) return null;
+    return a.offline === 'ready' || a.offline.startsWith('unavailable') ? a.offline : null;
+  }, null, timeoutMs, 'the app and its service worker');
+  if (state !== 'ready') throw new Error(`the app loaded but its service worker did not: offline ${state}`);
+}
 
 async function waitFor(page, fn, arg, timeoutMs, what) {
   const t0 = Date.now();
@@ -125,7 +140,10 @@ async function waitFor(page, fn, arg, timeoutMs, what) {
     const v = await page.evaluate(fn, arg);
     if (v) return v;
     if (Date.now() - t0 > timeoutMs) {
-      const err = await page.evaluate(() => window.crossingAssist?.error || document.getElementById('status')?.textContent);
+      const err = await page.evaluate(() => {
+        const a = window.crossingAssist;
+        return `${a?.error || document.getElementById('status')?.textContent}; offline: ${a?.offline}`;
+      });
       throw new Error(`timed out after ${timeoutMs} ms waiting for ${what} (page says: ${err})`);
     }
     await sleep(100);
@@ -239,7 +257,7 @@ async function guide(page, runS, samples) {
 async function fullPhases(page, context, server, args, result) {
   // First load: everything the page and the service worker fetch before the app is ready.
   await page.goto(`${server.url}?test=1&gyro=1&tutorial_speed=8`);
-  await waitFor(page, () => window.crossingAssist?.ready && window.crossingAssist.offline === 'ready', null, 90000, 'the app and its service worker');
+  await waitForApp(page);
   await sleep(500);
   result.first_load = server.requests.slice();
   result.states = { ready: await page.evaluate(screenState) };
@@ -537,7 +555,7 @@ async function shortPhases(page, server, args, result) {
   result.stored_settings = await page.evaluate(() => localStorage.getItem('crossing-assist-settings'));
   const base = args.level ? LEVEL_PORTRAIT : null;
   await orient(page, base);
-  await waitFor(page, () => window.crossingAssist?.ready && window.crossingAssist.offline === 'ready', null, 120000, 'the app and its service worker');
+  await waitForApp(page);
   result.first_load = server.requests.slice();
   result.states = { ready: await page.evaluate(screenState) };
   await control(page).click();
