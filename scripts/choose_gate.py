@@ -25,7 +25,9 @@ picks on the others (how far a threshold chosen this way carries to another mode
 landscape photo is one clip, its portrait views 2 x ``--portrait`` clips, so ``--frames 100000
 --portrait-frames 200`` chooses landscape on every held-out photo without playing every photo's
 portrait views too. ``--grid 16`` sweeps twice as many scales as crossing-eval (16 a doubling), for
-a curve that jumps between neighbouring scales. ``--zoom Z`` is for models trained with
+a curve that jumps between neighbouring scales; ``--max-scale 16`` sweeps on past crossing-eval's
+largest scale (4), for a view whose choice sits there (said as a warning: the curve was cut short,
+not the limit reached), deciding only the clips at the new scales. ``--zoom Z`` is for models trained with
 ``crossing-train --field-zoom``: the portrait views are shown magnified up to Z instead of at the
 training scale, as ``crossing-export --view-zoom Z`` bundles show them (:func:`magnify_view_crop`),
 cached and written apart. ``--measure far_mass`` replays the saved plays with the far-mass gate (the
@@ -58,6 +60,7 @@ from crossing_assist.runtime.listen import Listener, summarise
 from crossing_assist.models.evaluate import gate_scales  # noqa: E402  (crossing-eval's grid by default)
 
 GRID = 8                    # gate scales a doubling, as crossing-eval sweeps
+TOP = 4.0                   # the largest scale swept, as crossing-eval sweeps
 #: ``--measure far_mass``: the threshold its scales multiply (1 % of the mass beyond one strip of the
 #: argmax); the folds' bundles fitted an entropy threshold, not this, so far mass is swept absolutely.
 FAR_MASS_REFERENCE = 0.01
@@ -84,6 +87,11 @@ def _subset(ds, rows, out: Path) -> Path:
              for r in rows]
     write_manifest(out, fixed)
     return out
+
+
+def top_tag(top: float) -> str:
+    """File-name suffix of a sweep that tops out at another scale than crossing-eval's (``--max-scale``)."""
+    return "" if top == TOP else f"_top{top:g}"
 
 
 def upper_tag(upper: bool) -> str:
@@ -122,10 +130,11 @@ def view_draws(n_frames: int, portrait_frames: int | None, seed: int, portrait: 
         yield view, n, view_tag(mirror, n, seed, view, portrait, zoom)
 
 
-def curve_cache(fold: Path, draw: str, grid: int, measure: str | None, extra: str = "") -> Path:
-    """Where a fold's swept curve of one draw (:func:`view_tag`) is cached: another grid, measure
-    or ``extra`` (an ensemble's ``_ensembleK``) is a file of its own."""
-    return fold / f"gate_curve{draw}{'' if grid == GRID else f'_grid{grid}'}{measure_tag(measure)}{extra}.json"
+def curve_cache(fold: Path, draw: str, grid: int, measure: str | None, extra: str = "", top: float = TOP) -> Path:
+    """Where a fold's swept curve of one draw (:func:`view_tag`) is cached: another grid, top,
+    measure or ``extra`` (an ensemble's ``_ensembleK``) is a file of its own."""
+    return fold / (f"gate_curve{draw}{'' if grid == GRID else f'_grid{grid}'}{top_tag(top)}"
+                   f"{measure_tag(measure)}{extra}.json")
 
 
 def fold_bundle(fold: Path, source: str, ptl, mirror: bool = False) -> Path:
@@ -208,11 +217,11 @@ def sweep_point(heard: list, in_view: list[int]) -> dict:
 
 def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int, seed: int, portrait: int,
                mirror: bool = False, portrait_frames: int | None = None, grid: int = GRID, zoom: float = 1.0,
-               measure: str | None = None) -> dict:
+               measure: str | None = None, top: float = TOP) -> dict:
     """The fold's held-out curves: ``{"landscape": {...}, "portrait": {...}, "portrait_window": {...}}``
     (the portrait ones only with ``portrait`` > 0 views a photo, on a draw of ``portrait_frames``
-    photos, default ``n_frames``), swept over :func:`gate_scales` ``(grid)``; each curve cached in
-    the fold folder (another grid is another cache), and the predictions listened to too
+    photos, default ``n_frames``), swept over :func:`gate_scales` ``(grid, top)``; each curve cached in
+    the fold folder (another grid or top is another cache), and the predictions listened to too
     (``listened…npz``, :meth:`Listener.save`), so another grid is swept without the model.
     ``zoom`` > 1: the portrait views magnified up to it (:func:`magnify_view_crop`), cached apart;
     landscape frames at the training FOV are not magnified, so their curve is the same.
@@ -224,7 +233,7 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
     engine = geometry = None
     out = {}
     for view, n, draw in view_draws(n_frames, portrait_frames, seed, portrait, mirror, zoom):
-        done = curve_cache(fold, draw, grid, measure)
+        done = curve_cache(fold, draw, grid, measure, top=top)
         if done.is_file():   # listened to already (the fold does not change once finished)
             out[view] = json.loads(done.read_text())
             continue
@@ -240,26 +249,32 @@ def fold_curve(fold: Path, source: str, ptl, neg, used: set[str], n_frames: int,
         if lis is None or measure:   # listened before, or another measure: recomputed from the saved probabilities
             lis, extra = Listener.load(engine, heard, measure)
             in_view = extra["in_view"].tolist()
-        out[view] = curve_result(lis, in_view, engine, source, view, measure, grid)
+        out[view] = curve_result(lis, in_view, engine, source, view, measure, grid, top,
+                                 curve_cache(fold, draw, grid, measure))
         atomic_write_text(done, json.dumps(out[view], indent=1))
     return out
 
 
 def curve_result(lis: Listener, in_view: list[int], engine, source: str, view: str, measure: str | None,
-                 grid: int) -> dict:
+                 grid: int, top: float = TOP, known: Path | None = None) -> dict:
     """A fold's record of one view: its counts, the model's own accuracy and the curve swept over
-    :func:`gate_scales` ``(grid)`` times :func:`reference_threshold`."""
+    :func:`gate_scales` ``(grid, top)`` times :func:`reference_threshold`. ``known``: the cached
+    curve of the same clips swept to another top, whose points are taken as they are (a sweep
+    carried further decides only the clips at its new scales)."""
     t0 = reference_threshold(engine, measure)
     labels = np.asarray(lis.labels)
+    swept = {c["scale"]: c for c in json.loads(known.read_text())["curve"]} if known and known.is_file() else {}
     return {"source": source, "view": view, "measure": measure or engine.measure, "threshold": t0,
             "frames": int((labels != 0).sum()),
             "no_crossing_frames": int((labels == 0).sum()), "goal_in_view_frames": len(in_view),
             **model_accuracy(lis, in_view),
-            "curve": [{"scale": m, **sweep_point(lis.heard(m * t0), in_view)} for m in gate_scales(grid)]}
+            "curve": [swept.get(m) or {"scale": m, **sweep_point(lis.heard(m * t0), in_view)}
+                      for m in gate_scales(grid, top)]}
 
 
 def ensemble_curves(run_folds: list[tuple[Path, str]], n_frames: int, seed: int, portrait: int, mirror: bool,
-                    portrait_frames: int | None, grid: int, zoom: float, measure: str | None) -> dict:
+                    portrait_frames: int | None, grid: int, zoom: float, measure: str | None,
+                    top: float = TOP) -> dict:
     """One held-out photographer's curves for the ensemble of the runs' folds that held it out
     (``run_folds``: (fold folder, source), one a run, each listened to already by :func:`fold_curve`):
     their saved plays averaged frame by frame (:meth:`Listener.average`), as an ensemble bundle of
@@ -270,7 +285,7 @@ def ensemble_curves(run_folds: list[tuple[Path, str]], n_frames: int, seed: int,
     fold, source = run_folds[0]
     engine, out = None, {}
     for view, _, draw in view_draws(n_frames, portrait_frames, seed, portrait, mirror, zoom):
-        done = curve_cache(fold, draw, grid, measure, f"_ensemble{len(run_folds)}")
+        done = curve_cache(fold, draw, grid, measure, f"_ensemble{len(run_folds)}", top)
         if done.is_file():
             out[view] = json.loads(done.read_text())
             continue
@@ -278,7 +293,8 @@ def ensemble_curves(run_folds: list[tuple[Path, str]], n_frames: int, seed: int,
             engine = Engine(fold / f"bundle{tag(mirror)}", threads=1)
             magnify_view_crop(engine, zoom)
         lis, extra = Listener.average(engine, [f / f"listened{draw}.npz" for f, _ in run_folds], measure)
-        out[view] = curve_result(lis, extra["in_view"].tolist(), engine, source, view, measure, grid)
+        out[view] = curve_result(lis, extra["in_view"].tolist(), engine, source, view, measure, grid, top,
+                                 curve_cache(fold, draw, grid, measure, f"_ensemble{len(run_folds)}"))
         atomic_write_text(done, json.dumps(out[view], indent=1))
     return out
 
@@ -439,9 +455,17 @@ def main(argv=None) -> int:
                     help="portrait frames (narrower than the training camera) shown magnified up to Z instead of at "
                          "the training scale, as crossing-export --view-zoom Z bundles show them (for models trained "
                          "with crossing-train --field-zoom); results are written apart (gate…_zoomZ.json)")
+    ap.add_argument("--max-scale", type=float, default=TOP, metavar="M",
+                    help=f"the largest gate scale swept (a power of two; default {TOP:g}, crossing-eval's); a choice at "
+                         "the top of the sweep is said, since a larger threshold may then hear more within the limits; "
+                         "another top is a curve cache of its own, swept from the saved predictions")
     a = ap.parse_args(argv)
     if a.grid < 1:
         ap.error(f"--grid {a.grid}: at least 1 scale a doubling")
+    try:
+        gate_scales(a.grid, a.max_scale)
+    except ValueError as exc:
+        ap.error(f"--max-scale: {exc}")
     if not VIEW_ZOOM_RANGE[0] <= a.zoom <= VIEW_ZOOM_RANGE[1]:
         ap.error(f"--zoom {a.zoom}: valid {VIEW_ZOOM_RANGE[0]:g}..{VIEW_ZOOM_RANGE[1]:g}")
     if a.ensemble and not a.also:
@@ -453,7 +477,7 @@ def main(argv=None) -> int:
         for fold, source in finished_folds(cv):
             print(f"{cv} fold {source}: export + listen", file=sys.stderr, flush=True)
             curves = fold_curve(fold, source, ptl, neg, used, a.frames, a.seed, a.portrait, a.mirror, a.portrait_frames,
-                                a.grid, a.zoom, a.measure)
+                                a.grid, a.zoom, a.measure, a.max_scale)
             if i:   # one key per fold in the pooled per-fold figures
                 curves = {view: {**c, "source": f"{source} ({cv})"} for view, c in curves.items()}
             folds.append(curves)
@@ -470,7 +494,7 @@ def main(argv=None) -> int:
             return 2
         print(f"the ensemble of the {runs} runs:")
         report(a, [ensemble_curves(f, a.frames, a.seed, a.portrait, a.mirror, a.portrait_frames, a.grid, a.zoom,
-                                   a.measure) for f in members], [str(a.cv)] * len(members), f"_ensemble{runs}")
+                                   a.measure, a.max_scale) for f in members], [str(a.cv)] * len(members), f"_ensemble{runs}")
     return 0
 
 
@@ -489,7 +513,10 @@ def report(a: argparse.Namespace, folds: list[dict], run_of: list[str], suffix_e
         best, met = choose(curve, upper=a.upper)
         one = next(c for c in curve if c["scale"] == 1.0)
         model = pooled_accuracy([f[view] for f in folds])
-        result[view] = {"scale": best["scale"], "targets_met": met, "at_scale": best, "at_fitted_threshold": one,
+        # the loudest scale swept still within the limits: the curve was cut short, not the limit reached
+        at_top = met and best["scale"] == curve[-1]["scale"]
+        result[view] = {"scale": best["scale"], "targets_met": met, "at_sweep_top": at_top, "at_scale": best,
+                        "at_fitted_threshold": one,
                         "measure": a.measure or folds[0][view].get("measure", "entropy"),   # older caches: entropy
                         **({"threshold": best["scale"] * FAR_MASS_REFERENCE} if a.measure else {}),
                         **model, "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
@@ -503,7 +530,7 @@ def report(a: argparse.Namespace, folds: list[dict], run_of: list[str], suffix_e
                       f"of {loro['frames']}; per run " + " / ".join(f"{100 * r['confidently_wrong']:.2f} %"
                                                                    for r in loro["per_run"]) + ")")
         suffix = (tag(a.mirror) + ("" if view == "landscape" else f"_{view}") + zoom_tag(a.zoom) + measure_tag(a.measure)
-                  + upper_tag(a.upper) + suffix_extra)
+                  + upper_tag(a.upper) + top_tag(a.max_scale) + suffix_extra)
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],
                            a.cv / f"gate_risk_coverage{suffix}.png",
                            f"held out, {view}: " + (f"far mass threshold / {FAR_MASS_REFERENCE:g}" if a.measure
@@ -515,9 +542,13 @@ def report(a: argparse.Namespace, folds: list[dict], run_of: list[str], suffix_e
         print(f"{view}: {ref} (scale 1): {fmt(one)}")
         print(f"{view}: chosen scale {best['scale']:g}" + (f" (far mass {best['scale'] * FAR_MASS_REFERENCE:.4g})" if a.measure else "")
               + f" ({'targets met' if met else 'targets NOT met; nearest point'}): {fmt(best)}")
+        if at_top:
+            print(f"{view}: warning: the largest scale swept ({best['scale']:g}) is still within the limits, so a larger "
+                  f"threshold may hear more; sweep further with --max-scale {2 * a.max_scale:g}")
     # landscape stays at the top level (what build_default_bundle.sh and older readers take)
     portrait = {k: result[k] for k in PORTRAIT_SETS if k in result}   # "portrait" sets the portrait threshold
-    (a.cv / f"gate{tag(a.mirror)}{zoom_tag(a.zoom)}{measure_tag(a.measure)}{upper_tag(a.upper)}{suffix_extra}.json").write_text(
+    (a.cv / f"gate{tag(a.mirror)}{zoom_tag(a.zoom)}{measure_tag(a.measure)}{upper_tag(a.upper)}{top_tag(a.max_scale)}"
+            f"{suffix_extra}.json").write_text(
         json.dumps({**result["landscape"], **portrait}, indent=1))
 
 

@@ -224,6 +224,51 @@ def test_choose_gate_grid_sweeps_a_finer_grid_under_its_own_cache(tmp_path, monk
         cg.main([str(tmp_path / "cv"), "--grid", "0"])
 
 
+def test_choose_gate_says_a_choice_at_the_top_of_the_sweep_and_sweeps_further(tmp_path, monkeypatch, capsys):
+    """A curve still within the limits at its largest scale was cut short: the choice says so
+    (``at_sweep_top``, a warning naming ``--max-scale``); ``--max-scale 16`` sweeps the same clips
+    on to 16 (the points up to 4 unchanged), cached and written apart; a top that is not a power of
+    two is refused."""
+    import json
+
+    from crossing_assist.runtime.engine import Engine
+    from crossing_assist.runtime.listen import Listener
+
+    cg, ptl, neg, fold = _toy_fold(tmp_path, monkeypatch, photos=4, no_crossing=2)
+    short = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 4, 0, 0)["landscape"]
+    monkeypatch.setattr(Engine, "predict", lambda *a, **k: pytest.fail("another top replays the saved predictions"))
+    longer = cg.fold_curve(fold, "ptl:x", ptl, neg, set(), 4, 0, 0, top=16.0)["landscape"]
+    scales = [c["scale"] for c in longer["curve"]]
+    assert scales[0] == 0.25 and scales[-1] == 16.0 and len(scales) == len(short["curve"]) + 2 * cg.GRID
+    assert longer["curve"][:len(short["curve"])] == short["curve"]
+    lis, extra = Listener.load(Engine(cg.fold_bundle()), fold / "listened_4.npz")
+    assert longer["curve"][-1] == {"scale": 16.0, **cg.sweep_point(lis.heard(16 * longer["threshold"]),
+                                                                    extra["in_view"].tolist())}
+    assert {p.name for p in fold.glob("gate_curve*.json")} == {"gate_curve_4.json", "gate_curve_4_top16.json"}
+
+    def never_wrong(fold, source, *a, **k):   # beacon on rises with the scale, never wrong: the top is chosen
+        pts = [{"scale": m, "beacon_on": min(1.0, m / 32), "confidently_wrong": 0.0, "confidently_wrong_frames": 0,
+                "silence_no_crossing": 1.0, "beacon_on_goal_in_view": min(1.0, m / 32)}
+               for m in cg.gate_scales(cg.GRID, a[-1])]   # main passes --max-scale last
+        return {"landscape": {"source": source, "frames": 100, "no_crossing_frames": 50, "goal_in_view_frames": 100,
+                              "curve": pts}}
+
+    monkeypatch.setattr(cg, "read_manifest", lambda path: type("M", (), {"rows": []})())
+    monkeypatch.setattr(cg, "finished_folds", lambda cv: [(cv / "fold-ptl_x", "ptl:x")])
+    monkeypatch.setattr(cg, "fold_curve", never_wrong)
+    cv = tmp_path / "cv"
+    assert cg.main([str(cv), "--portrait", "0"]) == 0
+    chosen = json.loads((cv / "gate.json").read_text())
+    assert chosen["scale"] == 4.0 and chosen["targets_met"] and chosen["at_sweep_top"]
+    assert "sweep further with --max-scale 8" in capsys.readouterr().out
+    assert cg.main([str(cv), "--portrait", "0", "--max-scale", "16"]) == 0
+    further = json.loads((cv / "gate_top16.json").read_text())
+    assert further["scale"] == 16.0 and further["at_sweep_top"]
+    assert json.loads((cv / "gate.json").read_text()) == chosen      # the default sweep's record kept
+    with pytest.raises(SystemExit):
+        cg.main([str(cv), "--max-scale", "3"])
+
+
 def test_choose_gate_measure_far_mass_replays_the_saved_clips_at_absolute_thresholds(tmp_path, monkeypatch):
     """``--measure far_mass``: the fold's saved predictions decided again with the far-mass gate at
     :data:`FAR_MASS_REFERENCE` times each scale, without the model, cached apart from the bundle's

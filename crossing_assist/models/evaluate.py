@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 import json
+import math
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -171,10 +172,13 @@ def _bundle_conformal(bundle, probs: np.ndarray, labels: np.ndarray) -> dict:
     return bundle_conformal_report(bundle, probs, labels)
 
 
-def gate_scales(steps: int = 8) -> tuple[float, ...]:
-    """Gate thresholds to sweep, as multiples of the bundle's: ``steps`` a doubling, from 1/4 to 4
-    (1 included)."""
-    return tuple(2.0 ** (j / steps) for j in range(-2 * steps, 2 * steps + 1))
+def gate_scales(steps: int = 8, top: float = 4.0) -> tuple[float, ...]:
+    """Gate thresholds to sweep, as multiples of the bundle's: ``steps`` a doubling, from 1/4 to
+    ``top`` (a power of two >= 1; 1 included)."""
+    doublings = math.log2(top)
+    if top < 1 or doublings != round(doublings):
+        raise ValueError(f"sweep top {top:g}: a power of two >= 1 (1, 2, 4, 8, ...)")
+    return tuple(2.0 ** (j / steps) for j in range(-2 * steps, round(doublings) * steps + 1))
 
 
 #: The gate thresholds crossing-eval sweeps (scripts/choose_gate.py's default grid).
