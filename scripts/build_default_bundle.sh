@@ -6,6 +6,7 @@
 #   MEMBERS="runs/default_s1 runs/default_s2" scripts/build_default_bundle.sh   # an ensemble of three seeds
 #   MIRROR=0 MAX_INT8_DROP=0.02 RUN=runs/full_s0 MEMBERS="runs/full_s1 runs/full_s2" CV_DIR=runs/res256/cv \
 #       scripts/build_default_bundle.sh   # what ships since 2026-12-04 (docs/models.md)
+#   GATE_TOP=16 ...   # the held-out thresholds of choose_gate.py --max-scale 16 (gate…_top16….json)
 #
 # MEMBERS: more runs of the same recipe (other seeds; a folder holding a bundle is taken as it is),
 # each exported as RUN is; the bundle is their ensemble with RUN (crossing-export ensemble: the graphs
@@ -80,6 +81,10 @@ if [ "$GATE_MEASURE" != entropy ]; then
         echo "no $CV_DIR/${GATE_JSON%.json}_$GATE_MEASURE.json (scripts/choose_gate.py $CV_DIR ${MIRROR_ARGS[*]} --measure $GATE_MEASURE): gate on entropy" >&2
     fi
 fi
+# GATE_TOP=16: the thresholds of a sweep carried past x4 (choose_gate.py --max-scale 16), for a view whose
+# choice sat at the old sweep's top (the narrow camera's, 2026-12-06: docs/models.md, "A sweep cut short")
+GATE_TOP=${GATE_TOP:-4}
+if [ "$GATE_TOP" != 4 ]; then STAMP_JSON="${STAMP_JSON%.json}_top$GATE_TOP.json"; fi
 
 TMP=$(mktemp -d "${TMPDIR:-/tmp}/default_bundle.XXXXXX")
 trap 'rm -rf "$TMP"' EXIT

@@ -94,3 +94,11 @@ def test_build_default_bundle_with_members_ships_their_ensemble_at_its_held_out_
     unc = b.calibration.uncertainty
     assert (unc.measure, unc.threshold, unc.portrait_threshold) == ("far_mass", 0.02, 0.03)
     assert b.metrics["gate_held_out"]["threshold"] == 0.02
+    # GATE_TOP=16: the choice of the sweep carried on to x16, the narrow camera's threshold with it
+    (cv / "gate_mirror_far_mass_top16_ensemble3.json").write_text(json.dumps(
+        fm(0.02) | {"portrait": fm(0.03), "portrait_window": fm(0.0617)}))
+    r = _build(tmp_path, OUT=str(tmp_path / "top"), MEMBERS=f"{run} {one}", GATE_TOP="16", **env)
+    assert r.returncode == 0, r.stderr
+    assert "gate_mirror_far_mass_top16_ensemble3.json" in r.stderr
+    unc = read_bundle(tmp_path / "top").calibration.uncertainty
+    assert (unc.threshold, unc.portrait_threshold, unc.narrow_threshold, unc.narrow_fov_deg) == (0.02, 0.03, 0.0617, 42.0)
