@@ -20,7 +20,9 @@ augmentation, ``CV/gate_mirror.json``); ``scripts/build_default_bundle.sh`` expo
 ``--gate-scale m*_landscape --gate-scale-portrait m*_portrait``. ``--also CV2`` pools the folds of
 another CV run of the same recipe (another ``--seed``) with CV's before choosing; with more than
 one run, each view also records ``leave_one_run_out``: each run measured at the scale the rule
-picks on the others (how far a threshold chosen this way carries to another model).
+picks on the others (how far a threshold chosen this way carries to another model). Each view
+also records ``leave_one_photographer_out``: each photographer measured at the scale the rule
+picks on the other photographers (how far the choice carries to a user it never saw).
 ``--portrait-frames N`` draws the portrait views from N photos a fold instead of ``--frames``: a
 landscape photo is one clip, its portrait views 2 x ``--portrait`` clips, so ``--frames 100000
 --portrait-frames 200`` chooses landscape on every held-out photo without playing every photo's
@@ -332,24 +334,38 @@ def pool(folds: list[dict]) -> list[dict]:
     return out
 
 
+def leave_one_out(folds: list[dict], group_of: list[str], name: str, upper: bool = False) -> dict | None:
+    """How far the rule carries to data it never chose on: each group's folds (``group_of``: each
+    fold's group) measured at the scale :func:`choose` picks on the other groups' folds; the
+    groups' rates (``per_<name>``) and their pooled beacon-on and confidently-wrong rates. None
+    with a single group."""
+    groups = list(dict.fromkeys(group_of))
+    if len(groups) < 2:
+        return None
+    per = []
+    for group in groups:
+        best, met = choose(pool([f for f, g in zip(folds, group_of) if g != group]), upper=upper)
+        point = next(c for c in pool([f for f, g in zip(folds, group_of) if g == group]) if c["scale"] == best["scale"])
+        per.append({name: group, "scale": best["scale"], "targets_met_on_the_others": met,
+                    **{k: point[k] for k in ("beacon_on", "confidently_wrong", "confidently_wrong_frames", "frames")}})
+    frames = sum(r["frames"] for r in per)
+    wrong = sum(r["confidently_wrong_frames"] for r in per)
+    return {"beacon_on": sum(r["beacon_on"] * r["frames"] for r in per) / frames, "confidently_wrong": wrong / frames,
+            "confidently_wrong_frames": wrong, "frames": frames, "confidently_wrong_95": wilson(wrong, frames),
+            f"per_{name}": per}
+
+
 def leave_one_run_out(folds: list[dict], run_of: list[str], upper: bool = False) -> dict | None:
     """How far the rule carries to another model: each CV run's folds (``run_of``: each fold's
-    run) measured at the scale :func:`choose` picks on the other runs' folds; the runs' rates and
-    their pooled beacon-on and confidently-wrong rates. None with a single run."""
-    runs = list(dict.fromkeys(run_of))
-    if len(runs) < 2:
-        return None
-    per_run = []
-    for run in runs:
-        best, met = choose(pool([f for f, r in zip(folds, run_of) if r != run]), upper=upper)
-        point = next(c for c in pool([f for f, r in zip(folds, run_of) if r == run]) if c["scale"] == best["scale"])
-        per_run.append({"run": run, "scale": best["scale"], "targets_met_on_the_others": met,
-                        **{k: point[k] for k in ("beacon_on", "confidently_wrong", "confidently_wrong_frames", "frames")}})
-    frames = sum(r["frames"] for r in per_run)
-    wrong = sum(r["confidently_wrong_frames"] for r in per_run)
-    return {"beacon_on": sum(r["beacon_on"] * r["frames"] for r in per_run) / frames, "confidently_wrong": wrong / frames,
-            "confidently_wrong_frames": wrong, "frames": frames, "confidently_wrong_95": wilson(wrong, frames),
-            "per_run": per_run}
+    run) measured at the scale :func:`choose` picks on the other runs' folds (:func:`leave_one_out`)."""
+    return leave_one_out(folds, run_of, "run", upper)
+
+
+def leave_one_photographer_out(folds: list[dict], upper: bool = False) -> dict | None:
+    """How far the rule carries to a photographer it never chose on, as a user is: each held-out
+    photographer's folds (every run's) measured at the scale :func:`choose` picks on the other
+    photographers' folds (:func:`leave_one_out`)."""
+    return leave_one_out(folds, [f["source"].split(" (")[0] for f in folds], "photographer", upper)
 
 
 def pooled_accuracy(folds: list[dict]) -> dict:
@@ -522,13 +538,15 @@ def report(a: argparse.Namespace, folds: list[dict], run_of: list[str], suffix_e
                         **model, "curve": curve, "folds": [{k: v for k, v in f[view].items() if k != "curve"} for f in folds]}
         if a.also:
             result[view]["pooled_runs" if not suffix_extra else "ensemble_of_runs"] = [str(cv) for cv in (a.cv, *a.also)]
-            loro = leave_one_run_out([f[view] for f in folds], run_of, a.upper)
-            if loro:
-                result[view]["leave_one_run_out"] = loro
-                print(f"{view}: chosen on the other runs, measured on each: beacon on {loro['beacon_on']:.3f}, "
-                      f"confidently wrong {100 * loro['confidently_wrong']:.2f} % ({loro['confidently_wrong_frames']} "
-                      f"of {loro['frames']}; per run " + " / ".join(f"{100 * r['confidently_wrong']:.2f} %"
-                                                                   for r in loro["per_run"]) + ")")
+        carried = {"photographer": leave_one_photographer_out([f[view] for f in folds], a.upper),
+                   "run": leave_one_run_out([f[view] for f in folds], run_of, a.upper)}
+        for name, rec in carried.items():
+            if rec:
+                result[view][f"leave_one_{name}_out"] = rec
+                print(f"{view}: chosen on the other {name}s, measured on each: beacon on {rec['beacon_on']:.3f}, "
+                      f"confidently wrong {100 * rec['confidently_wrong']:.2f} % ({rec['confidently_wrong_frames']} "
+                      f"of {rec['frames']}; per {name} " + " / ".join(f"{100 * r['confidently_wrong']:.2f} %"
+                                                                   for r in rec[f"per_{name}"]) + ")")
         suffix = (tag(a.mirror) + ("" if view == "landscape" else f"_{view}") + zoom_tag(a.zoom) + measure_tag(a.measure)
                   + upper_tag(a.upper) + top_tag(a.max_scale) + suffix_extra)
         plot_risk_coverage([{"threshold": c["scale"], **c} for c in curve], best["scale"],

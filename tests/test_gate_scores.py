@@ -165,6 +165,42 @@ def test_choose_gate_also_pools_another_runs_folds_before_choosing(tmp_path, mon
     assert "leave_one_run_out" not in alone
 
 
+def test_choose_gate_measures_each_photographer_at_the_scale_chosen_on_the_others(tmp_path, monkeypatch):
+    """``leave_one_photographer_out``: each photographer's folds (every run's, grouped) measured at
+    the scale the rule picks on the other photographers', as a user the choice never saw is."""
+    import json
+
+    import choose_gate as cg
+
+    scales = cg.gate_scales(cg.GRID)
+    n = len(scales)
+    hi = scales.index(1.0)
+    wrong_from = {"ptl:x": hi + 1, "ptl:y": hi - 1}   # y's photos go wrong two steps earlier than x's
+
+    def curve(source):    # beacon on rises with the scale; 2 % wrong from the photographer's index
+        pts = [{"scale": m, "beacon_on": (i + 1) / n, "confidently_wrong": 0.02 if i >= wrong_from[source] else 0.0,
+                "silence_no_crossing": 1.0, "beacon_on_goal_in_view": (i + 1) / n} for i, m in enumerate(scales)]
+        return {"landscape": {"source": source, "frames": 100, "no_crossing_frames": 50, "goal_in_view_frames": 100,
+                              "curve": pts}}
+
+    for cv in ("a", "b"):
+        (tmp_path / cv).mkdir()
+    monkeypatch.setattr(cg, "read_manifest", lambda path: type("M", (), {"rows": []})())
+    monkeypatch.setattr(cg, "finished_folds", lambda cv: [(cv / "fold-ptl_x", "ptl:x"), (cv / "fold-ptl_y", "ptl:y")])
+    monkeypatch.setattr(cg, "fold_curve", lambda fold, source, *a, **k: curve(source))
+    assert cg.main([str(tmp_path / "a"), "--portrait", "0"]) == 0
+    lopo = json.loads((tmp_path / "a" / "gate.json").read_text())["leave_one_photographer_out"]
+    # x is measured at y's choice (hi - 2): never wrong; y at x's (hi): 2 % wrong
+    assert [(r["photographer"], r["scale"], r["confidently_wrong"]) for r in lopo["per_photographer"]] == [
+        ("ptl:x", scales[hi - 2], 0.0), ("ptl:y", scales[hi], 0.02)]
+    assert (lopo["confidently_wrong_frames"], lopo["frames"]) == (2, 200)
+    # another run's folds of a photographer are that photographer's, not another one
+    assert cg.main([str(tmp_path / "a"), "--also", str(tmp_path / "b"), "--portrait", "0"]) == 0
+    pooled = json.loads((tmp_path / "a" / "gate.json").read_text())["leave_one_photographer_out"]
+    assert [r["photographer"] for r in pooled["per_photographer"]] == ["ptl:x", "ptl:y"]
+    assert (pooled["confidently_wrong_frames"], pooled["frames"]) == (4, 400)
+
+
 def _toy_fold(tmp_path, monkeypatch, photos: int, no_crossing: int):
     """choose_gate with a finished fold ``fold-ptl_x`` whose bundle is the toy bundle, and the
     held-out photographer's ``photos`` and ``no_crossing`` views: ``(choose_gate, ptl, neg, fold)``."""
