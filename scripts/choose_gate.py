@@ -59,10 +59,9 @@ from crossing_assist.fileio import atomic_write_text
 from crossing_assist.geometry import VIEW_ZOOM_RANGE
 from crossing_assist.runtime.listen import Listener, summarise
 
-from crossing_assist.models.evaluate import gate_scales  # noqa: E402  (crossing-eval's grid by default)
+from crossing_assist.models.evaluate import GATE_TOP as TOP, gate_scales  # noqa: E402  (crossing-eval's grid by default)
 
 GRID = 8                    # gate scales a doubling, as crossing-eval sweeps
-TOP = 4.0                   # the largest scale swept, as crossing-eval sweeps
 #: ``--measure far_mass``: the threshold its scales multiply (1 % of the mass beyond one strip of the
 #: argmax); the folds' bundles fitted an entropy threshold, not this, so far mass is swept absolutely.
 FAR_MASS_REFERENCE = 0.01
@@ -285,9 +284,9 @@ def ensemble_curves(run_folds: list[tuple[Path, str]], n_frames: int, seed: int,
     from crossing_assist.runtime.engine import Engine
 
     fold, source = run_folds[0]
-    engine, out = None, {}
+    engine, out, k = None, {}, f"_ensemble{len(run_folds)}"
     for view, _, draw in view_draws(n_frames, portrait_frames, seed, portrait, mirror, zoom):
-        done = curve_cache(fold, draw, grid, measure, f"_ensemble{len(run_folds)}", top)
+        done = curve_cache(fold, draw, grid, measure, k, top)
         if done.is_file():
             out[view] = json.loads(done.read_text())
             continue
@@ -296,7 +295,7 @@ def ensemble_curves(run_folds: list[tuple[Path, str]], n_frames: int, seed: int,
             magnify_view_crop(engine, zoom)
         lis, extra = Listener.average(engine, [f / f"listened{draw}.npz" for f, _ in run_folds], measure)
         out[view] = curve_result(lis, extra["in_view"].tolist(), engine, source, view, measure, grid, top,
-                                 curve_cache(fold, draw, grid, measure, f"_ensemble{len(run_folds)}"))
+                                 curve_cache(fold, draw, grid, measure, k))
         atomic_write_text(done, json.dumps(out[view], indent=1))
     return out
 
@@ -493,7 +492,7 @@ def main(argv=None) -> int:
         for fold, source in finished_folds(cv):
             print(f"{cv} fold {source}: export + listen", file=sys.stderr, flush=True)
             curves = fold_curve(fold, source, ptl, neg, used, a.frames, a.seed, a.portrait, a.mirror, a.portrait_frames,
-                                a.grid, a.zoom, a.measure, a.max_scale)
+                                a.grid, a.zoom, a.measure, top=a.max_scale)
             if i:   # one key per fold in the pooled per-fold figures
                 curves = {view: {**c, "source": f"{source} ({cv})"} for view, c in curves.items()}
             folds.append(curves)
@@ -510,7 +509,7 @@ def main(argv=None) -> int:
             return 2
         print(f"the ensemble of the {runs} runs:")
         report(a, [ensemble_curves(f, a.frames, a.seed, a.portrait, a.mirror, a.portrait_frames, a.grid, a.zoom,
-                                   a.measure, a.max_scale) for f in members], [str(a.cv)] * len(members), f"_ensemble{runs}")
+                                   a.measure, top=a.max_scale) for f in members], [str(a.cv)] * len(members), f"_ensemble{runs}")
     return 0
 
 

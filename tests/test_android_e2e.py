@@ -126,10 +126,10 @@ def _drive(tmp: Path, www: Path, clip_path: Path, run_s: float, *extra: str) -> 
     cmd = [NODE, "tools/e2e_driver.mjs", "--clip", str(clip_path), "--out", str(tmp / "result.json"),
            "--run-s", str(run_s), "--www", str(www), "--chromium", CHROMIUM, *extra]
     proc = subprocess.run(cmd, cwd=DEMO, capture_output=True, text=True, timeout=600)
-    # Chromium refuses to cache anything when the disk is nearly full (it did at 1.5 GB free),
-    # and the app then says its service worker could not cache it: say how much was free.
-    free_gb = shutil.disk_usage(tmp).free / 1e9
-    assert proc.returncode == 0, f"{proc.stderr[-3000:]}\n(disk free: {free_gb:.1f} GB)"
+    if proc.returncode != 0:
+        # Chromium refuses to cache anything when the disk is nearly full (it did at 1.5 GB free),
+        # and the app then says its service worker could not cache it: say how much was free.
+        pytest.fail(f"{proc.stderr[-3000:]}\n(disk free: {shutil.disk_usage(tmp).free / 1e9:.1f} GB)")
     result = json.loads((tmp / "result.json").read_text())
     deliberate = ("NotReadableError: Could not start video source",   # the driver's failed start
                   "injected fault")                                   # the driver's fault in the loop

@@ -285,7 +285,7 @@ def test_choose_gate_says_a_choice_at_the_top_of_the_sweep_and_sweeps_further(tm
     def never_wrong(fold, source, *a, **k):   # beacon on rises with the scale, never wrong: the top is chosen
         pts = [{"scale": m, "beacon_on": min(1.0, m / 32), "confidently_wrong": 0.0, "confidently_wrong_frames": 0,
                 "silence_no_crossing": 1.0, "beacon_on_goal_in_view": min(1.0, m / 32)}
-               for m in cg.gate_scales(cg.GRID, a[-1])]   # main passes --max-scale last
+               for m in cg.gate_scales(cg.GRID, k["top"])]   # main passes --max-scale as top
         return {"landscape": {"source": source, "frames": 100, "no_crossing_frames": 50, "goal_in_view_frames": 100,
                               "curve": pts}}
 

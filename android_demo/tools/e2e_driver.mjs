@@ -125,12 +125,12 @@ const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
  * reported at once with the page's reason; the wait itself is long, since a cold Chromium on
  * a slow machine (first start, first WASM compile) takes far longer than a warm one.
  */
-async function waitForApp(page, timeoutMs = APP_TIMEOUT_MS) {
+async function waitForApp(page) {
   const state = await waitFor(page, () => {
     const a = window.crossingAssist;
     if (!a?.ready) return null;
     return a.offline === 'ready' || a.offline.startsWith('unavailable') ? a.offline : null;
-  }, null, timeoutMs, 'the app and its service worker');
+  }, null, APP_TIMEOUT_MS, 'the app and its service worker');
   if (state !== 'ready') throw new Error(`the app loaded but its service worker did not: offline ${state}`);
 }
 

@@ -172,7 +172,11 @@ def _bundle_conformal(bundle, probs: np.ndarray, labels: np.ndarray) -> dict:
     return bundle_conformal_report(bundle, probs, labels)
 
 
-def gate_scales(steps: int = 8, top: float = 4.0) -> tuple[float, ...]:
+#: The largest multiple of the bundle's threshold crossing-eval sweeps (scripts/choose_gate.py --max-scale).
+GATE_TOP = 4.0
+
+
+def gate_scales(steps: int = 8, top: float = GATE_TOP) -> tuple[float, ...]:
     """Gate thresholds to sweep, as multiples of the bundle's: ``steps`` a doubling, from 1/4 to
     ``top`` (a power of two >= 1; 1 included)."""
     doublings = math.log2(top)
