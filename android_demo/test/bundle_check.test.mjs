@@ -91,7 +91,7 @@ test('each hand edit of bundle.json is refused naming the leaf and both values',
   const edits = [
     [(m) => { m.calibration.uncertainty.threshold = 0.05; }, 'calibration.uncertainty.threshold = 0.05 disagrees with the model\'s 0.013542555469368927'],
     [(m) => { m.calibration.conformal.threshold = 0.5; }, 'calibration.conformal.threshold = 0.5 disagrees with the model\'s 0.2644445300102234'],
-    [(m) => { delete m.calibration.uncertainty.portrait_threshold; }, 'calibration.uncertainty.portrait_threshold = absent disagrees with the model\'s 0.027085110938737854'],
+    [(m) => { delete m.calibration.uncertainty.portrait_threshold; }, `calibration.uncertainty.portrait_threshold = absent disagrees with the model's ${JSON.stringify(DEFAULT_RAW().calibration.uncertainty.portrait_threshold)}`],   // the shipped gate's, re-chosen now and then
     [(m) => { m.actions.names[1] = 'left'; }, 'actions.names[1] = "left" disagrees with the model\'s "1"'],
     [(m) => { m.actions.bins.push([13]); }, 'actions.bins[13] = [13] disagrees with the model\'s absent'],
     [(m) => { m.fov_deg = 90; }, 'fov_deg = 90 disagrees with the model\'s 67'],
