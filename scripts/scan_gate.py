@@ -1,0 +1,221 @@
+"""The gate checked on held-out scans: photographers the folds never saw, sweeping the phone.
+
+``scripts/choose_gate.py`` chooses each view's far-mass threshold on still clips. A user looking
+for the crossing sweeps the phone left and right; then the decision logic's filter and heading
+hold carry headings across frames while the view moves, and a narrow camera's strips are only
+3.4 deg wide, so a threshold safe on still clips can be riskier scanned (the default's 3:4-window
+threshold, PTL val scanned: 0.88 % confidently wrong where 0.04 gave 0.43 %).
+
+For each finished fold of the CV runs (``CV`` and each ``--also``), play its held-out
+photographer's unseen photos (choose_gate's draw of ``--frames``) as ``scripts/pan_probe.py``
+plays them: 1 s still, then turned right, left and back (``--amplitude``, ``--rate``), every
+frame re-rendered as the turned camera sees it; ``--window``: the narrow camera's middle 3:4
+window. The model's outputs are saved in the fold (``scanned[_window]_N_seed.npz``), so a second
+call replays without the model. The runs' plays of one photographer are averaged frame by frame
+(the ensemble the default ships; one run: that model). Then the far-mass thresholds choose_gate
+sweeps (``--grid``, ``--max-scale``; from ``--min-scale``) are replayed through the runtime's
+decision logic (``runtime.listen.judge_scans``): every frame after the still second whose goal is
+in view, with the turn from a gyroscope and the turn read from the frames, the worse of the two
+counted (``--heard-after S``: judged when heard, the beacon turned by the gyroscope until then, as
+the app plays it). Per photographer a curve in choose_gate's format, pooled and chosen with its
+rule (confidently wrong <= 0.5 % of goal-in-view frames, the most beacon-on), and each
+photographer measured at the threshold chosen on the others. Writes ``CV/scan_gate[_window]….json``.
+
+``--cap GATE_JSON`` (choose_gate's result, in CV): also write ``GATE_JSON`` with the view's
+threshold lowered to the scans' choice where that is lower (``…_scan.json``; a file already named
+so is updated in place, so landscape and window caps stack), its still figures read at the capped
+threshold, for ``scripts/stamp_bundle.py --rescale-gate --gate-json …_scan.json``.
+
+    .venv/bin/python scripts/scan_gate.py runs/ship_s0/cv --also runs/ship_s1/cv --also runs/ship_s2/cv \\
+        --frames 100 --window --grid 16 --max-scale 16 --cap gate_far_mass_top16_ensemble3.json
+
+A missing CV run or an unusable option is one line and a non-zero exit.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from choose_gate import (  # noqa: E402  (sibling scripts: the folds, their draw, the rule; the scans)
+    FAR_MASS_REFERENCE, add_also, choose, finished_folds, fold_bundle, held_out_parser, held_out_rows,
+    leave_one_photographer_out, pool,
+)
+from pan_probe import play  # noqa: E402
+
+from crossing_assist.bundle import UncertaintySpec  # noqa: E402
+from crossing_assist.data_tools.images import load_frame  # noqa: E402
+from crossing_assist.data_tools.manifest import read_manifest  # noqa: E402
+from crossing_assist.fileio import atomic_write_text  # noqa: E402
+from crossing_assist.models.evaluate import GATE_TOP, SCAN_WINDOW_ASPECT, gate_scales  # noqa: E402
+from crossing_assist.runtime.listen import Listener, judge_scans, scan_yaw  # noqa: E402
+
+#: choose_gate's view each scan checks: the landscape threshold, or the narrow camera's (3:4 windows)
+VIEWS = {False: "landscape", True: "portrait_window"}
+
+
+def scan_cache(fold: Path, window: bool, n: int, seed: int, amplitude: float, rate: float) -> Path:
+    scan = "" if (amplitude, rate) == (20.0, 30.0) else f"_a{amplitude:g}_r{rate:g}"
+    return fold / f"scanned{'_window' if window else ''}_{n}_{seed}{scan}.npz"
+
+
+def scan_fold(fold: Path, source: str, ptl, neg, used: set[str], a) -> tuple[Path, Path]:
+    """The fold's held-out photos scanned with its bundle (once; cached in the fold): the saved
+    play and the bundle."""
+    from crossing_assist.runtime.engine import Engine
+
+    path, bundle = scan_cache(fold, a.window, a.frames, a.seed, a.amplitude, a.rate), fold_bundle(fold, source, ptl)
+    if path.is_file():
+        return path, bundle
+    rows = [r for r in held_out_rows(ptl, neg, source, used, a.frames, a.seed)[0] if r.far_x is not None]
+    if not rows:
+        raise ValueError(f"{fold}: {source} has no unseen photo with a crossing")
+    engine = Engine(bundle, threads=1)
+    psi = scan_yaw(a.amplitude, a.rate)
+    lis, labels, rates = play(engine, (load_frame(ptl.image_path(r), r.flags) for r in rows), rows, psi,
+                              SCAN_WINDOW_ASPECT if a.window else None)
+    lis.save(path, scan_labels=labels, psi=psi, camera_rates=rates)
+    return path, bundle
+
+
+def scan_curve(plays: list[Path], bundle: Path, source: str, view: str, scales: list[float],
+               heard_after: float) -> dict:
+    """One photographer's scans (the runs' ``plays`` averaged; decided with ``bundle``'s decision
+    settings, one of the runs' fold bundles, its gate replaced) judged at far mass
+    :data:`FAR_MASS_REFERENCE` x each scale, for every frame alike: a record in choose_gate's format
+    over the goal-in-view frames, each point keeping each yaw reading's counts."""
+    from crossing_assist.runtime.engine import Engine
+
+    engine = Engine(bundle, threads=1)
+    lis, extra = Listener.average(engine, plays, "far_mass")
+    base, readings = engine.bundle, (("gyro_turned", "camera_turned") if heard_after else ("gyro", "camera"))
+    curve, frames = [], 0
+    for m in scales:
+        gate = UncertaintySpec("far_mass", m * FAR_MASS_REFERENCE)
+        engine.bundle = replace(base, calibration=replace(base.calibration, uncertainty=gate))
+        judged = judge_scans(engine, lis.clips, extra["scan_labels"], extra["psi"], extra["camera_rates"],
+                             heard_after_s=heard_after)
+        got = {k: judged[k] for k in readings}
+        frames = got[readings[0]]["in_view"]
+        on = min(g["on"] for g in got.values()) / frames
+        curve.append({"scale": m, "beacon_on": on, "beacon_on_goal_in_view": on,
+                      "confidently_wrong": max(g["wrong"] for g in got.values()) / frames,
+                      "silence_no_crossing": None,
+                      "readings": {k: {c: g[c] for c in ("on", "wrong", "wrong_hold")} for k, g in got.items()}})
+    return {"source": source, "view": f"{view} scanned", "measure": "far_mass", "threshold": FAR_MASS_REFERENCE,
+            "photos": len(lis.clips), "frames": frames, "no_crossing_frames": 0, "goal_in_view_frames": frames,
+            "curve": curve}
+
+
+def cap(gate_path: Path, view: str, scanned: dict) -> Path:
+    """``gate_path`` (choose_gate's result) with ``view``'s threshold lowered to the scans' choice
+    where that is lower, written as ``…_scan.json``; its still figures read at the capped scale."""
+    g = json.loads(gate_path.read_text())
+    rec = g if view == "landscape" else g.get(view)
+    if rec is None:
+        raise ValueError(f"{gate_path} has no {view} choice (choose_gate.py --portrait)")
+    scan_rec = {k: scanned[k] for k in ("scale", "threshold", "targets_met", "at_scale", "heard_after_s")}
+    if scanned["scale"] < rec["scale"]:
+        still = next((c for c in rec["curve"] if np.isclose(c["scale"], scanned["scale"])), None)
+        if still is None:
+            raise ValueError(f"{gate_path}: {view} was not swept at scale {scanned['scale']:g}; use its --grid")
+        scan_rec["capped_from"] = {"scale": rec["scale"], "threshold": rec["threshold"]}
+        rec.update(scale=still["scale"], threshold=still["scale"] * FAR_MASS_REFERENCE, at_scale=still)
+    rec["scan"] = scan_rec
+    out = gate_path if gate_path.stem.endswith("_scan") else gate_path.with_name(f"{gate_path.stem}_scan.json")
+    atomic_write_text(out, json.dumps(g, indent=1))
+    return out
+
+
+def main(argv=None) -> int:
+    ap = held_out_parser(__doc__.split("\n\n")[0], frames=100)
+    add_also(ap)
+    ap.add_argument("--window", action="store_true",
+                    help="the narrow camera (the middle 3:4 window, ~41 deg): checks choose_gate's portrait_window")
+    ap.add_argument("--amplitude", type=float, default=20.0, help="degrees either side of straight ahead (default 20)")
+    ap.add_argument("--rate", type=float, default=30.0, help="turn rate, degrees per second (default 30)")
+    ap.add_argument("--heard-after", type=float, default=0.0, metavar="S",
+                    help="judge each decision S seconds after its capture, turned by the gyroscope meanwhile")
+    ap.add_argument("--grid", type=int, default=16, metavar="STEPS", help="scales a doubling (default 16)")
+    ap.add_argument("--min-scale", type=float, default=1.0, metavar="M",
+                    help="the smallest scale swept (default 1: far mass 0.01)")
+    ap.add_argument("--max-scale", type=float, default=GATE_TOP, metavar="M",
+                    help=f"the largest scale swept (a power of two; default {GATE_TOP:g})")
+    ap.add_argument("--cap", metavar="GATE_JSON", help="choose_gate's result in CV whose threshold the scans cap")
+    a = ap.parse_args(argv)
+    if a.mirror:
+        ap.error("--mirror: scans are played with the folds' plain bundles")
+    if not 0 <= a.heard_after <= 1:
+        ap.error(f"--heard-after {a.heard_after:g}: valid 0..1 s")
+    try:
+        scales = [m for m in gate_scales(a.grid, a.max_scale) if m >= a.min_scale - 1e-12]
+    except ValueError as exc:
+        ap.error(f"--grid/--max-scale: {exc}")
+    if not scales:
+        ap.error(f"--min-scale {a.min_scale:g}: above --max-scale {a.max_scale:g}")
+    runs = [a.cv, *a.also]
+    if missing := [str(cv) for cv in runs if not cv.is_dir()]:
+        print(f"error: no CV run folder {', '.join(missing)}", file=sys.stderr)
+        return 2
+    gate_path = a.cv / a.cap if a.cap else None
+    if gate_path and not gate_path.is_file():
+        print(f"error: --cap {gate_path} not found (scripts/choose_gate.py writes it)", file=sys.stderr)
+        return 2
+    ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
+    used = {r.image for r in read_manifest(a.used_neg).rows}
+    by_source: dict[str, list[tuple[Path, Path]]] = {}
+    for cv in runs:
+        for fold, source in finished_folds(cv):
+            print(f"{cv} fold {source}: scan", file=sys.stderr, flush=True)
+            by_source.setdefault(source, []).append(scan_fold(fold, source, ptl, neg, used, a))
+    photographers = {s: p for s, p in by_source.items() if len(p) == len(runs)}
+    for s in sorted(set(by_source) - set(photographers)):
+        print(f"{s}: not held out by every run's finished folds, left out", file=sys.stderr)
+    if not photographers:
+        print(f"error: no photographer held out by every run's finished folds in {', '.join(map(str, runs))}",
+              file=sys.stderr)
+        return 2
+    view = VIEWS[a.window]
+    folds = [scan_curve([p for p, _ in played], played[0][1], s, view, scales, a.heard_after)
+             for s, played in sorted(photographers.items())]
+    curve = pool(folds)
+    best, met = choose(curve)
+    lopo = leave_one_photographer_out(folds)
+    result = {"view": view, "scanned": {"amplitude_deg": a.amplitude, "rate_dps": a.rate},
+              "heard_after_s": a.heard_after, "runs": [str(cv) for cv in runs], "measure": "far_mass",
+              "scale": best["scale"], "threshold": best["scale"] * FAR_MASS_REFERENCE, "targets_met": met,
+              "at_scale": {k: v for k, v in best.items() if k != "per_fold"},
+              **({"leave_one_photographer_out": lopo} if lopo else {}), "curve": curve, "folds": folds}
+    name = f"scan_gate{'_window' if a.window else ''}{f'_heard{a.heard_after:g}' if a.heard_after else ''}.json"
+    atomic_write_text(a.cv / name, json.dumps(result, indent=1))
+    print(f"{view} scanned, {len(photographers)} photographers x {len(runs)} run(s), "
+          f"{folds[0]['photos']}+ photos each, {best['frames']} goal-in-view frames:")
+    print("| far mass | beacon on | confidently wrong |\n|---|---:|---:|")
+    for c in curve:
+        print(f"| {c['scale'] * FAR_MASS_REFERENCE:.5f} | {100 * c['beacon_on']:.1f} % | "
+              f"{100 * c['confidently_wrong']:.2f} % ({c['confidently_wrong_frames']}) |")
+    print(f"chosen: far mass {result['threshold']:.5f} ({'targets met' if met else 'targets NOT met; nearest point'}): "
+          f"beacon on {100 * best['beacon_on']:.1f} %, confidently wrong {100 * best['confidently_wrong']:.2f} %")
+    if lopo:
+        print(f"chosen on the other photographers, measured on each: beacon on {100 * lopo['beacon_on']:.1f} %, "
+              f"confidently wrong {100 * lopo['confidently_wrong']:.2f} % (per photographer "
+              + " / ".join(f"{100 * r['confidently_wrong']:.2f} % at {r['scale'] * FAR_MASS_REFERENCE:.4f}"
+                           for r in lopo["per_photographer"]) + ")")
+    print(f"written: {a.cv / name}")
+    if gate_path:
+        try:
+            out = cap(gate_path, view, result)
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+        print(f"capped: {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

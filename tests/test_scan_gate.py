@@ -1,0 +1,111 @@
+"""scripts/scan_gate.py: the gate checked on held-out photographers' scans, and capped by them."""
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+import scan_gate as sg  # noqa: E402
+
+
+@pytest.fixture()
+def two_runs(tmp_path, monkeypatch):
+    """Two CV runs, each with a finished fold for photographers src:0 and src:1 whose bundle is the
+    toy bundle, and the photographers' unseen bar photos: ``(runs, ptl, neg)``."""
+    from runtime_toy import TOY2, bar_dataset, make_toy_bundle
+
+    ptl = bar_dataset(tmp_path / "ptl", 8, split="train")
+    neg = bar_dataset(tmp_path / "neg", 4, unknown=True, split="train")
+    bundle = make_toy_bundle(tmp_path / "bundle", TOY2)
+    runs = [tmp_path / "a" / "cv", tmp_path / "b" / "cv"]
+    for cv in runs:
+        for s in ("src_0", "src_1"):
+            (cv / f"fold-{s}").mkdir(parents=True)
+    monkeypatch.setattr(sg, "finished_folds", lambda cv: [(cv / "fold-src_0", "src:0"), (cv / "fold-src_1", "src:1")])
+    monkeypatch.setattr(sg, "fold_bundle", lambda *a, **k: bundle)
+    return runs, ptl, neg
+
+
+def _args(runs, ptl, neg, *more):
+    return [str(runs[0]), "--also", str(runs[1]), "--ptl", str(ptl), "--neg", str(neg), "--used-neg", str(neg),
+            "--frames", "3", "--amplitude", "30", "--grid", "2", "--min-scale", "0.25", "--max-scale", "4", *more]
+
+
+def test_scans_of_each_photographer_are_played_once_averaged_over_runs_and_pooled(two_runs, monkeypatch, capsys):
+    from crossing_assist.runtime.engine import Engine
+
+    runs, ptl, neg = two_runs
+    assert sg.main(_args(runs, ptl, neg)) == 0
+    res = json.loads((runs[0] / "scan_gate.json").read_text())
+    for cv in runs:   # each fold's held-out photos scanned and saved in the fold
+        assert sorted(p.name for p in cv.glob("fold-*/scanned*.npz")) == ["scanned_3_0_a30_r30.npz"] * 2
+    assert [f["source"] for f in res["folds"]] == ["src:0", "src:1"] and res["view"] == "landscape"
+    assert [f["photos"] for f in res["folds"]] == [3, 3]
+    frames = sum(f["frames"] for f in res["folds"])
+    assert res["at_scale"]["frames"] == frames > 0
+    assert [c["scale"] for c in res["curve"]] == [0.25, 2 ** -1.5, 0.5, 2 ** -0.5, 1, 2 ** 0.5, 2, 2 ** 1.5, 4]
+    # the toy places bars: on and right at a loose gate, the curve climbs with the threshold
+    assert res["curve"][-1]["beacon_on"] > 0.8 and res["curve"][-1]["confidently_wrong"] < 0.01
+    assert res["curve"][0]["beacon_on"] <= res["curve"][-1]["beacon_on"]
+    assert res["targets_met"] and res["scale"] == max(res["curve"], key=lambda c: c["beacon_on"])["scale"]
+    assert {r["photographer"] for r in res["leave_one_photographer_out"]["per_photographer"]} == {"src:0", "src:1"}
+    out = capsys.readouterr().out
+    assert "| far mass | beacon on | confidently wrong |" in out and "chosen: far mass" in out
+
+    def no_model(*a, **k):
+        raise AssertionError("a second call replays the saved scans")
+
+    monkeypatch.setattr(Engine, "predict", no_model)
+    assert sg.main(_args(runs, ptl, neg)) == 0
+    assert json.loads((runs[0] / "scan_gate.json").read_text())["curve"] == res["curve"]
+
+
+def test_heard_late_counts_the_worse_of_the_turned_readings(two_runs):
+    runs, ptl, neg = two_runs
+    assert sg.main(_args(runs, ptl, neg, "--heard-after", "0.3")) == 0
+    res = json.loads((runs[0] / "scan_gate_heard0.3.json").read_text())
+    for f in res["folds"]:
+        for c in f["curve"]:
+            assert set(c["readings"]) == {"gyro_turned", "camera_turned"}
+            assert c["confidently_wrong"] * f["frames"] == pytest.approx(max(r["wrong"] for r in c["readings"].values()))
+            assert c["beacon_on"] * f["frames"] == pytest.approx(min(r["on"] for r in c["readings"].values()))
+
+
+def _gate(path: Path, scale: float) -> Path:
+    curve = [{"scale": m, "beacon_on": m / 10, "confidently_wrong": 0.0} for m in (1.0, 2 ** 0.5, 2.0, 4.0)]
+    view = {"scale": scale, "threshold": scale * 0.01, "at_scale": curve[-1], "curve": curve}
+    path.write_text(json.dumps({**view, "portrait_window": dict(view)}))
+    return path
+
+
+def test_cap_lowers_a_view_to_the_scans_choice_only_where_that_is_lower(tmp_path):
+    gate = _gate(tmp_path / "gate.json", 4.0)
+    scanned = {"scale": 2.0, "threshold": 0.02, "targets_met": True, "at_scale": {"beacon_on": 0.3}, "heard_after_s": 0}
+    out = sg.cap(gate, "portrait_window", scanned)
+    assert out.name == "gate_scan.json"
+    g = json.loads(out.read_text())
+    w = g["portrait_window"]
+    assert (w["scale"], w["threshold"], w["at_scale"]["beacon_on"]) == (2.0, 0.02, 0.2)   # still figures at the cap
+    assert w["scan"]["capped_from"] == {"scale": 4.0, "threshold": 0.04} and g["scale"] == 4.0   # landscape untouched
+    # a second cap (landscape) stacks on the first file; a looser scan choice leaves the view as it was
+    again = sg.cap(out, "landscape", {**scanned, "scale": 8.0, "threshold": 0.08})
+    g2 = json.loads(again.read_text())
+    assert again == out and g2["scale"] == 4.0 and "capped_from" not in g2["scan"]
+    assert g2["portrait_window"]["scale"] == 2.0
+    with pytest.raises(ValueError, match="not swept at scale"):
+        sg.cap(gate, "landscape", {**scanned, "scale": 3.0})
+    with pytest.raises(ValueError, match="no portrait choice"):
+        sg.cap(gate, "portrait", scanned)
+
+
+def test_bad_runs_and_options_are_one_line(tmp_path, capsys):
+    assert sg.main([str(tmp_path / "none")]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    (tmp_path / "cv").mkdir()
+    assert sg.main([str(tmp_path / "cv"), "--cap", "gate.json"]) == 2
+    assert "not found" in capsys.readouterr().err
+    for bad in (["--heard-after", "5"], ["--min-scale", "64"], ["--mirror"]):
+        with pytest.raises(SystemExit):
+            sg.main([str(tmp_path / "cv"), *bad])
