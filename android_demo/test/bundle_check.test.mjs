@@ -31,6 +31,8 @@ const entry = (key, value, extra = []) => field(14, 2, [...field(1, 2, utf8(key)
 const model = (...parts) => new Uint8Array(parts.flat());
 
 const DEFAULT_RAW = () => JSON.parse(readFileSync(join(DEFAULT, 'bundle.json'), 'utf8'));
+// the shipped gate's thresholds (re-chosen now and then, so read, not written in)
+const SHIPPED_GATE = () => DEFAULT_RAW().calibration.uncertainty;
 const defaultBytes = () => new Uint8Array(readFileSync(join(DEFAULT, 'model.onnx')));
 
 test('the walk finds metadata_props among every wire type and skips the graph', () => {
@@ -89,9 +91,9 @@ test('the real default bundle: the walk reads its embedded copy in well under a 
 test('each hand edit of bundle.json is refused naming the leaf and both values', { skip: noDefault }, () => {
   const bytes = defaultBytes();
   const edits = [
-    [(m) => { m.calibration.uncertainty.threshold = 0.05; }, 'calibration.uncertainty.threshold = 0.05 disagrees with the model\'s 0.013542555469368927'],
+    [(m) => { m.calibration.uncertainty.threshold = 0.05; }, `calibration.uncertainty.threshold = 0.05 disagrees with the model's ${JSON.stringify(SHIPPED_GATE().threshold)}`],
     [(m) => { m.calibration.conformal.threshold = 0.5; }, 'calibration.conformal.threshold = 0.5 disagrees with the model\'s 0.2644445300102234'],
-    [(m) => { delete m.calibration.uncertainty.portrait_threshold; }, `calibration.uncertainty.portrait_threshold = absent disagrees with the model's ${JSON.stringify(DEFAULT_RAW().calibration.uncertainty.portrait_threshold)}`],   // the shipped gate's, re-chosen now and then
+    [(m) => { delete m.calibration.uncertainty.portrait_threshold; }, `calibration.uncertainty.portrait_threshold = absent disagrees with the model's ${JSON.stringify(SHIPPED_GATE().portrait_threshold)}`],
     [(m) => { m.actions.names[1] = 'left'; }, 'actions.names[1] = "left" disagrees with the model\'s "1"'],
     [(m) => { m.actions.bins.push([13]); }, 'actions.bins[13] = [13] disagrees with the model\'s absent'],
     [(m) => { m.fov_deg = 90; }, 'fov_deg = 90 disagrees with the model\'s 67'],
@@ -156,13 +158,13 @@ test('fetchBundle (the app\'s load) refuses a bundle whose bundle.json was edite
   try {
     files['bundle.json'] = readFileSync(join(DEFAULT, 'bundle.json'));
     const ok = await fetchBundle('http://phone.test/bundle/');
-    assert.equal(ok.meta.calibration.uncertainty.threshold, 0.013542555469368927);
+    assert.equal(ok.meta.calibration.uncertainty.threshold, SHIPPED_GATE().threshold);
     const edited = DEFAULT_RAW();
     edited.calibration.uncertainty.threshold = 0.05;
     files['bundle.json'] = JSON.stringify(edited);
     await assert.rejects(fetchBundle('http://phone.test/bundle/'), {
       name: 'BundleError',
-      message: 'bundle.json: calibration.uncertainty.threshold = 0.05 disagrees with the model\'s 0.013542555469368927; re-export the bundle',
+      message: `bundle.json: calibration.uncertainty.threshold = 0.05 disagrees with the model's ${JSON.stringify(SHIPPED_GATE().threshold)}; re-export the bundle`,
     });
   } finally {
     globalThis.fetch = saved;
