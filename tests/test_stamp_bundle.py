@@ -169,13 +169,17 @@ def test_narrow_fov_stamps_the_windows_threshold_for_narrow_portrait_frames(ship
 
     src, cv = shipped
     fm = _far_mass_gate
-    (cv / "gate_far_mass.json").write_text(json.dumps(fm(0.007) | {"portrait": fm(0.015), "portrait_window": fm(0.038)}))
+    scan = {"scale": 3.8, "threshold": 0.038, "capped_from": {"scale": 5.0, "threshold": 0.05}}   # scan_gate.py --cap
+    (cv / "gate_far_mass.json").write_text(json.dumps(fm(0.007) | {"portrait": fm(0.015),
+                                                                   "portrait_window": fm(0.038) | {"scan": scan}}))
     r = _stamp(src, tmp_path / "out", "--cv", cv, "--rescale-gate", "--gate-json", "gate_far_mass.json",
                "--narrow-fov", 45, "--sensor-aspect", "4:3")
     assert r.returncode == 0, r.stderr
     assert "0.038 (portrait frames at most 45 deg)" in r.stdout
     unc = read_bundle(tmp_path / "out").calibration.uncertainty
     assert (unc.narrow_threshold, unc.narrow_fov_deg) == (0.038, 45.0)
+    # the scans' check (and the still choice it capped) is kept beside the window's figures
+    assert read_bundle(tmp_path / "out").metrics["gate_held_out"]["portrait_window"]["scan"] == scan
     eng = Engine(tmp_path / "out")
     assert [eng.decision_config("portrait", eng.camera_fov(w, h)).threshold for w, h in ((720, 1280), (480, 640))] == [0.038, 0.015]
     r = _stamp(src, tmp_path / "scaled", "--cv", cv, "--rescale-gate", "--narrow-fov", 44)
