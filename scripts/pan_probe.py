@@ -32,7 +32,9 @@ gyroscope followed, or the picture followed and the gyroscope confirmed by it).
 
 ``--window``: a narrow camera scans instead, seeing the middle 3:4 window of each turned view at
 the window's own FOV (40.8 deg from PTL's 67), as ``crossing-eval --scan --portrait`` plays it;
-a goal beside the window but still in the photo is its edge strip.
+a goal beside the window but still in the photo is its edge strip. ``--phone``: a phone held in
+portrait scans instead (3:4 at the bundle's portrait FOV, 53 deg), seeing the middle of each
+turned view as choose_gate's ``portrait`` view cuts it.
 
 A missing manifest, an empty split or an unusable bundle is one line and exit 1.
 """
@@ -58,12 +60,13 @@ from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.listen import SCAN_FPS, Listener, judge_scans, scan_yaw
 
 
-def play(engine: Engine, images, rows, psi: np.ndarray, window: float | None = None) -> tuple[Listener, np.ndarray, np.ndarray]:
+def play(engine: Engine, images, rows, psi: np.ndarray, window: float | None = None,
+         phone_fov: float | None = None) -> tuple[Listener, np.ndarray, np.ndarray]:
     """Each photo scanned: its predictions (a :class:`Listener`'s clips, which it saves and loads),
     the goal's strip and the yaw rate read from the frames, per frame [photo, frame]."""
     lis, labels, rates = Listener(engine, len(psi) / SCAN_FPS, SCAN_FPS), [], []
     for i, (r, img) in enumerate(zip(rows, images)):
-        preds, labs, seen = scan_clips(engine, img, r.far_x, r.label, psi, window=window)
+        preds, labs, seen = scan_clips(engine, img, r.far_x, r.label, psi, window=window, phone_fov_deg=phone_fov)
         lis.clips.append(preds)
         lis.labels.append(r.label)
         labels.append(labs)
@@ -84,12 +87,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--window", action="store_true",
                     help="a narrow camera: the middle 3:4 window of each turned view (crossing-eval --scan --portrait)")
+    ap.add_argument("--phone", action="store_true",
+                    help="a phone held in portrait (3:4 at the bundle's portrait FOV) sees the middle of each turned view")
     ap.add_argument("--heard-after", type=float, default=0.0, metavar="S",
                     help="judge each decision S seconds after its frame's capture, when it is heard (default 0)")
     ap.add_argument("--cache", type=Path, help="the model's outputs: written after playing, read with --replay")
     ap.add_argument("--replay", action="store_true", help="decide again from --cache without running the model")
     ap.add_argument("--out", type=Path, help="write the figures as JSON here")
     a = ap.parse_args(argv)
+    if a.window and a.phone:
+        ap.error("--window and --phone: one camera scans")
     if not 0 <= a.heard_after <= 1:   # before a play that takes minutes (crossing-eval's range)
         print(f"error: --heard-after {a.heard_after:g} s invalid; valid: 0..1 s after the frame's capture", file=sys.stderr)
         return 1
@@ -120,7 +127,8 @@ def main(argv: list[str] | None = None) -> int:
         rows = draw(rows, a.photos, rng)
         psi = scan_yaw(a.amplitude, a.rate)
         lis, labels, rates = play(engine, [load_frame(ds.image_path(r), r.flags) for r in rows], rows, psi,
-                                  SCAN_WINDOW_ASPECT if a.window else None)
+                                  SCAN_WINDOW_ASPECT if a.window else None,
+                                  engine.bundle.geometry.camera_fov_deg[1] if a.phone else None)
         if a.cache:
             a.cache.parent.mkdir(parents=True, exist_ok=True)
             lis.save(a.cache, scan_labels=labels, psi=psi, camera_rates=rates)

@@ -10,7 +10,9 @@ For each finished fold of the CV runs (``CV`` and each ``--also``), play its hel
 photographer's unseen photos (choose_gate's draw of ``--frames``) as ``scripts/pan_probe.py``
 plays them: 1 s still, then turned right, left and back (``--amplitude``, ``--rate``), every
 frame re-rendered as the turned camera sees it; ``--window``: the narrow camera's middle 3:4
-window. The model's outputs are saved in the fold (``scanned[_window]_N_seed.npz``), so a second
+window; ``--phone``: a phone held in portrait (3:4 at the bundle's portrait FOV, choose_gate's
+``portrait`` view of each turned frame). The model's outputs are saved in the fold
+(``scanned[_window|_phone]_N_seed.npz``), so a second
 call replays without the model. The runs' plays of one photographer are averaged frame by frame
 (the ensemble the default ships; one run: that model). Then the far-mass thresholds choose_gate
 sweeps (``--grid``, ``--max-scale``; from ``--min-scale``) are replayed through the runtime's
@@ -19,11 +21,11 @@ in view, with the turn from a gyroscope and the turn read from the frames, the w
 counted (``--heard-after S``: judged when heard, the beacon turned by the gyroscope until then, as
 the app plays it). Per photographer a curve in choose_gate's format, pooled and chosen with its
 rule (confidently wrong <= 0.5 % of goal-in-view frames, the most beacon-on), and each
-photographer measured at the threshold chosen on the others. Writes ``CV/scan_gate[_window]….json``.
+photographer measured at the threshold chosen on the others. Writes ``CV/scan_gate[_window|_phone]….json``.
 
 ``--cap GATE_JSON`` (choose_gate's result, in CV): also write ``GATE_JSON`` with the view's
 threshold lowered to the scans' choice where that is lower (``…_scan.json``; a file already named
-so is updated in place, so landscape and window caps stack), its still figures read at the capped
+so is updated in place, so the cameras' caps stack), its still figures read at the capped
 threshold, for ``scripts/stamp_bundle.py --rescale-gate --gate-json …_scan.json``.
 
     .venv/bin/python scripts/scan_gate.py runs/ship_s0/cv --also runs/ship_s1/cv --also runs/ship_s2/cv \\
@@ -55,13 +57,19 @@ from crossing_assist.fileio import atomic_write_text  # noqa: E402
 from crossing_assist.models.evaluate import GATE_TOP, SCAN_WINDOW_ASPECT, gate_scales  # noqa: E402
 from crossing_assist.runtime.listen import Listener, judge_scans, scan_yaw  # noqa: E402
 
-#: choose_gate's view each scan checks: the landscape threshold, or the narrow camera's (3:4 windows)
-VIEWS = {False: "landscape", True: "portrait_window"}
+#: choose_gate's view each scanning camera checks: landscape, the narrow camera's (3:4 windows) or
+#: the phone held in portrait's threshold
+VIEWS = {"landscape": "landscape", "window": "portrait_window", "phone": "portrait"}
 
 
-def scan_cache(fold: Path, window: bool, n: int, seed: int, amplitude: float, rate: float) -> Path:
+def camera(a) -> str:
+    """Which camera scans: ``landscape``, ``window`` (--window) or ``phone`` (--phone)."""
+    return "window" if a.window else "phone" if a.phone else "landscape"
+
+
+def scan_cache(fold: Path, cam: str, n: int, seed: int, amplitude: float, rate: float) -> Path:
     scan = "" if (amplitude, rate) == (20.0, 30.0) else f"_a{amplitude:g}_r{rate:g}"
-    return fold / f"scanned{'_window' if window else ''}_{n}_{seed}{scan}.npz"
+    return fold / f"scanned{'' if cam == 'landscape' else f'_{cam}'}_{n}_{seed}{scan}.npz"
 
 
 def scan_fold(fold: Path, source: str, ptl, neg, used: set[str], a) -> tuple[Path, Path]:
@@ -69,7 +77,7 @@ def scan_fold(fold: Path, source: str, ptl, neg, used: set[str], a) -> tuple[Pat
     play and the bundle."""
     from crossing_assist.runtime.engine import Engine
 
-    path, bundle = scan_cache(fold, a.window, a.frames, a.seed, a.amplitude, a.rate), fold_bundle(fold, source, ptl)
+    path, bundle = scan_cache(fold, camera(a), a.frames, a.seed, a.amplitude, a.rate), fold_bundle(fold, source, ptl)
     if path.is_file():
         return path, bundle
     rows = [r for r in held_out_rows(ptl, neg, source, used, a.frames, a.seed)[0] if r.far_x is not None]
@@ -78,7 +86,8 @@ def scan_fold(fold: Path, source: str, ptl, neg, used: set[str], a) -> tuple[Pat
     engine = Engine(bundle, threads=1)
     psi = scan_yaw(a.amplitude, a.rate)
     lis, labels, rates = play(engine, (load_frame(ptl.image_path(r), r.flags) for r in rows), rows, psi,
-                              SCAN_WINDOW_ASPECT if a.window else None)
+                              SCAN_WINDOW_ASPECT if a.window else None,
+                              engine.bundle.geometry.camera_fov_deg[1] if a.phone else None)
     lis.save(path, scan_labels=labels, psi=psi, camera_rates=rates)
     return path, bundle
 
@@ -137,6 +146,8 @@ def main(argv=None) -> int:
     add_also(ap)
     ap.add_argument("--window", action="store_true",
                     help="the narrow camera (the middle 3:4 window, ~41 deg): checks choose_gate's portrait_window")
+    ap.add_argument("--phone", action="store_true",
+                    help="a phone held in portrait (3:4 at the bundle's portrait FOV): checks choose_gate's portrait")
     ap.add_argument("--amplitude", type=float, default=20.0, help="degrees either side of straight ahead (default 20)")
     ap.add_argument("--rate", type=float, default=30.0, help="turn rate, degrees per second (default 30)")
     ap.add_argument("--heard-after", type=float, default=0.0, metavar="S",
@@ -150,6 +161,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     if a.mirror:
         ap.error("--mirror: scans are played with the folds' plain bundles")
+    if a.window and a.phone:
+        ap.error("--window and --phone: one camera scans at a time")
     if not 0 <= a.heard_after <= 1:
         ap.error(f"--heard-after {a.heard_after:g}: valid 0..1 s")
     try:
@@ -180,7 +193,7 @@ def main(argv=None) -> int:
         print(f"error: no photographer held out by every run's finished folds in {', '.join(map(str, runs))}",
               file=sys.stderr)
         return 2
-    view = VIEWS[a.window]
+    view = VIEWS[camera(a)]
     folds = [scan_curve([p for p, _ in played], played[0][1], s, view, scales, a.heard_after)
              for s, played in sorted(photographers.items())]
     curve = pool(folds)
@@ -191,7 +204,8 @@ def main(argv=None) -> int:
               "scale": best["scale"], "threshold": best["scale"] * FAR_MASS_REFERENCE, "targets_met": met,
               "at_scale": {k: v for k, v in best.items() if k != "per_fold"},
               **({"leave_one_photographer_out": lopo} if lopo else {}), "curve": curve, "folds": folds}
-    name = f"scan_gate{'_window' if a.window else ''}{f'_heard{a.heard_after:g}' if a.heard_after else ''}.json"
+    cam = camera(a)
+    name = f"scan_gate{'' if cam == 'landscape' else f'_{cam}'}{f'_heard{a.heard_after:g}' if a.heard_after else ''}.json"
     atomic_write_text(a.cv / name, json.dumps(result, indent=1))
     print(f"{view} scanned, {len(photographers)} photographers x {len(runs)} run(s), "
           f"{folds[0]['photos']}+ photos each, {best['frames']} goal-in-view frames:")

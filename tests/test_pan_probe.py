@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from runtime_toy import bar_dataset, toy_bundle  # noqa: F401  (fixture)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
@@ -82,3 +83,30 @@ def test_a_narrow_camera_scans_the_middle_window(tmp_path, toy_bundle):  # noqa:
         edge = np.isin(z["scan_labels"], (1, 12)).mean()
     with np.load(wide) as z:
         assert edge > np.isin(z["scan_labels"], (1, 12)).mean()   # the window's edges hold more goals
+
+
+def test_a_phone_held_in_portrait_scans_the_middle_of_each_turned_view(tmp_path):
+    """--phone: the same scans seen by a phone held in portrait (3:4 frames at the bundle's portrait
+    FOV, the middle of each turned view as choose_gate's portrait view cuts it); --window with it
+    is refused."""
+    from runtime_toy import TOY2, make_toy_bundle
+
+    from crossing_assist.runtime.engine import Engine
+    from crossing_assist.runtime.listen import Listener
+
+    bundle = make_toy_bundle(tmp_path / "bundle", TOY2)   # 80 deg landscape, 50 deg portrait
+    data = bar_dataset(tmp_path / "data", n=4)
+    args = ["--bundle", str(bundle), "--data", str(data), "--photos", "4"]
+    wide, phone = tmp_path / "w.npz", tmp_path / "p.npz"
+    assert pp.main([*args, "--cache", str(wide)]) == 0
+    assert pp.main([*args, "--phone", "--cache", str(phone)]) == 0
+    engine = Engine(bundle, threads=1)
+    lis = Listener.load(engine, phone)[0]
+    assert {round(p.fov_deg, 1) for c in lis.clips for p in c} == {round(engine.bundle.geometry.camera_fov_deg[1], 1)}
+    assert {p.orientation for c in lis.clips for p in c} == {"portrait"}
+    with np.load(phone) as z, np.load(wide) as w:
+        # narrower than the photo's camera: the goal leaves the view sooner, and sits at the edges more
+        assert (z["scan_labels"] == 0).sum() >= (w["scan_labels"] == 0).sum()
+        assert not np.array_equal(z["scan_labels"], w["scan_labels"])
+    with pytest.raises(SystemExit):
+        pp.main([*args, "--phone", "--window"])

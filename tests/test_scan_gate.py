@@ -62,6 +62,18 @@ def test_scans_of_each_photographer_are_played_once_averaged_over_runs_and_poole
     assert json.loads((runs[0] / "scan_gate.json").read_text())["curve"] == res["curve"]
 
 
+def test_a_phone_held_in_portrait_checks_the_portrait_threshold(two_runs):
+    """--phone: the photographers' photos scanned by a phone held in portrait, cached apart, their
+    curve for choose_gate's portrait view; with --window, refused."""
+    runs, ptl, neg = two_runs
+    assert sg.main(_args(runs, ptl, neg, "--phone")) == 0
+    res = json.loads((runs[0] / "scan_gate_phone.json").read_text())
+    assert res["view"] == "portrait" and res["at_scale"]["frames"] > 0
+    assert sorted(p.name for p in runs[0].glob("fold-*/scanned_phone*.npz")) == ["scanned_phone_3_0_a30_r30.npz"] * 2
+    with pytest.raises(SystemExit):
+        sg.main(_args(runs, ptl, neg, "--phone", "--window"))
+
+
 def test_heard_late_counts_the_worse_of_the_turned_readings(two_runs):
     runs, ptl, neg = two_runs
     assert sg.main(_args(runs, ptl, neg, "--heard-after", "0.3")) == 0

@@ -222,7 +222,8 @@ SCAN_WINDOW_ASPECT = 3 / 4
 
 
 def scan_clips(engine, image: np.ndarray, far_x: float | None, label: int, psi: np.ndarray,
-               fov_deg: float | None = None, window: float | None = None) -> tuple[list, np.ndarray, np.ndarray]:
+               fov_deg: float | None = None, window: float | None = None,
+               phone_fov_deg: float | None = None) -> tuple[list, np.ndarray, np.ndarray]:
     """One photo (scaled to a camera stream's width) seen by a camera turned ``psi[j]`` degrees at
     each frame (:func:`~crossing_assist.data_tools.augment.yaw`: the scene beyond the photo black,
     the goal moved, ``unknown`` once it leaves the view), through ``engine``: the predictions, the
@@ -231,8 +232,11 @@ def scan_clips(engine, image: np.ndarray, far_x: float | None, label: int, psi: 
     gyroscope). ``fov_deg``: the photo's camera (None: the bundle's for its size). ``window``: a
     narrower camera turning with it instead, which sees the middle window of this aspect (width /
     height) of each turned view at the window's own FOV; a goal beside the window but still in the
-    photo is the edge strip (:func:`~crossing_assist.data_tools.augment.crop_window`)."""
-    from ..data_tools.augment import crop_window, yaw
+    photo is the edge strip (:func:`~crossing_assist.data_tools.augment.crop_window`).
+    ``phone_fov_deg``: a phone held in portrait (3:4, this FOV across) turning with it instead, which
+    sees the middle of each turned view as :func:`~crossing_assist.data_tools.augment.phone_views`
+    cuts it (the ``portrait`` view of choose_gate and crossing-eval)."""
+    from ..data_tools.augment import crop_window, phone_views, yaw
     from ..geometry import window_fov
     from ..runtime.listen import SCAN_FPS
     from ..runtime.sources import CAMERA_WIDTH, scale_to_width
@@ -244,9 +248,14 @@ def scan_clips(engine, image: np.ndarray, far_x: float | None, label: int, psi: 
     for j, p in enumerate(psi):
         view, x, lab, _ = yaw(image, far_x, label, float(p), fov)
         cam = fov
+        if window is not None and phone_fov_deg is not None:
+            raise ValueError("a scan is seen by a window or by a phone, not both")
         if window is not None:
             view, x, lab = crop_window(view, x, lab, window, 0.5)
             cam = window_fov(view.shape[1] / image.shape[1], fov)
+        elif phone_fov_deg is not None:
+            view, x, lab, _ = phone_views(view, x, lab, 1, fov_deg=phone_fov_deg, train_fov_deg=fov)[0]
+            cam = phone_fov_deg
         preds.append(engine.predict(view, cam))
         labels.append(lab)
         rates.append(seen.update(view, j / SCAN_FPS, cam))
