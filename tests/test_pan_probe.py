@@ -110,3 +110,31 @@ def test_a_phone_held_in_portrait_scans_the_middle_of_each_turned_view(tmp_path)
         assert not np.array_equal(z["scan_labels"], w["scan_labels"])
     with pytest.raises(SystemExit):
         pp.main([*args, "--phone", "--window"])
+
+
+def test_a_portrait_phone_scan_reads_the_turn_from_the_rows_the_photo_has(tmp_path, monkeypatch):
+    """A phone held in portrait sees more rows than a landscape photo has; phone_views repeats the
+    photo's edge rows there. The turn read from the frames uses the photo's own rows (a phone would
+    see a real scene above and below), and follows the scan's turn rate; the model sees the whole
+    phone frame."""
+    import cv2
+    from runtime_toy import TOY2, make_toy_bundle
+
+    from crossing_assist.models.evaluate import scan_clips
+    from crossing_assist.runtime.engine import Engine
+    from crossing_assist.runtime.listen import SCAN_FPS, scan_yaw
+    from crossing_assist.runtime.visual_yaw import VisualYaw
+
+    engine = Engine(make_toy_bundle(tmp_path / "bundle", TOY2), threads=1)   # portrait 50 deg, landscape 80
+    rng = np.random.default_rng(0)
+    image = cv2.resize(rng.integers(0, 255, (24, 64, 3), dtype=np.uint8), (640, 240), interpolation=cv2.INTER_CUBIC)
+    read, seen = VisualYaw.update, {"yaw": set(), "model": set()}
+    monkeypatch.setattr(VisualYaw, "update", lambda self, frame, *a: seen["yaw"].add(frame.shape[0]) or read(self, frame, *a))
+    predict = Engine.predict
+    monkeypatch.setattr(Engine, "predict", lambda self, frame, *a, **k: seen["model"].add(frame.shape[0]) or predict(self, frame, *a, **k))
+    psi = scan_yaw(20.0, 30.0)
+    _, _, rates = scan_clips(engine, image, 0.5, 6, psi, phone_fov_deg=50.0)
+    assert seen["yaw"] == {240} and min(seen["model"]) > 240   # 3:4 phone frames, ~474 rows of which 240 real
+    turn = np.diff(psi, prepend=psi[0]) * SCAN_FPS
+    turning = np.abs(turn) > 0
+    assert np.median(np.abs(rates[turning] - turn[turning])) < 3.0   # deg/s, at 30 deg/s
