@@ -242,14 +242,14 @@ def scan_clips(engine, image: np.ndarray, far_x: float | None, label: int, psi: 
     from ..runtime.sources import CAMERA_WIDTH, scale_to_width
     from ..runtime.visual_yaw import VisualYaw
 
+    if window is not None and phone_fov_deg is not None:
+        raise ValueError("a scan is seen by a window or by a phone, not both")
     image = scale_to_width(image, CAMERA_WIDTH)
     fov = engine.camera_fov(image.shape[1], image.shape[0], fov_deg)
     seen, preds, labels, rates = VisualYaw(), [], [], []
     for j, p in enumerate(psi):
         view, x, lab, _ = yaw(image, far_x, label, float(p), fov)
         cam, real = fov, view.shape[0]
-        if window is not None and phone_fov_deg is not None:
-            raise ValueError("a scan is seen by a window or by a phone, not both")
         if window is not None:
             view, x, lab = crop_window(view, x, lab, window, 0.5)
             cam = window_fov(view.shape[1] / image.shape[1], fov)
