@@ -38,19 +38,17 @@ from __future__ import annotations
 
 import json
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from choose_gate import (  # noqa: E402  (sibling scripts: the folds, their draw, the rule; the scans)
-    FAR_MASS_REFERENCE, add_also, choose, finished_folds, fold_bundle, held_out_parser, held_out_rows,
-    leave_one_photographer_out, pool,
+    FAR_MASS_REFERENCE, add_also, choose, ensemble_members, finished_folds, fold_bundle, held_out_parser,
+    held_out_rows, leave_one_photographer_out, pool,
 )
 from pan_probe import play  # noqa: E402
 
-from crossing_assist.bundle import UncertaintySpec  # noqa: E402
 from crossing_assist.data_tools.images import load_frame  # noqa: E402
 from crossing_assist.data_tools.manifest import read_manifest  # noqa: E402
 from crossing_assist.fileio import atomic_write_text  # noqa: E402
@@ -95,20 +93,18 @@ def scan_fold(fold: Path, source: str, ptl, neg, used: set[str], a) -> tuple[Pat
 def scan_curve(plays: list[Path], bundle: Path, source: str, view: str, scales: list[float],
                heard_after: float) -> dict:
     """One photographer's scans (the runs' ``plays`` averaged; decided with ``bundle``'s decision
-    settings, one of the runs' fold bundles, its gate replaced) judged at far mass
+    settings, one of the runs' fold bundles, at the swept gate) judged at far mass
     :data:`FAR_MASS_REFERENCE` x each scale, for every frame alike: a record in choose_gate's format
     over the goal-in-view frames, each point keeping each yaw reading's counts."""
     from crossing_assist.runtime.engine import Engine
 
     engine = Engine(bundle, threads=1)
     lis, extra = Listener.average(engine, plays, "far_mass")
-    base, readings = engine.bundle, (("gyro_turned", "camera_turned") if heard_after else ("gyro", "camera"))
+    readings = ("gyro_turned", "camera_turned") if heard_after else ("gyro", "camera")
     curve, frames = [], 0
     for m in scales:
-        gate = UncertaintySpec("far_mass", m * FAR_MASS_REFERENCE)
-        engine.bundle = replace(base, calibration=replace(base.calibration, uncertainty=gate))
         judged = judge_scans(engine, lis.clips, extra["scan_labels"], extra["psi"], extra["camera_rates"],
-                             heard_after_s=heard_after)
+                             heard_after_s=heard_after, measure="far_mass", threshold=m * FAR_MASS_REFERENCE)
         got = {k: judged[k] for k in readings}
         frames = got[readings[0]]["in_view"]
         on = min(g["on"] for g in got.values()) / frames
@@ -181,21 +177,20 @@ def main(argv=None) -> int:
         return 2
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}
-    by_source: dict[str, list[tuple[Path, Path]]] = {}
+    by_source: dict[str, list[tuple[Path, str]]] = {}
     for cv in runs:
         for fold, source in finished_folds(cv):
-            print(f"{cv} fold {source}: scan", file=sys.stderr, flush=True)
-            by_source.setdefault(source, []).append(scan_fold(fold, source, ptl, neg, used, a))
-    photographers = {s: p for s, p in by_source.items() if len(p) == len(runs)}
-    for s in sorted(set(by_source) - set(photographers)):
-        print(f"{s}: not held out by every run's finished folds, left out", file=sys.stderr)
-    if not photographers:
-        print(f"error: no photographer held out by every run's finished folds in {', '.join(map(str, runs))}",
-              file=sys.stderr)
+            by_source.setdefault(source, []).append((fold, source))
+    members = ensemble_members(by_source, len(runs))   # the photographers every run held out
+    if not members:
         return 2
-    view = VIEWS[camera(a)]
-    folds = [scan_curve([p for p, _ in played], played[0][1], s, view, scales, a.heard_after)
-             for s, played in sorted(photographers.items())]
+    view, folds = VIEWS[camera(a)], []
+    for held in sorted(members, key=lambda m: m[0][1]):
+        played = []
+        for fold, source in held:
+            print(f"{fold} ({source}): scan", file=sys.stderr, flush=True)
+            played.append(scan_fold(fold, source, ptl, neg, used, a))
+        folds.append(scan_curve([p for p, _ in played], played[0][1], held[0][1], view, scales, a.heard_after))
     curve = pool(folds)
     best, met = choose(curve)
     lopo = leave_one_photographer_out(folds)
@@ -207,7 +202,7 @@ def main(argv=None) -> int:
     cam = camera(a)
     name = f"scan_gate{'' if cam == 'landscape' else f'_{cam}'}{f'_heard{a.heard_after:g}' if a.heard_after else ''}.json"
     atomic_write_text(a.cv / name, json.dumps(result, indent=1))
-    print(f"{view} scanned, {len(photographers)} photographers x {len(runs)} run(s), "
+    print(f"{view} scanned, {len(folds)} photographers x {len(runs)} run(s), "
           f"{folds[0]['photos']}+ photos each, {best['frames']} goal-in-view frames:")
     print("| far mass | beacon on | confidently wrong |\n|---|---:|---:|")
     for c in curve:

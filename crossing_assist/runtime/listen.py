@@ -290,7 +290,7 @@ TURNED_READINGS = {"gyro_turned": ("gyro", "turn from a gyroscope, the beacon tu
 
 def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
                 psi: np.ndarray, camera_rates: np.ndarray, fps: float = SCAN_FPS,
-                heard_after_s: float = 0.0) -> dict:
+                heard_after_s: float = 0.0, **overrides) -> dict:
     """Replay the decision logic over scanned clips (``clips[i][j]``: photo ``i`` seen with the
     camera turned ``psi[j]`` degrees; ``labels[i, j]`` its goal's strip then, 0 once out of view)
     once per :data:`SCAN_YAW_INPUTS`: told the turn, told the rates ``camera_rates[i, j]`` read from
@@ -303,27 +303,33 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
     long after its frame's capture (the model's run, then playing until the next decision),
     against the goal and the camera's turn then (the phone app, in its e2e run: heard 0.28 s to
     0.51 s after capture; docs/results.md, "Heard when it plays"). It adds :data:`TURNED_READINGS`:
-    a reading's decisions with the beacon turned by the gyroscope's turn since the capture."""
+    a reading's decisions with the beacon turned by the gyroscope's turn since the capture.
+    ``overrides``: decision settings for every clip instead of the bundle's (e.g. ``threshold``
+    and ``measure``: a gate swept, :meth:`Engine.decision_config`)."""
     psi = np.asarray(psi, float)
     lag = int(round(heard_after_s * fps))
     if not 0 <= lag < len(psi):
         raise ValueError(f"Invalid heard_after_s: {heard_after_s}; valid: 0 <= s < {len(psi) / fps:g} (the scan)")
     gyro = np.broadcast_to(np.diff(psi, prepend=psi[0]) * fps, (len(clips), len(psi)))
     rates = {"gyro": gyro, "camera": np.asarray(camera_rates, float), "no_yaw": np.zeros((len(clips), len(psi)))}
-    res = {k: _judge_scan_input(engine, clips, labels, psi, rates[k], fps, lag) for k in SCAN_YAW_INPUTS}
+    res = {k: _judge_scan_input(engine, clips, labels, psi, rates[k], fps, lag, overrides=overrides)
+           for k in SCAN_YAW_INPUTS}
     if lag:
         for name, (reading, _) in TURNED_READINGS.items():
-            res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, follow_turn=True)
+            res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, follow_turn=True,
+                                          overrides=overrides)
     return res
 
 
 def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
-                      psi: np.ndarray, rates: np.ndarray, fps: float, lag: int = 0, follow_turn: bool = False) -> dict:
+                      psi: np.ndarray, rates: np.ndarray, fps: float, lag: int = 0, follow_turn: bool = False,
+                      overrides: dict | None = None) -> dict:
     start = int(round(SCAN_STILL_S * fps))
     c = dict.fromkeys(("in_view", "on", "wrong", "wrong_hold", "out_of_view", "out_on", "out_wrong_side"), 0)
     for clip, labs, clip_rates in zip(clips, labels, rates):
         first = next((p for p in clip if p.ok), None)
-        decider = Decider(engine.decision_config((first and first.orientation) or "landscape", first and first.fov_deg))
+        decider = Decider(engine.decision_config((first and first.orientation) or "landscape", first and first.fov_deg,
+                                                 **(overrides or {})))
         fov = decider.cfg.fov_deg
         for j, p in enumerate(clip):
             d = decider.step(j / fps, p.observation(), float(clip_rates[j]))
