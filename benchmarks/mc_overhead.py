@@ -43,6 +43,9 @@ from crossing_assist.models.backbones import create_backbone, list_backbones
 from crossing_assist.models.heads import create_head
 from crossing_assist.models.policy import Policy, policy_config
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from speedlib import synthetic_frames  # noqa: E402
+
 
 @dataclass(frozen=True)
 class BenchConfig:
@@ -58,18 +61,6 @@ class BenchConfig:
     seed: int = 0
 
 
-def _frames(size: tuple[int, int], n: int, seed: int) -> list[np.ndarray]:
-    """Smooth random frames (int8 calibration needs activations with a realistic range)."""
-    rng = np.random.default_rng(seed)
-    h, w = size
-    out = []
-    for _ in range(n):
-        coarse = rng.integers(0, 256, (h // 16 + 1, w // 16 + 1, 3)).astype(np.float32)
-        img = np.kron(coarse, np.ones((16, 16, 1)))[:h, :w] + rng.normal(0, 12, (h, w, 3))
-        out.append(np.clip(img, 0, 255).astype(np.uint8))
-    return out
-
-
 def bench_backbone(name: str, cfg: BenchConfig) -> dict:
     torch.manual_seed(cfg.seed)
     bb = create_backbone(name, weights=cfg.weights)
@@ -79,7 +70,7 @@ def bench_backbone(name: str, cfg: BenchConfig) -> dict:
     spec = lambda t, p: GraphSpec(size=size, mean=bb.facts.mean, std=bb.facts.std, samples=t, p=p)  # noqa: E731
     models = {"det": export_graph(policy, spec(1, 0.0)), "mc16": export_graph(policy, spec(cfg.samples, cfg.p)),
               "naive": export_graph(policy, spec(1, cfg.p))}
-    frames = _frames(size, 17, cfg.seed)
+    frames = synthetic_frames(17, *size, seed=cfg.seed)
     if cfg.int8:
         from crossing_assist.export.quantize import quantize_convs
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import ALGORITHMS, THESIS_HORIZON
-from .files import _atomic_write, read_episodes
+from .files import _atomic_write, _write_csv, read_episodes
 
 METRICS = (("training_reward", "Figure 4.4: training reward per episode"),
            ("interventions", "Figure 4.5: expert interventions per episode"),
@@ -323,14 +323,5 @@ def write_report(dirs: list[Path], out: Path) -> list[Path]:
     md, rows = table(runs)
     intro = ("# Table 3 and the thesis's claims\n\n" + __doc__.split("\n\n", 1)[1].strip() + "\n\n")
     _atomic_write(out / "table3.md", intro + md)
-    import csv  # noqa: PLC0415
-    import io  # noqa: PLC0415
-    keys: list[str] = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=keys)
-    w.writeheader()
-    w.writerows(rows)
-    _atomic_write(out / "table3.csv", buf.getvalue())
+    _write_csv(out / "table3.csv", rows)
     return [out / "table3.md", out / "table3.csv", *figures(runs, out)]
