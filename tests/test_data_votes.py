@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from crossing_assist.data_tools.images import save_rgb
 from crossing_assist.data_tools.labels import VotesConfig, build_voted_dataset
 from crossing_assist.data_tools.manifest import Row, read_manifest
 from crossing_assist.data_tools.splits import SplitConfig, SplitError, assign_splits, shared_sources
@@ -17,15 +16,6 @@ from crossing_assist.data_tools.votes import (
 )
 
 FRAMES = ["v1/v1_t00000.000.jpg", "v1/v1_t00000.500.jpg", "v2/v2_t00000.000.jpg", "v2/v2_t00000.500.jpg"]
-
-
-def _frames_dir(tmp_path):
-    d = tmp_path / "frames"
-    for f in FRAMES:
-        save_rgb(d / f, np.zeros((4, 4, 3), np.uint8))
-    (d / "frames.csv").write_text("image,source,video,t_s\n" + "".join(
-        f"{f},vid:{f.split('/')[0]},x.mp4,0\n" for f in FRAMES))
-    return d
 
 
 def _votes_csv(path, lines):
@@ -50,8 +40,8 @@ def test_fleiss_kappa_textbook_example():
     assert np.isnan(fleiss_kappa(np.array([[1, 0]])))                # nobody rated twice
 
 
-def test_csv_votes_build_a_dataset_with_ties_and_agreement(tmp_path):
-    d = _frames_dir(tmp_path)
+def test_csv_votes_build_a_dataset_with_ties_and_agreement(tmp_path, make_frames_dir):
+    d = make_frames_dir(FRAMES)
     votes = _votes_csv(tmp_path / "votes.csv", [
         "v1/v1_t00000.000.jpg,ann,7", "v1_t00000.000.jpg,bob,7", "v1/v1_t00000.000.jpg,cat,6",
         "v1_t00000.500.jpg,ann,5", "v1_t00000.500.jpg,bob,6",             # a tie
@@ -74,8 +64,8 @@ def test_csv_votes_build_a_dataset_with_ties_and_agreement(tmp_path):
     ("v1_t00000.000.jpg,ann,6", "line 3: annotator 'ann' already voted"),
     ("nothere.jpg,bob,6", "line 3: frame 'nothere.jpg' is not in frames.csv"),
 ])
-def test_bad_votes_name_the_line(tmp_path, line, message):
-    d = _frames_dir(tmp_path)
+def test_bad_votes_name_the_line(tmp_path, line, message, make_frames_dir):
+    d = make_frames_dir(FRAMES)
     votes = _votes_csv(tmp_path / "votes.csv", ["v1_t00000.000.jpg,ann,7", line])
     with pytest.raises(VotesError, match=message):
         build_voted_dataset(VotesConfig(d, (votes,)))
@@ -91,8 +81,8 @@ def _ls_task(tid, url, *anns):
         for k, (who, choice, cancelled) in enumerate(anns)]}
 
 
-def test_label_studio_export(tmp_path):
-    _frames_dir(tmp_path)
+def test_label_studio_export(tmp_path, make_frames_dir):
+    make_frames_dir(FRAMES)
     export = [
         _ls_task(1, "/data/local-files/?d=frames/v1/v1_t00000.000.jpg", (1, "7", False), ({"id": 2, "email": "b@x"}, "8", False),
                  (3, "7", False)),
