@@ -232,7 +232,8 @@ def test_an_edge_strip_means_at_the_edge_or_beyond_so_turning_towards_it_places_
 def test_a_decision_heard_after_a_turn_points_where_the_goal_is_then():
     """Step 10: a decision plays after its frame's capture; turned with the gyroscope's turn since
     then, its heading stays on the goal in the world. A heading in an edge strip ("at the edge or
-    beyond") turned towards moves half the turn; a stop stays a stop."""
+    beyond") turned towards moves half the turn, and stops once the turn carries it out of that
+    strip (where the goal is is unknown then); a stop stays a stop."""
     d = Decider(DecisionConfig(fov_deg=67.0))
     dec = run(d, [obs_bin(5, 0.95)] * 30)[-1]
     assert not dec.stop
@@ -242,8 +243,14 @@ def test_a_decision_heard_after_a_turn_points_where_the_goal_is_then():
     assert turned(dec, 0.0, 67.0) is dec and turned(dec, math.nan, 67.0) is dec
     edge = replace(dec, heading_deg=x_to_heading(bin_center_x(12), 67.0))
     assert edge_side(edge.heading_deg, 67.0) == 1
-    assert turned(edge, 6.0, 67.0).heading_deg == pytest.approx(edge.heading_deg - 3.0)   # towards: half
+    assert turned(edge, 2.0, 67.0).heading_deg == pytest.approx(edge.heading_deg - 1.0)   # towards: half
+    assert edge_side(edge.heading_deg - 2.0, 67.0) == 1                                   # (still in strip 12)
+    out = turned(edge, 6.0, 67.0)                         # towards, out of the strip: unknown, a stop
+    assert out.stop and out.reason == "uncertain" and out.gate == "stop" and out.heading_deg is None and out.pan is None
+    assert edge_side(edge.heading_deg - 6.0, 67.0) == 0
     assert turned(edge, -6.0, 67.0).heading_deg == pytest.approx(edge.heading_deg + 6.0)  # away: all of it
+    left = replace(dec, heading_deg=x_to_heading(bin_center_x(1), 67.0))
+    assert turned(left, -6.0, 67.0).stop and not turned(left, 6.0, 67.0).stop            # the other edge alike
     far = turned(dec, -60.0, 67.0)                         # beyond the view: the pan says "turn further"
     assert far.pan == 1.0
     stop = Decider(DecisionConfig()).step(0.0, obs_bin(0, 0.9))

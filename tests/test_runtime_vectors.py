@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from crossing_assist.runtime import belief as bf
-from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation
+from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation, edge_side
 from crossing_assist.runtime.gate import GateConfig
 from crossing_assist.runtime.live import is_fresh, same_frame
 from crossing_assist.geometry import view_rows
@@ -138,16 +138,23 @@ def test_a_turn_without_yaw_input_does_not_keep_the_old_direction(stored):
 
 
 def test_turned_cases_move_by_the_turn_or_half_of_it_towards_an_edge(stored):
-    """Version 14, step 10: the stored cases hold whole turns, half turns (an edge strip turned
-    towards), beyond-the-view pans and stops, so a port is checked on each branch."""
+    """Versions 14-15, step 10: the stored cases hold whole turns, half turns (an edge strip turned
+    towards, within it), stops for an edge strip turned towards out of it, beyond-the-view pans and
+    stops, so a port is checked on each branch."""
     cases = stored["turned"]
-    moved = {"whole": 0, "half": 0, "stop": 0, "saturated": 0}
+    moved = {"whole": 0, "half": 0, "stop": 0, "turned_out": 0, "saturated": 0}
     for c in cases:
         e = c["expect"]
         if c["heading_deg"] is None:
-            assert e["heading_deg"] is None and e["pan"] is None
+            assert e["heading_deg"] is None and e["pan"] is None and e["stop"] and c["stop"]
             moved["stop"] += 1
             continue
+        side = edge_side(c["heading_deg"], c["fov_deg"])
+        if side * c["turn_deg"] > 0 and edge_side(c["heading_deg"] - c["turn_deg"], c["fov_deg"]) != side:
+            assert e == {"stop": True, "reason": "uncertain", "heading_deg": None, "pan": None}, c
+            moved["turned_out"] += 1
+            continue
+        assert not e["stop"] and e["reason"] == c["reason"] == "ok"
         delta = c["heading_deg"] - e["heading_deg"]
         assert delta == pytest.approx(c["turn_deg"]) or delta == pytest.approx(c["turn_deg"] / 2)
         moved["half" if c["turn_deg"] and delta == pytest.approx(c["turn_deg"] / 2) else "whole"] += 1
@@ -157,7 +164,7 @@ def test_turned_cases_move_by_the_turn_or_half_of_it_towards_an_edge(stored):
 
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == VERSION == 14
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == VERSION == 15
     assert "decision steps" in capsys.readouterr().out
 
 

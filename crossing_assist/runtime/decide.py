@@ -138,11 +138,15 @@ def turned(decision: Decision, turn_deg: float, fov_deg: float) -> Decision:
     heading moves by the turn (the goal stays put in the world), except that a heading in an
     edge strip turned towards moves by half of it: an edge strip means "at this edge or beyond",
     so after the turn the goal lies anywhere from the moved heading back out to the edge
-    (:func:`~crossing_assist.runtime.belief.spread_edge`), whose middle this is. A stop stays a
+    (:func:`~crossing_assist.runtime.belief.spread_edge`), whose middle this is. Once that turn
+    has carried the moved heading out of the edge strip, where the goal is is unknown, as for
+    step 3's hold: the decision becomes a stop (``uncertain``) until the next one. A stop stays a
     stop; a turn that is not a finite number turns nothing."""
     if decision.heading_deg is None or not math.isfinite(turn_deg) or turn_deg == 0.0:
         return decision
     side = edge_side(decision.heading_deg, fov_deg)
+    if side * turn_deg > 0 and edge_side(decision.heading_deg - turn_deg, fov_deg) != side:
+        return replace(decision, gate=GATE_STOP, reason=REASON_UNCERTAIN, stop=True, heading_deg=None, pan=None)
     h = decision.heading_deg - (turn_deg / 2.0 if side * turn_deg > 0 else turn_deg)
     return replace(decision, heading_deg=h, pan=heading_to_pan(h, fov_deg / 2.0))
 

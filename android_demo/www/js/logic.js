@@ -441,12 +441,17 @@ export function edgeSide(heading, fovDeg) {
  * Step 10 (decide.turned): the decision as it is played once the camera has turned turnDeg (the
  * gyroscope's, + = right) since its frame's capture. The heading moves by the turn (the goal stays
  * put in the world); a heading in an edge strip turned towards moves by half of it (the goal lies
- * anywhere from the moved heading back out to the edge). A stop stays a stop; a turn that is not a
- * finite number turns nothing.
+ * anywhere from the moved heading back out to the edge), and once the turn has carried the moved
+ * heading out of that strip, where the goal is is unknown (as for step 3's hold): a stop
+ * ('uncertain') until the next decision. A stop stays a stop; a turn that is not a finite number
+ * turns nothing.
  */
 export function turnedDecision(decision, turnDeg, fovDeg) {
   if (decision.heading_deg === null || !Number.isFinite(turnDeg) || turnDeg === 0) return decision;
   const side = edgeSide(decision.heading_deg, fovDeg);
+  if (side * turnDeg > 0 && edgeSide(decision.heading_deg - turnDeg, fovDeg) !== side) {
+    return { ...decision, gate: GATE_STOP, reason: REASON_UNCERTAIN, stop: true, heading_deg: null, pan: null };
+  }
   const h = decision.heading_deg - (side * turnDeg > 0 ? turnDeg / 2 : turnDeg);
   return { ...decision, heading_deg: h, pan: headingToPan(h, fovDeg / 2) };
 }

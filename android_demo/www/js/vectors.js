@@ -13,7 +13,7 @@ import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains, 
 import { statusMessage } from './view.js';
 import * as visualYaw from './visualyaw.js';
 
-const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14];
+const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
 
 function close(a, b, tol) {
   return Math.abs(a - b) <= tol * Math.max(1, Math.abs(b));
@@ -202,9 +202,12 @@ export function replayVectors(vectors) {
     }
   }
   // version 14: step 10, a decision played after the camera turned since its frame's capture
+  // (version 15: with its stop and reason, an edge strip turned towards out of it stopping)
   for (const v of vectors.turned || []) {
     checks += 1;
-    const got = turnedDecision({ stop: v.heading_deg === null, heading_deg: v.heading_deg, pan: v.pan }, v.turn_deg, v.fov_deg);
+    const before = { stop: v.stop ?? v.heading_deg === null, heading_deg: v.heading_deg, pan: v.pan };
+    if ('reason' in v) before.reason = v.reason;
+    const got = turnedDecision(before, v.turn_deg, v.fov_deg);
     const bad = compareDecision(got, v.expect, tol);
     if (bad.length) fail({ scenario: 'turned', field: `heading ${v.heading_deg} turn ${v.turn_deg} fov ${v.fov_deg}`, got: bad[0].got, expected: bad[0].expected });
   }
