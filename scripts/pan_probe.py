@@ -60,10 +60,23 @@ from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.listen import SCAN_FPS, Listener, judge_scans, scan_yaw
 
 
-def play(engine: Engine, images, rows, psi: np.ndarray, window: float | None = None,
-         phone_fov: float | None = None) -> tuple[Listener, np.ndarray, np.ndarray]:
-    """Each photo scanned: its predictions (a :class:`Listener`'s clips, which it saves and loads),
-    the goal's strip and the yaw rate read from the frames, per frame [photo, frame]."""
+def camera(a) -> str:
+    """Which camera scans (``--window``, ``--phone`` or neither): ``window``, ``phone`` or ``landscape``."""
+    return "window" if a.window else "phone" if a.phone else "landscape"
+
+
+def camera_suffix(cam: str) -> str:
+    """The file-name suffix of a camera's scans: none for landscape, else ``_window`` / ``_phone``."""
+    return "" if cam == "landscape" else f"_{cam}"
+
+
+def play(engine: Engine, images, rows, psi: np.ndarray, cam: str = "landscape") -> tuple[Listener, np.ndarray, np.ndarray]:
+    """Each photo scanned by ``cam`` (:func:`camera`: the photo's own camera, the narrow camera's
+    middle 3:4 window, or a phone held in portrait at the bundle's portrait FOV): its predictions
+    (a :class:`Listener`'s clips, which it saves and loads), the goal's strip and the yaw rate read
+    from the frames, per frame [photo, frame]."""
+    window = SCAN_WINDOW_ASPECT if cam == "window" else None
+    phone_fov = engine.bundle.geometry.camera_fov_deg[1] if cam == "phone" else None
     lis, labels, rates = Listener(engine, len(psi) / SCAN_FPS, SCAN_FPS), [], []
     for i, (r, img) in enumerate(zip(rows, images)):
         preds, labs, seen = scan_clips(engine, img, r.far_x, r.label, psi, window=window, phone_fov_deg=phone_fov)
@@ -126,9 +139,7 @@ def main(argv: list[str] | None = None) -> int:
         rng = np.random.default_rng(a.seed)
         rows = draw(rows, a.photos, rng)
         psi = scan_yaw(a.amplitude, a.rate)
-        lis, labels, rates = play(engine, [load_frame(ds.image_path(r), r.flags) for r in rows], rows, psi,
-                                  SCAN_WINDOW_ASPECT if a.window else None,
-                                  engine.bundle.geometry.camera_fov_deg[1] if a.phone else None)
+        lis, labels, rates = play(engine, [load_frame(ds.image_path(r), r.flags) for r in rows], rows, psi, camera(a))
         if a.cache:
             a.cache.parent.mkdir(parents=True, exist_ok=True)
             lis.save(a.cache, scan_labels=labels, psi=psi, camera_rates=rates)

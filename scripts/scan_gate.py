@@ -47,12 +47,12 @@ from choose_gate import (  # noqa: E402  (sibling scripts: the folds, their draw
     FAR_MASS_REFERENCE, add_also, choose, ensemble_members, finished_folds, fold_bundle, held_out_parser,
     held_out_rows, leave_one_photographer_out, pool,
 )
-from pan_probe import play  # noqa: E402
+from pan_probe import camera, camera_suffix, play  # noqa: E402
 
 from crossing_assist.data_tools.images import load_frame  # noqa: E402
 from crossing_assist.data_tools.manifest import read_manifest  # noqa: E402
 from crossing_assist.fileio import atomic_write_text  # noqa: E402
-from crossing_assist.models.evaluate import GATE_TOP, SCAN_WINDOW_ASPECT, gate_scales  # noqa: E402
+from crossing_assist.models.evaluate import GATE_TOP, gate_scales  # noqa: E402
 from crossing_assist.runtime.listen import Listener, judge_scans, scan_yaw  # noqa: E402
 
 #: choose_gate's view each scanning camera checks: landscape, the narrow camera's (3:4 windows) or
@@ -60,14 +60,9 @@ from crossing_assist.runtime.listen import Listener, judge_scans, scan_yaw  # no
 VIEWS = {"landscape": "landscape", "window": "portrait_window", "phone": "portrait"}
 
 
-def camera(a) -> str:
-    """Which camera scans: ``landscape``, ``window`` (--window) or ``phone`` (--phone)."""
-    return "window" if a.window else "phone" if a.phone else "landscape"
-
-
 def scan_cache(fold: Path, cam: str, n: int, seed: int, amplitude: float, rate: float) -> Path:
     scan = "" if (amplitude, rate) == (20.0, 30.0) else f"_a{amplitude:g}_r{rate:g}"
-    return fold / f"scanned{'' if cam == 'landscape' else f'_{cam}'}_{n}_{seed}{scan}.npz"
+    return fold / f"scanned{camera_suffix(cam)}_{n}_{seed}{scan}.npz"
 
 
 def scan_fold(fold: Path, source: str, ptl, neg, used: set[str], a) -> tuple[Path, Path]:
@@ -83,9 +78,7 @@ def scan_fold(fold: Path, source: str, ptl, neg, used: set[str], a) -> tuple[Pat
         raise ValueError(f"{fold}: {source} has no unseen photo with a crossing")
     engine = Engine(bundle, threads=1)
     psi = scan_yaw(a.amplitude, a.rate)
-    lis, labels, rates = play(engine, (load_frame(ptl.image_path(r), r.flags) for r in rows), rows, psi,
-                              SCAN_WINDOW_ASPECT if a.window else None,
-                              engine.bundle.geometry.camera_fov_deg[1] if a.phone else None)
+    lis, labels, rates = play(engine, (load_frame(ptl.image_path(r), r.flags) for r in rows), rows, psi, camera(a))
     lis.save(path, scan_labels=labels, psi=psi, camera_rates=rates)
     return path, bundle
 
@@ -199,8 +192,7 @@ def main(argv=None) -> int:
               "scale": best["scale"], "threshold": best["scale"] * FAR_MASS_REFERENCE, "targets_met": met,
               "at_scale": {k: v for k, v in best.items() if k != "per_fold"},
               **({"leave_one_photographer_out": lopo} if lopo else {}), "curve": curve, "folds": folds}
-    cam = camera(a)
-    name = f"scan_gate{'' if cam == 'landscape' else f'_{cam}'}{f'_heard{a.heard_after:g}' if a.heard_after else ''}.json"
+    name = f"scan_gate{camera_suffix(camera(a))}{f'_heard{a.heard_after:g}' if a.heard_after else ''}.json"
     atomic_write_text(a.cv / name, json.dumps(result, indent=1))
     print(f"{view} scanned, {len(folds)} photographers x {len(runs)} run(s), "
           f"{folds[0]['photos']}+ photos each, {best['frames']} goal-in-view frames:")

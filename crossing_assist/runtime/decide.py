@@ -129,6 +129,13 @@ def edge_side(heading_deg: float, fov_deg: float) -> int:
     return 1 if x >= (N_BINS - 1) / N_BINS else -1 if x <= 1.0 / N_BINS else 0
 
 
+def turned_out_of_edge(side: int, moved_deg: float, turn_deg: float, fov_deg: float) -> bool:
+    """A heading taken in edge strip ``side`` (+1 right, -1 left, 0 none), now at ``moved_deg``
+    after a turn of ``turn_deg`` towards that edge, that has left the strip: an edge strip means
+    "at this edge or beyond", so where the goal is is then unknown (steps 3 and 10)."""
+    return side * turn_deg > 0 and edge_side(moved_deg, fov_deg) != side
+
+
 def turned(decision: Decision, turn_deg: float, fov_deg: float) -> Decision:
     """Step 10 (docs/runtime.md): ``decision`` as it is played once the camera has turned
     ``turn_deg`` (a gyroscope's, + = right) since its frame's capture.
@@ -145,7 +152,7 @@ def turned(decision: Decision, turn_deg: float, fov_deg: float) -> Decision:
     if decision.heading_deg is None or not math.isfinite(turn_deg) or turn_deg == 0.0:
         return decision
     side = edge_side(decision.heading_deg, fov_deg)
-    if side * turn_deg > 0 and edge_side(decision.heading_deg - turn_deg, fov_deg) != side:
+    if turned_out_of_edge(side, decision.heading_deg - turn_deg, turn_deg, fov_deg):
         return replace(decision, gate=GATE_STOP, reason=REASON_UNCERTAIN, stop=True, heading_deg=None, pan=None)
     h = decision.heading_deg - (turn_deg / 2.0 if side * turn_deg > 0 else turn_deg)
     return replace(decision, heading_deg=h, pan=heading_to_pan(h, fov_deg / 2.0))
@@ -224,7 +231,7 @@ class Decider:
             # a hold taken in an edge strip means "at this edge or beyond" (as the belief's edge
             # strips, bf.spread_edge): turned towards that edge out of the strip, where the goal is
             # now is unknown; turning away keeps it
-            if self.hold_edge and psi * self.hold_edge > 0 and edge_side(self.hold_heading, cfg.fov_deg) != self.hold_edge:
+            if turned_out_of_edge(self.hold_edge, self.hold_heading, psi, cfg.fov_deg):
                 self.hold_heading = None
         if obs is not None and self.t_last_ok is not None and t - self.t_last_ok > cfg.watchdog_s:
             # 4a: the first frame after a stall: what was believed before it is stale (the user

@@ -345,7 +345,7 @@ export class Decider {
       this.holdHeading -= psi;
       this.holdTurned += Math.abs(psi);
       // an edge hold ("at this edge or beyond") turned towards: where the goal is now is unknown
-      if (this.holdEdge !== 0 && psi * this.holdEdge > 0 && edgeSide(this.holdHeading, cfg.fov_deg) !== this.holdEdge) {
+      if (turnedOutOfEdge(this.holdEdge, this.holdHeading, psi, cfg.fov_deg)) {
         this.holdHeading = null;
       }
     }
@@ -438,6 +438,15 @@ export function edgeSide(heading, fovDeg) {
 }
 
 /**
+ * A heading taken in edge strip `side` (+1 right, -1 left, 0 none), now at movedDeg after a turn of
+ * turnDeg towards that edge, that has left the strip: where the goal is is then unknown (steps 3
+ * and 10; decide.turned_out_of_edge).
+ */
+export function turnedOutOfEdge(side, movedDeg, turnDeg, fovDeg) {
+  return side * turnDeg > 0 && edgeSide(movedDeg, fovDeg) !== side;
+}
+
+/**
  * Step 10 (decide.turned): the decision as it is played once the camera has turned turnDeg (the
  * gyroscope's, + = right) since its frame's capture. The heading moves by the turn (the goal stays
  * put in the world); a heading in an edge strip turned towards moves by half of it (the goal lies
@@ -449,7 +458,7 @@ export function edgeSide(heading, fovDeg) {
 export function turnedDecision(decision, turnDeg, fovDeg) {
   if (decision.heading_deg === null || !Number.isFinite(turnDeg) || turnDeg === 0) return decision;
   const side = edgeSide(decision.heading_deg, fovDeg);
-  if (side * turnDeg > 0 && edgeSide(decision.heading_deg - turnDeg, fovDeg) !== side) {
+  if (turnedOutOfEdge(side, decision.heading_deg - turnDeg, turnDeg, fovDeg)) {
     return { ...decision, gate: GATE_STOP, reason: REASON_UNCERTAIN, stop: true, heading_deg: null, pan: null };
   }
   const h = decision.heading_deg - (side * turnDeg > 0 ? turnDeg / 2 : turnDeg);
