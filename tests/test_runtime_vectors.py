@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from crossing_assist.runtime import belief as bf
-from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation, edge_side
+from crossing_assist.runtime.decide import Decider, DecisionConfig, Observation, edge_side, turned_out_of_edge
 from crossing_assist.runtime.gate import GateConfig
 from crossing_assist.runtime.live import is_fresh, same_frame
 from crossing_assist.geometry import view_rows
@@ -150,7 +150,7 @@ def test_turned_cases_move_by_the_turn_or_half_of_it_towards_an_edge(stored):
             moved["stop"] += 1
             continue
         side = edge_side(c["heading_deg"], c["fov_deg"])
-        if side * c["turn_deg"] > 0 and edge_side(c["heading_deg"] - c["turn_deg"], c["fov_deg"]) != side:
+        if turned_out_of_edge(side, c["heading_deg"] - c["turn_deg"], c["turn_deg"], c["fov_deg"]):
             assert e == {"stop": True, "reason": "uncertain", "heading_deg": None, "pan": None}, c
             moved["turned_out"] += 1
             continue
