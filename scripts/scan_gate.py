@@ -60,9 +60,13 @@ from crossing_assist.runtime.listen import Listener, judge_scans, scan_yaw  # no
 VIEWS = {"landscape": "landscape", "window": "portrait_window", "phone": "portrait"}
 
 
+def scan_suffix(amplitude: float, rate: float) -> str:
+    """The file-name part a scan other than the default (±20° at 30°/s) adds."""
+    return "" if (amplitude, rate) == (20.0, 30.0) else f"_a{amplitude:g}_r{rate:g}"
+
+
 def scan_cache(fold: Path, cam: str, n: int, seed: int, amplitude: float, rate: float) -> Path:
-    scan = "" if (amplitude, rate) == (20.0, 30.0) else f"_a{amplitude:g}_r{rate:g}"
-    return fold / f"scanned{camera_suffix(cam)}_{n}_{seed}{scan}.npz"
+    return fold / f"scanned{camera_suffix(cam)}_{n}_{seed}{scan_suffix(amplitude, rate)}.npz"
 
 
 def scan_fold(fold: Path, source: str, ptl, neg, used: set[str], a) -> tuple[Path, Path]:
@@ -192,7 +196,8 @@ def main(argv=None) -> int:
               "scale": best["scale"], "threshold": best["scale"] * FAR_MASS_REFERENCE, "targets_met": met,
               "at_scale": {k: v for k, v in best.items() if k != "per_fold"},
               **({"leave_one_photographer_out": lopo} if lopo else {}), "curve": curve, "folds": folds}
-    name = f"scan_gate{camera_suffix(camera(a))}{f'_heard{a.heard_after:g}' if a.heard_after else ''}.json"
+    name = (f"scan_gate{camera_suffix(camera(a))}{scan_suffix(a.amplitude, a.rate)}"
+            f"{f'_heard{a.heard_after:g}' if a.heard_after else ''}.json")
     atomic_write_text(a.cv / name, json.dumps(result, indent=1))
     print(f"{view} scanned, {len(folds)} photographers x {len(runs)} run(s), "
           f"{folds[0]['photos']}+ photos each, {best['frames']} goal-in-view frames:")

@@ -38,7 +38,7 @@ def test_scans_of_each_photographer_are_played_once_averaged_over_runs_and_poole
 
     runs, ptl, neg = two_runs
     assert sg.main(_args(runs, ptl, neg)) == 0
-    res = json.loads((runs[0] / "scan_gate.json").read_text())
+    res = json.loads((runs[0] / "scan_gate_a30_r30.json").read_text())
     for cv in runs:   # each fold's held-out photos scanned and saved in the fold
         assert sorted(p.name for p in cv.glob("fold-*/scanned*.npz")) == ["scanned_3_0_a30_r30.npz"] * 2
     assert [f["source"] for f in res["folds"]] == ["src:0", "src:1"] and res["view"] == "landscape"
@@ -59,7 +59,7 @@ def test_scans_of_each_photographer_are_played_once_averaged_over_runs_and_poole
 
     monkeypatch.setattr(Engine, "predict", no_model)
     assert sg.main(_args(runs, ptl, neg)) == 0
-    assert json.loads((runs[0] / "scan_gate.json").read_text())["curve"] == res["curve"]
+    assert json.loads((runs[0] / "scan_gate_a30_r30.json").read_text())["curve"] == res["curve"]
 
 
 def test_a_phone_held_in_portrait_checks_the_portrait_threshold(two_runs):
@@ -67,7 +67,7 @@ def test_a_phone_held_in_portrait_checks_the_portrait_threshold(two_runs):
     curve for choose_gate's portrait view; with --window, refused."""
     runs, ptl, neg = two_runs
     assert sg.main(_args(runs, ptl, neg, "--phone")) == 0
-    res = json.loads((runs[0] / "scan_gate_phone.json").read_text())
+    res = json.loads((runs[0] / "scan_gate_phone_a30_r30.json").read_text())
     assert res["view"] == "portrait" and res["at_scale"]["frames"] > 0
     assert sorted(p.name for p in runs[0].glob("fold-*/scanned_phone*.npz")) == ["scanned_phone_3_0_a30_r30.npz"] * 2
     with pytest.raises(SystemExit):
@@ -77,7 +77,7 @@ def test_a_phone_held_in_portrait_checks_the_portrait_threshold(two_runs):
 def test_heard_late_counts_the_worse_of_the_turned_readings(two_runs):
     runs, ptl, neg = two_runs
     assert sg.main(_args(runs, ptl, neg, "--heard-after", "0.3")) == 0
-    res = json.loads((runs[0] / "scan_gate_heard0.3.json").read_text())
+    res = json.loads((runs[0] / "scan_gate_a30_r30_heard0.3.json").read_text())
     for f in res["folds"]:
         for c in f["curve"]:
             assert set(c["readings"]) == {"gyro_turned", "camera_turned"}
