@@ -21,7 +21,9 @@ in view, with the turn from a gyroscope and the turn read from the frames, the w
 counted (``--heard-after S``: judged when heard, the beacon turned by the gyroscope until then, as
 the app plays it). Per photographer a curve in choose_gate's format, pooled and chosen with its
 rule (confidently wrong <= 0.5 % of goal-in-view frames, the most beacon-on), and each
-photographer measured at the threshold chosen on the others. Writes ``CV/scan_gate[_window|_phone]….json``.
+photographer measured at the threshold chosen on the others. Each point also counts the photos its
+wrong frames come from (``confidently_wrong_photos``): a misread photo stays wrong over many
+frames, so a choice can rest on a handful of photos. Writes ``CV/scan_gate[_window|_phone]….json``.
 
 ``--cap GATE_JSON`` (choose_gate's result, in CV): also write ``GATE_JSON`` with the view's
 threshold lowered to the scans' choice where that is lower (``…_scan.json``; a file already named
@@ -107,8 +109,10 @@ def scan_curve(plays: list[Path], bundle: Path, source: str, view: str, scales: 
         on = min(g["on"] for g in got.values()) / frames
         curve.append({"scale": m, "beacon_on": on, "beacon_on_goal_in_view": on,
                       "confidently_wrong": max(g["wrong"] for g in got.values()) / frames,
+                      "confidently_wrong_photos": max(g["wrong_photos"] for g in got.values()),
                       "silence_no_crossing": None,
-                      "readings": {k: {c: g[c] for c in ("on", "wrong", "wrong_hold")} for k, g in got.items()}})
+                      "readings": {k: {c: g[c] for c in ("on", "wrong", "wrong_hold", "wrong_photos")}
+                                   for k, g in got.items()}})
     return {"source": source, "view": f"{view} scanned", "measure": "far_mass", "threshold": FAR_MASS_REFERENCE,
             "photos": len(lis.clips), "frames": frames, "no_crossing_frames": 0, "goal_in_view_frames": frames,
             "curve": curve}
@@ -189,6 +193,9 @@ def main(argv=None) -> int:
             played.append(scan_fold(fold, source, ptl, neg, used, a))
         folds.append(scan_curve([p for p, _ in played], played[0][1], held[0][1], view, scales, a.heard_after))
     curve = pool(folds)
+    for i, c in enumerate(curve):   # the photos the wrong frames come from: what the choice rests on
+        c["confidently_wrong_photos"] = sum(f["curve"][i]["confidently_wrong_photos"] for f in folds)
+    photos = sum(f["photos"] for f in folds)
     best, met = choose(curve)
     lopo = leave_one_photographer_out(folds)
     result = {"view": view, "scanned": {"amplitude_deg": a.amplitude, "rate_dps": a.rate},
@@ -201,12 +208,14 @@ def main(argv=None) -> int:
     atomic_write_text(a.cv / name, json.dumps(result, indent=1))
     print(f"{view} scanned, {len(folds)} photographers x {len(runs)} run(s), "
           f"{folds[0]['photos']}+ photos each, {best['frames']} goal-in-view frames:")
-    print("| far mass | beacon on | confidently wrong |\n|---|---:|---:|")
+    print(f"| far mass | beacon on | confidently wrong (frames) | photos with a wrong frame, of {photos} |\n"
+          "|---|---:|---:|---:|")
     for c in curve:
         print(f"| {c['scale'] * FAR_MASS_REFERENCE:.5f} | {100 * c['beacon_on']:.1f} % | "
-              f"{100 * c['confidently_wrong']:.2f} % ({c['confidently_wrong_frames']}) |")
+              f"{100 * c['confidently_wrong']:.2f} % ({c['confidently_wrong_frames']}) | {c['confidently_wrong_photos']} |")
     print(f"chosen: far mass {result['threshold']:.5f} ({'targets met' if met else 'targets NOT met; nearest point'}): "
-          f"beacon on {100 * best['beacon_on']:.1f} %, confidently wrong {100 * best['confidently_wrong']:.2f} %")
+          f"beacon on {100 * best['beacon_on']:.1f} %, confidently wrong {100 * best['confidently_wrong']:.2f} % "
+          f"({best['confidently_wrong_frames']} frames from {best['confidently_wrong_photos']} of {photos} photos)")
     if lopo:
         print(f"chosen on the other photographers, measured on each: beacon on {100 * lopo['beacon_on']:.1f} %, "
               f"confidently wrong {100 * lopo['confidently_wrong']:.2f} % (per photographer "

@@ -479,9 +479,13 @@ def test_judge_scans_counts_each_frame_against_the_goal_in_that_frame(toy_bundle
     labels = np.asarray([[9] * 10 + [9] * 5 + [3] * 5 + [0] * 5])
     psi = np.asarray([0.0] * 10 + [5.0] * 15)
     g = judge_scans(engine, [[pred] * 25], labels, psi, np.zeros((1, 25)))["no_yaw"]
-    assert (g["in_view"], g["on"], g["wrong"], g["wrong_hold"]) == (10, 10, 5, 0)
+    assert (g["in_view"], g["on"], g["wrong"], g["wrong_hold"], g["wrong_photos"]) == (10, 10, 5, 0, 1)
     assert (g["out_of_view"], g["out_on"], g["out_wrong_side"]) == (5, 5, 5)
     assert g["confidently_wrong"] == 0.5 and g["out_of_view_wrong_side"] == 1.0
+    # a second photo whose goal stays at strip 9: its frames add to the counts, not to the wrong photos
+    both = judge_scans(engine, [[pred] * 25] * 2, np.vstack([labels, np.full((1, 25), 9)]), psi,
+                       np.zeros((2, 25)))["no_yaw"]
+    assert (both["in_view"], both["wrong"], both["wrong_photos"]) == (25, 5, 1)
 
 
 def test_judge_scans_heard_late_counts_the_turn_since_the_capture(toy_bundle):  # noqa: F811

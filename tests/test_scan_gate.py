@@ -51,8 +51,12 @@ def test_scans_of_each_photographer_are_played_once_averaged_over_runs_and_poole
     assert res["curve"][0]["beacon_on"] <= res["curve"][-1]["beacon_on"]
     assert res["targets_met"] and res["scale"] == max(res["curve"], key=lambda c: c["beacon_on"])["scale"]
     assert {r["photographer"] for r in res["leave_one_photographer_out"]["per_photographer"]} == {"src:0", "src:1"}
+    for c in res["curve"]:   # the wrong frames' photos: none without a wrong frame, never more than frames or photos
+        assert c["confidently_wrong_photos"] <= min(c["confidently_wrong_frames"], 6)
+        assert (c["confidently_wrong_photos"] == 0) == (c["confidently_wrong_frames"] == 0)
     out = capsys.readouterr().out
-    assert "| far mass | beacon on | confidently wrong |" in out and "chosen: far mass" in out
+    assert "| far mass | beacon on | confidently wrong (frames) | photos with a wrong frame, of 6 |" in out
+    assert "chosen: far mass" in out and "of 6 photos)" in out
 
     def no_model(*a, **k):
         raise AssertionError("a second call replays the saved scans")

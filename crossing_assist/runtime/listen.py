@@ -296,8 +296,9 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
     once per :data:`SCAN_YAW_INPUTS`: told the turn, told the rates ``camera_rates[i, j]`` read from
     the frames, told nothing. Every frame after the still second is judged against the goal in
     *that* frame: with the goal in view, beacon on and confidently wrong, and how many of the
-    wrong frames the heading hold played; with the goal out of view, the beacon on and pointing
-    to the side the goal did not leave by.
+    wrong frames the heading hold played, and on how many photos any frame was (``wrong_photos``:
+    a photo the model misreads stays wrong over many frames, so the frames are not independent);
+    with the goal out of view, the beacon on and pointing to the side the goal did not leave by.
 
     ``heard_after_s`` (rounded to whole frames): each decision is judged when it is heard, that
     long after its frame's capture (the model's run, then playing until the next decision),
@@ -325,8 +326,10 @@ def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], lab
                       psi: np.ndarray, rates: np.ndarray, fps: float, lag: int = 0, follow_turn: bool = False,
                       overrides: dict | None = None) -> dict:
     start = int(round(SCAN_STILL_S * fps))
-    c = dict.fromkeys(("in_view", "on", "wrong", "wrong_hold", "out_of_view", "out_on", "out_wrong_side"), 0)
+    c = dict.fromkeys(("in_view", "on", "wrong", "wrong_hold", "wrong_photos", "out_of_view", "out_on",
+                       "out_wrong_side"), 0)
     for clip, labs, clip_rates in zip(clips, labels, rates):
+        wrong_before = c["wrong"]
         first = next((p for p in clip if p.ok), None)
         decider = Decider(engine.decision_config((first and first.orientation) or "landscape", first and first.fov_deg,
                                                  **(overrides or {})))
@@ -350,6 +353,7 @@ def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], lab
                 c["out_on"] += int(not d.stop)
                 # turned right (psi > 0), the goal left the view on the left: a beacon to the right is wrong
                 c["out_wrong_side"] += int(not d.stop and (d.heading_deg > 0) == (psi[h] > 0))
+        c["wrong_photos"] += int(c["wrong"] > wrong_before)
     rate = lambda k, n: c[k] / c[n] if c[n] else None  # noqa: E731
     return {**c, "beacon_on": rate("on", "in_view"), "confidently_wrong": rate("wrong", "in_view"),
             "wrong_by_hold": rate("wrong_hold", "wrong"), "out_of_view_on": rate("out_on", "out_of_view"),
