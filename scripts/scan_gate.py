@@ -27,8 +27,10 @@ frames, so a choice can rest on a handful of photos. Writes ``CV/scan_gate[_wind
 
 ``--cap GATE_JSON`` (choose_gate's result, in CV): also write ``GATE_JSON`` with the view's
 threshold lowered to the scans' choice where that is lower (``…_scan.json``; a file already named
-so is updated in place, so the cameras' caps stack), its still figures read at the capped
-threshold, for ``scripts/stamp_bundle.py --rescale-gate --gate-json …_scan.json``.
+so is updated in place, so the cameras' and the sweeps' caps stack, each check listed in the
+view's ``scans``), its still figures read at the capped threshold, for
+``scripts/stamp_bundle.py --rescale-gate --gate-json …_scan.json``. ``--saved``: cap from the
+result an earlier call with the same options and runs wrote, without replaying the scans.
 
     .venv/bin/python scripts/scan_gate.py runs/ship_s0/cv --also runs/ship_s1/cv --also runs/ship_s2/cv \\
         --frames 100 --window --grid 16 --max-scale 16 --cap gate_far_mass_top16_ensemble3.json
@@ -125,14 +127,19 @@ def cap(gate_path: Path, view: str, scanned: dict) -> Path:
     rec = g if view == "landscape" else g.get(view)
     if rec is None:
         raise ValueError(f"{gate_path} has no {view} choice (choose_gate.py --portrait)")
-    scan_rec = {k: scanned[k] for k in ("scale", "threshold", "targets_met", "at_scale", "heard_after_s")}
+    scan_rec = {k: scanned[k] for k in ("scanned", "heard_after_s", "scale", "threshold", "targets_met", "at_scale")
+                if k in scanned}
     if scanned["scale"] < rec["scale"]:
         still = next((c for c in rec["curve"] if np.isclose(c["scale"], scanned["scale"])), None)
         if still is None:
             raise ValueError(f"{gate_path}: {view} was not swept at scale {scanned['scale']:g}; use its --grid")
         scan_rec["capped_from"] = {"scale": rec["scale"], "threshold": rec["threshold"]}
         rec.update(scale=still["scale"], threshold=still["scale"] * FAR_MASS_REFERENCE, at_scale=still)
-    rec["scan"] = scan_rec
+    # every check the view passed, one per sweep and hearing (a file stamped before the list: its one check)
+    same = (scan_rec.get("scanned"), scan_rec["heard_after_s"])
+    rec["scans"] = [s for s in rec.pop("scans", None) or ([rec["scan"]] if "scan" in rec else [])
+                    if (s.get("scanned"), s["heard_after_s"]) != same] + [scan_rec]
+    rec.pop("scan", None)
     out = gate_path if gate_path.stem.endswith("_scan") else gate_path.with_name(f"{gate_path.stem}_scan.json")
     atomic_write_text(out, json.dumps(g, indent=1))
     return out
@@ -155,6 +162,8 @@ def main(argv=None) -> int:
     ap.add_argument("--max-scale", type=float, default=GATE_TOP, metavar="M",
                     help=f"the largest scale swept (a power of two; default {GATE_TOP:g})")
     ap.add_argument("--cap", metavar="GATE_JSON", help="choose_gate's result in CV whose threshold the scans cap")
+    ap.add_argument("--saved", action="store_true",
+                    help="with --cap: cap from the result an earlier call with these options wrote (no replay)")
     a = ap.parse_args(argv)
     if a.mirror:
         ap.error("--mirror: scans are played with the folds' plain bundles")
@@ -176,6 +185,11 @@ def main(argv=None) -> int:
     if gate_path and not gate_path.is_file():
         print(f"error: --cap {gate_path} not found (scripts/choose_gate.py writes it)", file=sys.stderr)
         return 2
+    view = VIEWS[camera(a)]
+    name = (f"scan_gate{camera_suffix(camera(a))}{scan_suffix(a.amplitude, a.rate)}"
+            f"{f'_heard{a.heard_after:g}' if a.heard_after else ''}.json")
+    if a.saved:
+        return cap_saved(gate_path, view, a.cv / name, [str(cv) for cv in runs])
     ptl, neg = read_manifest(a.ptl), read_manifest(a.neg)
     used = {r.image for r in read_manifest(a.used_neg).rows}
     by_source: dict[str, list[tuple[Path, str]]] = {}
@@ -185,7 +199,7 @@ def main(argv=None) -> int:
     members = ensemble_members(by_source, len(runs))   # the photographers every run held out
     if not members:
         return 2
-    view, folds = VIEWS[camera(a)], []
+    folds = []
     for held in sorted(members, key=lambda m: m[0][1]):
         played = []
         for fold, source in held:
@@ -203,8 +217,6 @@ def main(argv=None) -> int:
               "scale": best["scale"], "threshold": best["scale"] * FAR_MASS_REFERENCE, "targets_met": met,
               "at_scale": {k: v for k, v in best.items() if k != "per_fold"},
               **({"leave_one_photographer_out": lopo} if lopo else {}), "curve": curve, "folds": folds}
-    name = (f"scan_gate{camera_suffix(camera(a))}{scan_suffix(a.amplitude, a.rate)}"
-            f"{f'_heard{a.heard_after:g}' if a.heard_after else ''}.json")
     atomic_write_text(a.cv / name, json.dumps(result, indent=1))
     print(f"{view} scanned, {len(folds)} photographers x {len(runs)} run(s), "
           f"{folds[0]['photos']}+ photos each, {best['frames']} goal-in-view frames:")
@@ -222,14 +234,35 @@ def main(argv=None) -> int:
               + " / ".join(f"{100 * r['confidently_wrong']:.2f} % at {r['scale'] * FAR_MASS_REFERENCE:.4f}"
                            for r in lopo["per_photographer"]) + ")")
     print(f"written: {a.cv / name}")
-    if gate_path:
-        try:
-            out = cap(gate_path, view, result)
-        except ValueError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 1
-        print(f"capped: {out}")
+    return capped(gate_path, view, result) if gate_path else 0
+
+
+def capped(gate_path: Path, view: str, result: dict) -> int:
+    """:func:`cap` with its line: the file written and the view's threshold, or the error."""
+    try:
+        out = cap(gate_path, view, result)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    g = json.loads(out.read_text())
+    print(f"capped: {out} ({view} at far mass {(g if view == 'landscape' else g[view])['threshold']:.5f})")
     return 0
+
+
+def cap_saved(gate_path: Path | None, view: str, saved: Path, runs: list[str]) -> int:
+    """``--saved``: cap ``gate_path`` from the sweep's result an earlier call wrote, if it pooled ``runs``."""
+    if gate_path is None:
+        print("error: --saved caps from a saved sweep: give --cap GATE_JSON", file=sys.stderr)
+        return 2
+    if not saved.is_file():
+        print(f"error: --saved: no {saved} (run this sweep once without --saved)", file=sys.stderr)
+        return 2
+    result = json.loads(saved.read_text())
+    if result.get("runs") != runs:
+        print(f"error: --saved: {saved} pooled {', '.join(result.get('runs', []))}, not {', '.join(runs)}",
+              file=sys.stderr)
+        return 2
+    return capped(gate_path, view, result)
 
 
 if __name__ == "__main__":

@@ -55,9 +55,10 @@ from choose_gate import tag  # noqa: E402  (a sibling script: the file-name suff
 
 def summary(g: dict) -> dict:
     """One view of choose_gate.py's result, without its curves (``pooled_runs``: the CV runs it pooled;
-    ``scan``: scripts/scan_gate.py's check on held-out scans, and the threshold it capped)."""
+    ``scans``: scripts/scan_gate.py's checks on held-out scans, one per sweep, and the thresholds they
+    capped; ``scan``: the one check of a file written before the list)."""
     return {k: g[k] for k in ("measure", "scale", "threshold", "targets_met", "folds", "accuracy", "bin_mae",
-                              "accuracy_goal_in_view", "pooled_runs", "scan") if k in g} | {
+                              "accuracy_goal_in_view", "pooled_runs", "scan", "scans") if k in g} | {
         "at_scale": {k: v for k, v in g["at_scale"].items() if k != "per_fold"},
         "at_fitted_threshold": {k: v for k, v in g["at_fitted_threshold"].items() if k != "per_fold"}}
 

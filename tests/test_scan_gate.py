@@ -104,16 +104,51 @@ def test_cap_lowers_a_view_to_the_scans_choice_only_where_that_is_lower(tmp_path
     g = json.loads(out.read_text())
     w = g["portrait_window"]
     assert (w["scale"], w["threshold"], w["at_scale"]["beacon_on"]) == (2.0, 0.02, 0.2)   # still figures at the cap
-    assert w["scan"]["capped_from"] == {"scale": 4.0, "threshold": 0.04} and g["scale"] == 4.0   # landscape untouched
+    assert w["scans"][0]["capped_from"] == {"scale": 4.0, "threshold": 0.04} and g["scale"] == 4.0   # landscape untouched
     # a second cap (landscape) stacks on the first file; a looser scan choice leaves the view as it was
     again = sg.cap(out, "landscape", {**scanned, "scale": 8.0, "threshold": 0.08})
     g2 = json.loads(again.read_text())
-    assert again == out and g2["scale"] == 4.0 and "capped_from" not in g2["scan"]
+    assert again == out and g2["scale"] == 4.0 and "capped_from" not in g2["scans"][0]
     assert g2["portrait_window"]["scale"] == 2.0
+    # a slower sweep heard late caps the capped view further; both checks are kept, each named by its sweep
+    slow = {**scanned, "scale": 2 ** 0.5, "threshold": 0.01414, "heard_after_s": 0.2,
+            "scanned": {"amplitude_deg": 20.0, "rate_dps": 15.0}}
+    w3 = json.loads(sg.cap(out, "portrait_window", slow).read_text())["portrait_window"]
+    assert w3["scale"] == 2 ** 0.5 and w3["at_scale"]["beacon_on"] == pytest.approx(2 ** 0.5 / 10)
+    assert [c.get("scanned", {}).get("rate_dps") for c in w3["scans"]] == [None, 15.0]
+    assert w3["scans"][1]["capped_from"] == {"scale": 2.0, "threshold": 0.02}
+    # the same sweep checked again replaces its record instead of adding one
+    w4 = json.loads(sg.cap(out, "portrait_window", {**slow, "scale": 4.0}).read_text())["portrait_window"]
+    assert len(w4["scans"]) == 2 and w4["scale"] == 2 ** 0.5 and "capped_from" not in w4["scans"][1]
     with pytest.raises(ValueError, match="not swept at scale"):
         sg.cap(gate, "landscape", {**scanned, "scale": 3.0})
     with pytest.raises(ValueError, match="no portrait choice"):
         sg.cap(gate, "portrait", scanned)
+
+
+def test_saved_caps_from_the_sweeps_result_without_replaying(two_runs, tmp_path, monkeypatch, capsys):
+    from crossing_assist.runtime.engine import Engine
+
+    runs, ptl, neg = two_runs
+    assert sg.main(_args(runs, ptl, neg, "--saved", "--cap", "gate.json")) == 2   # no gate to cap
+    _gate(runs[0] / "gate.json", 4.0)
+    assert sg.main(_args(runs, ptl, neg, "--saved", "--cap", "gate.json")) == 2   # nothing saved yet
+    assert "run this sweep once without --saved" in capsys.readouterr().err
+    assert sg.main(_args(runs, ptl, neg)) == 0
+    chosen = json.loads((runs[0] / "scan_gate_a30_r30.json").read_text())["scale"]
+
+    def no_model(*a, **k):
+        raise AssertionError("--saved replays nothing")
+
+    monkeypatch.setattr(Engine, "predict", no_model)
+    monkeypatch.setattr(sg, "judge_scans", no_model)
+    assert sg.main(_args(runs, ptl, neg, "--saved", "--cap", "gate.json")) == 0
+    g = json.loads((runs[0] / "gate_scan.json").read_text())
+    assert g["scale"] == min(4.0, chosen) and g["scans"][0]["scanned"] == {"amplitude_deg": 30.0, "rate_dps": 30.0}
+    assert "capped: " in capsys.readouterr().out
+    # a saved result pooled over other runs is not this check
+    assert sg.main([str(runs[0]), *_args(runs, ptl, neg)[3:], "--saved", "--cap", "gate.json"]) == 2
+    assert "pooled" in capsys.readouterr().err
 
 
 def test_bad_runs_and_options_are_one_line(tmp_path, capsys):
