@@ -19,7 +19,8 @@ sweeps (``--grid``, ``--max-scale``; from ``--min-scale``) are replayed through 
 decision logic (``runtime.listen.judge_scans``): every frame after the still second whose goal is
 in view, with the turn from a gyroscope and the turn read from the frames, the worse of the two
 counted (``--heard-after S``: judged when heard, the beacon turned by the gyroscope until then, as
-the app plays it). Per photographer a curve in choose_gate's format, pooled and chosen with its
+the app plays it; each point also keeps the same decisions heard late but not turned, the play
+of a player without a gyroscope, ``confidently_wrong_unturned``). Per photographer a curve in choose_gate's format, pooled and chosen with its
 rule (confidently wrong <= 0.5 % of goal-in-view frames, the most beacon-on), and each
 photographer measured at the threshold chosen on the others. Each point also counts the photos its
 wrong frames come from (``confidently_wrong_photos``): a misread photo stays wrong over many
@@ -109,12 +110,16 @@ def scan_curve(plays: list[Path], bundle: Path, source: str, view: str, scales: 
         got = {k: judged[k] for k in readings}
         frames = got[readings[0]]["in_view"]
         on = min(g["on"] for g in got.values()) / frames
+        # heard late, the untouched readings are the same decisions played as decided (no gyroscope)
+        unturned = {k: judged[k] for k in ("gyro", "camera")} if heard_after else {}
         curve.append({"scale": m, "beacon_on": on, "beacon_on_goal_in_view": on,
                       "confidently_wrong": max(g["wrong"] for g in got.values()) / frames,
                       "confidently_wrong_photos": max(g["wrong_photos"] for g in got.values()),
                       "silence_no_crossing": None,
+                      **({"confidently_wrong_unturned_frames": max(g["wrong"] for g in unturned.values())}
+                         if unturned else {}),
                       "readings": {k: {c: g[c] for c in ("on", "wrong", "wrong_hold", "wrong_photos")}
-                                   for k, g in got.items()}})
+                                   for k, g in (got | unturned).items()}})
     return {"source": source, "view": f"{view} scanned", "measure": "far_mass", "threshold": FAR_MASS_REFERENCE,
             "photos": len(lis.clips), "frames": frames, "no_crossing_frames": 0, "goal_in_view_frames": frames,
             "curve": curve}
@@ -209,6 +214,10 @@ def main(argv=None) -> int:
     curve = pool(folds)
     for i, c in enumerate(curve):   # the photos the wrong frames come from: what the choice rests on
         c["confidently_wrong_photos"] = sum(f["curve"][i]["confidently_wrong_photos"] for f in folds)
+        if a.heard_after:
+            n = c["confidently_wrong_unturned_frames"] = sum(f["curve"][i]["confidently_wrong_unturned_frames"]
+                                                            for f in folds)
+            c["confidently_wrong_unturned"] = n / c["frames"]
     photos = sum(f["photos"] for f in folds)
     best, met = choose(curve)
     lopo = leave_one_photographer_out(folds)
@@ -220,14 +229,18 @@ def main(argv=None) -> int:
     atomic_write_text(a.cv / name, json.dumps(result, indent=1))
     print(f"{view} scanned, {len(folds)} photographers x {len(runs)} run(s), "
           f"{folds[0]['photos']}+ photos each, {best['frames']} goal-in-view frames:")
-    print(f"| far mass | beacon on | confidently wrong (frames) | photos with a wrong frame, of {photos} |\n"
-          "|---|---:|---:|---:|")
+    late = " not turned (no gyroscope) |" if a.heard_after else ""
+    print(f"| far mass | beacon on | confidently wrong (frames) | photos with a wrong frame, of {photos} |{late}\n"
+          f"|---|---:|---:|---:|{'---:|' if late else ''}")
     for c in curve:
         print(f"| {c['scale'] * FAR_MASS_REFERENCE:.5f} | {100 * c['beacon_on']:.1f} % | "
-              f"{100 * c['confidently_wrong']:.2f} % ({c['confidently_wrong_frames']}) | {c['confidently_wrong_photos']} |")
+              f"{100 * c['confidently_wrong']:.2f} % ({c['confidently_wrong_frames']}) | {c['confidently_wrong_photos']} |"
+              + (f" {100 * c['confidently_wrong_unturned']:.2f} % |" if late else ""))
     print(f"chosen: far mass {result['threshold']:.5f} ({'targets met' if met else 'targets NOT met; nearest point'}): "
           f"beacon on {100 * best['beacon_on']:.1f} %, confidently wrong {100 * best['confidently_wrong']:.2f} % "
-          f"({best['confidently_wrong_frames']} frames from {best['confidently_wrong_photos']} of {photos} photos)")
+          f"({best['confidently_wrong_frames']} frames from {best['confidently_wrong_photos']} of {photos} photos)"
+          + (f"; not turned (a player without a gyroscope) {100 * best['confidently_wrong_unturned']:.2f} %"
+             if a.heard_after else ""))
     if lopo:
         print(f"chosen on the other photographers, measured on each: beacon on {100 * lopo['beacon_on']:.1f} %, "
               f"confidently wrong {100 * lopo['confidently_wrong']:.2f} % (per photographer "

@@ -84,9 +84,18 @@ def test_heard_late_counts_the_worse_of_the_turned_readings(two_runs):
     res = json.loads((runs[0] / "scan_gate_a30_r30_heard0.3.json").read_text())
     for f in res["folds"]:
         for c in f["curve"]:
-            assert set(c["readings"]) == {"gyro_turned", "camera_turned"}
-            assert c["confidently_wrong"] * f["frames"] == pytest.approx(max(r["wrong"] for r in c["readings"].values()))
-            assert c["beacon_on"] * f["frames"] == pytest.approx(min(r["on"] for r in c["readings"].values()))
+            r = c["readings"]
+            assert set(r) == {"gyro_turned", "camera_turned", "gyro", "camera"}
+            turned = [r["gyro_turned"], r["camera_turned"]]
+            assert c["confidently_wrong"] * f["frames"] == pytest.approx(max(g["wrong"] for g in turned))
+            assert c["beacon_on"] * f["frames"] == pytest.approx(min(g["on"] for g in turned))
+            # the same decisions not turned: what a player without a gyroscope plays, kept apart
+            assert c["confidently_wrong_unturned_frames"] == max(r["gyro"]["wrong"], r["camera"]["wrong"])
+    for i, c in enumerate(res["curve"]):
+        n = sum(f["curve"][i]["confidently_wrong_unturned_frames"] for f in res["folds"])
+        assert c["confidently_wrong_unturned"] == pytest.approx(n / c["frames"])
+    # a turn of 30°/s heard 0.3 s late, 9° (1.6 strips), not turned: the toy's right headings go wrong
+    assert max(c["confidently_wrong_unturned"] for c in res["curve"]) > max(c["confidently_wrong"] for c in res["curve"])
 
 
 def _gate(path: Path, scale: float) -> Path:
