@@ -20,9 +20,10 @@ decision logic (``runtime.listen.judge_scans``): every frame after the still sec
 in view, with the turn from a gyroscope and the turn read from the frames, the worse of the two
 counted (``--heard-after S``: judged when heard, the beacon turned by the gyroscope until then, as
 the app plays it; each point also keeps the same decisions heard late but not turned, the play
-of a player without a gyroscope, ``confidently_wrong_unturned``). Per photographer a curve in choose_gate's format, pooled and chosen with its
-rule (confidently wrong <= 0.5 % of goal-in-view frames, the most beacon-on), and each
-photographer measured at the threshold chosen on the others. Each point also counts the photos its
+of a player without a gyroscope, ``confidently_wrong_unturned``). Per photographer a curve in
+choose_gate's format, pooled and chosen with its rule (confidently wrong <= 0.5 % of
+goal-in-view frames, the most beacon-on), and each photographer measured at the threshold chosen
+on the others. Each point also counts the photos its
 wrong frames come from (``confidently_wrong_photos``): a misread photo stays wrong over many
 frames, so a choice can rest on a handful of photos. Writes ``CV/scan_gate[_window|_phone]….json``.
 
