@@ -19,8 +19,9 @@ sweeps (``--grid``, ``--max-scale``; from ``--min-scale``) are replayed through 
 decision logic (``runtime.listen.judge_scans``): every frame after the still second whose goal is
 in view, with the turn from a gyroscope and the turn read from the frames, the worse of the two
 counted (``--heard-after S``: judged when heard, the beacon turned by the gyroscope until then, as
-the app plays it; each point also keeps the same decisions heard late but not turned, the play
-of a player without a gyroscope, ``confidently_wrong_unturned``). Per photographer a curve in
+the app plays it; each point also keeps the same decisions heard late as two other players play
+them, in :data:`LATE_PLAYS`: not turned, a player without a gyroscope, ``…_unturned``; a stop once
+half a strip stale, the app while its gyroscope is not followed, ``…_stale``). Per photographer a curve in
 choose_gate's format, pooled and chosen with its rule (confidently wrong <= 0.5 % of
 goal-in-view frames, the most beacon-on), and each photographer measured at the threshold chosen
 on the others. Each point also counts the photos its
@@ -60,6 +61,11 @@ from crossing_assist.data_tools.manifest import read_manifest  # noqa: E402
 from crossing_assist.fileio import atomic_write_text  # noqa: E402
 from crossing_assist.models.evaluate import GATE_TOP, gate_scales  # noqa: E402
 from crossing_assist.runtime.listen import Listener, judge_scans, scan_yaw  # noqa: E402
+
+#: Heard late, the plays kept beside the app's turned one, each the worse of its readings
+#: (``runtime.listen.judge_scans``): as decided (a player without a gyroscope), and a stop once
+#: half a strip stale (the app while its gyroscope reports but is not yet followed)
+LATE_PLAYS = {"unturned": ("gyro", "camera"), "stale": ("camera_stale",)}
 
 #: choose_gate's view each scanning camera checks: landscape, the narrow camera's (3:4 windows) or
 #: the phone held in portrait's threshold
@@ -111,16 +117,18 @@ def scan_curve(plays: list[Path], bundle: Path, source: str, view: str, scales: 
         got = {k: judged[k] for k in readings}
         frames = got[readings[0]]["in_view"]
         on = min(g["on"] for g in got.values()) / frames
-        # heard late, the untouched readings are the same decisions played as decided (no gyroscope)
-        unturned = {k: judged[k] for k in ("gyro", "camera")} if heard_after else {}
+        late = {kind: [judged[k] for k in keys] for kind, keys in LATE_PLAYS.items()} if heard_after else {}
+        counts = {}
+        for kind, gs in late.items():
+            counts[f"confidently_wrong_{kind}_frames"] = max(g["wrong"] for g in gs)
+            counts[f"beacon_on_{kind}_frames"] = min(g["on"] for g in gs)
+        shown = {**got, **{k: judged[k] for keys in LATE_PLAYS.values() for k in keys}} if heard_after else got
         curve.append({"scale": m, "beacon_on": on, "beacon_on_goal_in_view": on,
                       "confidently_wrong": max(g["wrong"] for g in got.values()) / frames,
                       "confidently_wrong_photos": max(g["wrong_photos"] for g in got.values()),
-                      "silence_no_crossing": None,
-                      **({"confidently_wrong_unturned_frames": max(g["wrong"] for g in unturned.values())}
-                         if unturned else {}),
+                      "silence_no_crossing": None, **counts,
                       "readings": {k: {c: g[c] for c in ("on", "wrong", "wrong_hold", "wrong_photos")}
-                                   for k, g in (got | unturned).items()}})
+                                   for k, g in shown.items()}})
     return {"source": source, "view": f"{view} scanned", "measure": "far_mass", "threshold": FAR_MASS_REFERENCE,
             "photos": len(lis.clips), "frames": frames, "no_crossing_frames": 0, "goal_in_view_frames": frames,
             "curve": curve}
@@ -215,10 +223,10 @@ def main(argv=None) -> int:
     curve = pool(folds)
     for i, c in enumerate(curve):   # the photos the wrong frames come from: what the choice rests on
         c["confidently_wrong_photos"] = sum(f["curve"][i]["confidently_wrong_photos"] for f in folds)
-        if a.heard_after:
-            n = c["confidently_wrong_unturned_frames"] = sum(f["curve"][i]["confidently_wrong_unturned_frames"]
-                                                            for f in folds)
-            c["confidently_wrong_unturned"] = n / c["frames"]
+        for kind in LATE_PLAYS if a.heard_after else ():
+            for rate in (f"confidently_wrong_{kind}", f"beacon_on_{kind}"):
+                n = c[f"{rate}_frames"] = sum(f["curve"][i][f"{rate}_frames"] for f in folds)
+                c[rate] = n / c["frames"]
     photos = sum(f["photos"] for f in folds)
     best, met = choose(curve)
     lopo = leave_one_photographer_out(folds)
@@ -230,18 +238,20 @@ def main(argv=None) -> int:
     atomic_write_text(a.cv / name, json.dumps(result, indent=1))
     print(f"{view} scanned, {len(folds)} photographers x {len(runs)} run(s), "
           f"{folds[0]['photos']}+ photos each, {best['frames']} goal-in-view frames:")
-    late = " not turned (no gyroscope) |" if a.heard_after else ""
+    late = " not turned (no gyroscope): wrong | a gyroscope not followed: on / wrong |" if a.heard_after else ""
     print(f"| far mass | beacon on | confidently wrong (frames) | photos with a wrong frame, of {photos} |{late}\n"
-          f"|---|---:|---:|---:|{'---:|' if late else ''}")
+          f"|---|---:|---:|---:|{'---:|---:|' if late else ''}")
     for c in curve:
         print(f"| {c['scale'] * FAR_MASS_REFERENCE:.5f} | {100 * c['beacon_on']:.1f} % | "
               f"{100 * c['confidently_wrong']:.2f} % ({c['confidently_wrong_frames']}) | {c['confidently_wrong_photos']} |"
-              + (f" {100 * c['confidently_wrong_unturned']:.2f} % |" if late else ""))
+              + (f" {100 * c['confidently_wrong_unturned']:.2f} % | {100 * c['beacon_on_stale']:.1f} % / "
+                 f"{100 * c['confidently_wrong_stale']:.2f} % |" if late else ""))
     print(f"chosen: far mass {result['threshold']:.5f} ({'targets met' if met else 'targets NOT met; nearest point'}): "
           f"beacon on {100 * best['beacon_on']:.1f} %, confidently wrong {100 * best['confidently_wrong']:.2f} % "
           f"({best['confidently_wrong_frames']} frames from {best['confidently_wrong_photos']} of {photos} photos)"
-          + (f"; not turned (a player without a gyroscope) {100 * best['confidently_wrong_unturned']:.2f} %"
-             if a.heard_after else ""))
+          + (f"; not turned (a player without a gyroscope) {100 * best['confidently_wrong_unturned']:.2f} %; "
+             f"a stop once half a strip stale (a gyroscope not followed) {100 * best['beacon_on_stale']:.1f} % on, "
+             f"{100 * best['confidently_wrong_stale']:.2f} % wrong" if a.heard_after else ""))
     if lopo:
         print(f"chosen on the other photographers, measured on each: beacon on {100 * lopo['beacon_on']:.1f} %, "
               f"confidently wrong {100 * lopo['confidently_wrong']:.2f} % (per photographer "

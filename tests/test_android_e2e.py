@@ -1154,7 +1154,7 @@ def test_a_gyroscope_the_picture_confirms_is_followed_by_default(confirmed_gyro:
     """By default the Decider follows the turn read from the picture. A gyroscope is listened to
     as well: once the picture has confirmed its turns (GyroCheck), it is followed instead, and each
     decision is played turned by the gyroscope's turn since its frame's capture (step 10), never
-    before; nothing is said."""
+    before (before, a decision the turn has made half a strip stale plays as a stop); nothing is said."""
     r = confirmed_gyro["result"]
     assert "gyro=1" not in r["page_url"]
     frames = {e["id"]: e for e in r["trace"] if e["kind"] == "frame"}
@@ -1169,6 +1169,16 @@ def test_a_gyroscope_the_picture_confirms_is_followed_by_default(confirmed_gyro:
     assert turned, "a confirmed gyroscope never turned the beacon"
     assert all(frames[e["frame"]]["t"] >= checks[0]["t"] for e in turned), "turned before the picture confirmed it"
     assert all(e["turn_deg"] >= 0 for e in turned) and max(e["turn_deg"] for e in turned) > 2.0   # 30 deg/s right
+    # before that, the gyroscope reports but is not followed: only the size of its turn is trusted, so a
+    # decision plays as decided until the turn since its capture passes half a strip (13 actions), then
+    # as a stop; never turned
+    stale = [e for e in r["trace"] if e["kind"] == "stale" and e["frame"] in frames]
+    assert stale and all(frames[e["frame"]]["t"] <= checks[0]["t"] for e in stale), stale
+    for e in stale:
+        f = frames[e["frame"]]
+        half = f["decision_fov_deg"] / 12 / 2
+        assert e["heading_deg"] == (None if abs(e["turn_deg"]) > half else f["decision"]["heading_deg"]), (e, f["decision"])
+    assert any(e["heading_deg"] is None for e in stale)   # ~30 deg/s for 0.3-0.5 s: well past half a strip
     assert not any("gyroscope" in e.get("text", "") for e in r["trace"] if e["kind"] == "speech")
     assert r["turning_text"].endswith("(gyroscope)"), r["turning_text"]   # the helper view says which
 

@@ -162,9 +162,25 @@ def test_turned_cases_move_by_the_turn_or_half_of_it_towards_an_edge(stored):
     assert all(n > 0 for n in moved.values()), moved
 
 
+def test_stale_cases_play_as_decided_within_half_a_strip_and_stop_beyond(stored):
+    """Version 16, step 10 without the turn's sign: the heading never moves; past half a strip of
+    turn, either way, the decision is a stop; the cases hold both sides of the line at both FOVs."""
+    seen = {"kept": 0, "stopped": 0}
+    for c in stored["stale"]:
+        e = c["expect"]
+        if c["heading_deg"] is not None and abs(c["turn_deg"]) > c["fov_deg"] / 12 / 2:
+            assert e == {"stop": True, "reason": "uncertain", "heading_deg": None, "pan": None}, c
+            seen["stopped"] += 1
+        else:
+            assert (e["stop"], e["heading_deg"], e["pan"]) == (c["stop"], c["heading_deg"], c["pan"]), c
+            seen["kept"] += c["heading_deg"] is not None and c["turn_deg"] != 0
+    assert all(n > 0 for n in seen.values()), seen
+    assert {c["fov_deg"] for c in stored["stale"]} == {67.0, 40.8}
+
+
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == VERSION == 15
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == VERSION == 16
     assert "decision steps" in capsys.readouterr().out
 
 

@@ -85,17 +85,24 @@ def test_heard_late_counts_the_worse_of_the_turned_readings(two_runs):
     for f in res["folds"]:
         for c in f["curve"]:
             r = c["readings"]
-            assert set(r) == {"gyro_turned", "camera_turned", "gyro", "camera"}
+            assert set(r) == {"gyro_turned", "camera_turned", "gyro", "camera", "camera_stale"}
             turned = [r["gyro_turned"], r["camera_turned"]]
             assert c["confidently_wrong"] * f["frames"] == pytest.approx(max(g["wrong"] for g in turned))
             assert c["beacon_on"] * f["frames"] == pytest.approx(min(g["on"] for g in turned))
-            # the same decisions not turned: what a player without a gyroscope plays, kept apart
+            # the same decisions not turned (a player without a gyroscope) and stopped once half a strip
+            # stale (the app while its gyroscope is not followed), kept apart
             assert c["confidently_wrong_unturned_frames"] == max(r["gyro"]["wrong"], r["camera"]["wrong"])
+            assert (c["confidently_wrong_stale_frames"], c["beacon_on_stale_frames"]) == (
+                r["camera_stale"]["wrong"], r["camera_stale"]["on"])
     for i, c in enumerate(res["curve"]):
-        n = sum(f["curve"][i]["confidently_wrong_unturned_frames"] for f in res["folds"])
-        assert c["confidently_wrong_unturned"] == pytest.approx(n / c["frames"])
-    # a turn of 30°/s heard 0.3 s late, 9° (1.6 strips), not turned: the toy's right headings go wrong
-    assert max(c["confidently_wrong_unturned"] for c in res["curve"]) > max(c["confidently_wrong"] for c in res["curve"])
+        for rate in ("confidently_wrong_unturned", "confidently_wrong_stale", "beacon_on_stale"):
+            n = sum(f["curve"][i][f"{rate}_frames"] for f in res["folds"])
+            assert c[rate] == pytest.approx(n / c["frames"])
+    # a turn of 30°/s heard 0.3 s late, 9° (1.6 strips), not turned: the toy's right headings go wrong;
+    # stopped once half a strip stale, the beacon is off while the camera turns and never wrong
+    top = res["curve"][-1]
+    assert top["confidently_wrong_unturned"] > top["confidently_wrong"]
+    assert top["confidently_wrong_stale"] == 0 and top["beacon_on_stale"] < top["beacon_on"] / 2
 
 
 def _gate(path: Path, scale: float) -> Path:

@@ -13,7 +13,7 @@ import { BundleError, parseBundleMeta } from '../www/js/bundle.js';
 import { gateKind, gateThreshold, LEVEL, levelAngle, rolledTooFar } from '../www/js/geometry.js';
 import { cameraElevationDeg, cameraRollDeg, GYRO_CHECK, GyroCheck, NO_TILT_TEXT, sameFrame, SIDEWAYS, SidewaysHint, TILT, TiltSilence, TiltWatch, Watchdog, YawIntegrator,
   yawRateFromRotation } from '../www/js/live.js';
-import { cueFor, Decider, decisionConfig, observationFromOutputs } from '../www/js/logic.js';
+import { cueFor, Decider, decisionConfig, observationFromOutputs, staleDecision } from '../www/js/logic.js';
 import { rgbaToRgb } from '../www/js/model.js';
 import { replayVectors, thumbFromRows } from '../www/js/vectors.js';
 import { modelName, statusMessage } from '../www/js/view.js';
@@ -843,4 +843,20 @@ test('a gyroscope is confirmed by the picture only by clear agreement', () => {
   const mixed = check(Array.from({ length: 30 }, (_, i) => (i % 3 === 0 ? [25, -40] : [25, 25])));
   assert.equal(mixed.verdict, 'ok');
   assert.ok(!mixed.confirmed());
+});
+
+test('a decision heard with only the size of the turn known plays as decided up to half a strip, then as a stop', () => {
+  const d = { gate: 'learner', reason: 'ok', stop: false, heading_deg: 10, pan: 0.3, rate_hz: 4 };
+  // 66 deg across: strips of 5.5 deg, half a strip 2.75 deg, either way (the sign is not trusted)
+  for (const turn of [0, 2.7, -2.7, NaN]) assert.deepEqual(staleDecision(d, turn, 66), d);
+  for (const turn of [2.8, -2.8, 30]) {
+    const s = staleDecision(d, turn, 66);
+    assert.equal(s.stop, true);
+    assert.equal(s.heading_deg, null);
+    assert.equal(s.reason, 'uncertain');
+    assert.equal(cueFor(s).kind, cueFor({ ...d, stop: true }).kind);   // the stop cue, not a beacon
+  }
+  assert.deepEqual(staleDecision(d, 2.8, 40.8).stop, true);   // a narrow camera's half strip is 1.7 deg
+  const stop = { ...d, stop: true, heading_deg: null, pan: null };
+  assert.deepEqual(staleDecision(stop, 30, 66), stop);   // a stop stays a stop
 });

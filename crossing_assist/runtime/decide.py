@@ -158,6 +158,18 @@ def turned(decision: Decision, turn_deg: float, fov_deg: float) -> Decision:
     return replace(decision, heading_deg=h, pan=heading_to_pan(h, fov_deg / 2.0))
 
 
+def stale(decision: Decision, turn_deg: float, fov_deg: float) -> Decision:
+    """Step 10 without the turn's sign: ``decision`` as it is played once the camera has turned
+    ``turn_deg`` since its frame's capture, where only the size of that turn is known (the app's
+    gyroscope reporting but not followed: not yet confirmed by the picture, or found turning the
+    wrong way). It cannot be turned back, so it plays as decided while the turn stays within half
+    a strip (a twelfth of ``fov_deg``) and as a stop (``uncertain``) beyond, until the next
+    decision. A stop stays a stop; a turn that is not a finite number changes nothing."""
+    if decision.heading_deg is None or not math.isfinite(turn_deg) or abs(turn_deg) <= fov_deg / N_BINS / 2.0:
+        return decision
+    return replace(decision, gate=GATE_STOP, reason=REASON_UNCERTAIN, stop=True, heading_deg=None, pan=None)
+
+
 class Decider:
     """The stateful decision step. Call :meth:`step` with non-decreasing ``t``."""
 

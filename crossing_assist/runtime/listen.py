@@ -25,7 +25,7 @@ import numpy as np
 from crossing_assist.actions import UNKNOWN, heading_to_x, x_to_bin, x_to_heading
 from crossing_assist.fileio import atomic_path
 from crossing_assist.runtime.belief import PROBS_MEASURES
-from crossing_assist.runtime.decide import Decider, DecisionConfig, turned
+from crossing_assist.runtime.decide import Decider, DecisionConfig, stale, turned
 from crossing_assist.runtime.engine import Engine, Prediction
 from crossing_assist.runtime.gate import GATE_HOLD
 
@@ -287,6 +287,12 @@ SCAN_YAW_INPUTS = {"gyro": "turn from a gyroscope", "camera": "turn read from th
 TURNED_READINGS = {"gyro_turned": ("gyro", "turn from a gyroscope, the beacon turned with it until heard"),
                    "camera_turned": ("camera", "turn read from the frames, the beacon turned by a gyroscope until heard")}
 
+#: And the app's play while its gyroscope reports but is not followed (not yet confirmed by the
+#: picture): the picture's decisions, each a stop once the turn since its capture passes half a
+#: strip (:func:`~crossing_assist.runtime.decide.stale`: the size of the turn known, not its way).
+STALE_READINGS = {"camera_stale": ("camera", "turn read from the frames, a stop once half a strip stale "
+                                             "(a gyroscope not followed)")}
+
 
 def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
                 psi: np.ndarray, camera_rates: np.ndarray, fps: float = SCAN_FPS,
@@ -304,7 +310,8 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
     long after its frame's capture (the model's run, then playing until the next decision),
     against the goal and the camera's turn then (the phone app, in its e2e run: heard 0.28 s to
     0.51 s after capture; docs/results.md, "Heard when it plays"). It adds :data:`TURNED_READINGS`:
-    a reading's decisions with the beacon turned by the gyroscope's turn since the capture.
+    a reading's decisions with the beacon turned by the gyroscope's turn since the capture, and
+    :data:`STALE_READINGS`: with only that turn's size known, each a stop past half a strip.
     ``overrides``: decision settings for every clip instead of the bundle's (e.g. ``threshold``
     and ``measure``: a gate swept, :meth:`Engine.decision_config`)."""
     psi = np.asarray(psi, float)
@@ -316,14 +323,15 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
     res = {k: _judge_scan_input(engine, clips, labels, psi, rates[k], fps, lag, overrides=overrides)
            for k in SCAN_YAW_INPUTS}
     if lag:
-        for name, (reading, _) in TURNED_READINGS.items():
-            res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, follow_turn=True,
-                                          overrides=overrides)
+        for readings, play in ((TURNED_READINGS, turned), (STALE_READINGS, stale)):
+            for name, (reading, _) in readings.items():
+                res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, play=play,
+                                              overrides=overrides)
     return res
 
 
 def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
-                      psi: np.ndarray, rates: np.ndarray, fps: float, lag: int = 0, follow_turn: bool = False,
+                      psi: np.ndarray, rates: np.ndarray, fps: float, lag: int = 0, play=None,
                       overrides: dict | None = None) -> dict:
     start = int(round(SCAN_STILL_S * fps))
     c = dict.fromkeys(("in_view", "on", "wrong", "wrong_hold", "wrong_photos", "out_of_view", "out_on",
@@ -339,8 +347,8 @@ def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], lab
             h = j + lag    # the frame whose moment the decision is heard at
             if j < start or h >= len(clip):
                 continue
-            if follow_turn:
-                d = turned(d, float(psi[h] - psi[j]), fov)
+            if play is not None:   # played as heard: the decision and the gyroscope's turn since its capture
+                d = play(d, float(psi[h] - psi[j]), fov)
             label = int(labs[h])
             if label != UNKNOWN:
                 c["in_view"] += 1

@@ -110,6 +110,10 @@ Version 15: step 10 stops a decision in an edge strip once the turn towards that
 heading out of the strip (where the goal is is unknown then, as for step 3's hold). Each
 ``turned`` case now also carries the decision's ``stop`` and ``reason``, before and after
 (``expect``); the scenarios are unchanged.
+
+Version 16: ``stale``, step 10 without the turn's sign (:func:`crossing_assist.runtime.decide.stale`,
+the app's play while its gyroscope reports but is not followed): the same decisions and FOVs, and
+turns on both sides of half a strip; the decision as played (``expect``). The scenarios are unchanged.
 """
 
 from __future__ import annotations
@@ -130,7 +134,7 @@ from crossing_assist.geometry import FOV_RANGE_DEG, PAD_RGB, level_angle, orient
 from crossing_assist.runtime.beacon import BeaconConfig, itd_seconds, pan_gains
 from crossing_assist.runtime.belief import entropy
 from crossing_assist.runtime.camera import camera_fov, gate_threshold, geometry_of
-from crossing_assist.runtime.decide import REASON_UNCERTAIN, Decider, DecisionConfig, Observation, turned
+from crossing_assist.runtime.decide import REASON_UNCERTAIN, Decider, DecisionConfig, Observation, stale, turned
 from crossing_assist.runtime.engine import measure_value
 from crossing_assist.runtime.live import is_fresh, same_frame
 from crossing_assist.runtime.status import STATUS_STOP, status_message
@@ -138,7 +142,7 @@ from crossing_assist.runtime import visual_yaw as vy
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 15
+VERSION = 16
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -511,18 +515,18 @@ def _visual_yaw_vectors(rng: np.random.Generator) -> dict:
             "sequence": {"width": width, "steps": seq}}
 
 
-def _turned_vectors() -> list[dict]:
-    """Step 10 (:func:`turned`): a decision's heading and pan once the camera turned since its
-    capture, inside the frame and in either edge strip, turned towards (within the strip and out
-    of it) and away, and a stop."""
+def _turned_vectors(play=turned, turns=(-20.0, -5.0, -1.0, 0.0, 1.0, 3.0, 7.5, 40.0)) -> list[dict]:
+    """Step 10 (:func:`turned`, or ``play``): a decision's heading and pan once the camera turned
+    since its capture, inside the frame and in either edge strip, turned towards (within the strip
+    and out of it) and away, and a stop."""
     d0 = Decider(DecisionConfig()).step(0.0, Observation(_probs_for(13, 6, 0.9), 0.1), 0.0)
     cases = []
     for fov in (67.0, 40.8):
         for h in (None, -31.0, -25.0, -10.0, 0.0, 12.5, 17.9, 33.4, 60.0):
             d = dataclasses.replace(d0, stop=h is None, reason=REASON_UNCERTAIN if h is None else d0.reason,
                                     heading_deg=h, pan=None if h is None else heading_to_pan(h, fov / 2))
-            for turn in (-20.0, -5.0, -1.0, 0.0, 1.0, 3.0, 7.5, 40.0):
-                t = turned(d, turn, fov)
+            for turn in turns:
+                t = play(d, turn, fov)
                 cases.append({"stop": d.stop, "reason": d.reason, "heading_deg": h, "pan": d.pan, "turn_deg": turn,
                               "fov_deg": fov, "expect": {"stop": t.stop, "reason": t.reason, "heading_deg": t.heading_deg,
                                                          "pan": t.pan}})
@@ -565,6 +569,8 @@ def build_vectors(seed: int = 20240601) -> dict:
         "guards": _guards(rng),
         "status": _status_vectors(),
         "turned": _turned_vectors(),
+        # half a strip: 2.79 deg at 67 deg across, 1.7 deg at 40.8
+        "stale": _turned_vectors(stale, (-20.0, -2.9, -1.6, 0.0, 1.6, 1.8, 2.7, 2.9, 40.0)),
         "visual_yaw": _visual_yaw_vectors(np.random.default_rng([seed, 12])),
         "geometry": {"fov_range_deg": list(FOV_RANGE_DEG), "fov_choice": _fov_choices(),
                      "view_rows": {"geometry": GEOMETRY_V3, "cases": _view_rows()},

@@ -67,7 +67,7 @@ import { cameraFov, defaultFovText, FovError, frameView, gateKind, gateThreshold
 import { Haptics } from './haptics.js';
 import { GYRO_WRONG_TEXT, GyroCheck, isFresh, NO_TILT_TEXT, sameFrame, SidewaysHint, TiltSilence, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator,
   yawRateFromRotation } from './live.js';
-import { argmax, configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN, turnedDecision } from './logic.js';
+import { argmax, configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN, staleDecision, turnedDecision } from './logic.js';
 import { fetchBundle, openBest } from './model.js';
 import { loadSettings, saveSettings, urlOverrides } from './settings.js';
 import { Speaker, SpeechPolicy } from './speech.js';
@@ -353,9 +353,9 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   app.turning = null;
   if (!app.audioFailed) {
     let heard = d; // what the beacon plays now, which the direction vibration and speech follow
-    if (fresh && d.heading_deg !== null && gyroFollowed()) {
+    if (fresh && d.heading_deg !== null && (gyroFollowed() || gyroReporting())) {
       app.turning = { id: (app.frameId || 0) + 1, d, captured, fov: decider.cfg.fov_deg, rendered: null };
-      heard = followTurn(); // turned by the turn made while the model ran
+      heard = followTurn(); // turned by the turn made while the model ran (or stopped once stale)
     } else {
       app.audio.render(fresh ? cueFor(d) : STOP_CUE);
     }
@@ -476,6 +476,11 @@ function gyroFollowed() {
   return sensorOn('gyro') || (sensorOn('visualYaw') && app.gyroCheck.confirmed() && app.yaw.reporting(now()));
 }
 
+/** A gyroscope reports, whether or not it is followed: the size of a turn since a capture is known. */
+function gyroReporting() {
+  return !!app.yaw && app.yaw.reporting(now());
+}
+
 /** Something the user must know for the rest of this guidance: spoken whole (routine sentences
  * wait for it) and shown in a line kept until guidance ends. */
 function notice(t, text) {
@@ -562,20 +567,23 @@ function onMotion(e) {
  * gyroscope followed, the decision is played turned by the gyroscope's turn since the capture,
  * at its decision and again at each gyroscope sample until the next decision. Only while the
  * cue it played is still the one playing: any other cue (a stop, the watchdog's, a pause) ends it.
- * Returns the decision as played (null once ended).
+ * A gyroscope that reports but is not followed (not yet confirmed by the picture, or found turning
+ * the wrong way) gives only the size of the turn: the decision plays as decided until it is half a
+ * strip stale, then as a stop (logic.js staleDecision). Returns the decision as played (null once ended).
  */
 function followTurn() {
   const f = app.turning;
-  if (!app.audio || app.audioFailed || (f.rendered !== null && (app.audio.cue !== f.rendered || !gyroFollowed()))) {
+  const followed = gyroFollowed();
+  if (!app.audio || app.audioFailed || (f.rendered !== null && (app.audio.cue !== f.rendered || !(followed || gyroReporting())))) {
     app.turning = null;
     return null;
   }
   const t = now();
   const turn = app.yaw.between(f.captured, t) * (t - f.captured); // 0 before the capture
-  const played = turnedDecision(f.d, turn, f.fov);
+  const played = followed ? turnedDecision(f.d, turn, f.fov) : staleDecision(f.d, turn, f.fov);
   app.audio.render(cueFor(played));
   f.rendered = app.audio.cue;
-  record({ kind: 'turned', t, frame: f.id, turn_deg: turn, heading_deg: played.heading_deg });
+  record({ kind: followed ? 'turned' : 'stale', t, frame: f.id, turn_deg: turn, heading_deg: played.heading_deg });
   return played;
 }
 

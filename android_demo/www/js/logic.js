@@ -465,6 +465,21 @@ export function turnedDecision(decision, turnDeg, fovDeg) {
   return { ...decision, heading_deg: h, pan: headingToPan(h, fovDeg / 2) };
 }
 
+/**
+ * Step 10 without the turn's sign (decide.stale): a decision played while a gyroscope reports but
+ * is not followed (the picture has not confirmed it yet, or found it turning the wrong way), so
+ * the size of the turn since its frame's capture is known, not its way. Heard late, the decision
+ * lags the user's facing by that turn and cannot be turned back, so it plays as decided while the
+ * turn stays within half a strip (a twelfth of fovDeg), and as a stop (uncertain) beyond, until
+ * the next decision. A turn that is not a finite number changes nothing; a stop stays a stop.
+ */
+export function staleDecision(decision, turnDeg, fovDeg) {
+  if (decision.heading_deg === null || !Number.isFinite(turnDeg) || Math.abs(turnDeg) <= fovDeg / N_BINS / 2) {
+    return decision;
+  }
+  return { ...decision, gate: GATE_STOP, reason: REASON_UNCERTAIN, stop: true, heading_deg: null, pan: null };
+}
+
 /** The cue of a decision (beacon.cue_for): {kind, pan, heading_deg, rate_hz}. */
 export function cueFor(decision) {
   if (decision.stop || decision.heading_deg === null || decision.pan === null) {

@@ -9,11 +9,11 @@
 import { headingToPan, spaceGroups } from './actions.js';
 import { cameraFov, FovError, gateThreshold, levelAngle, orientation, PAD_RGB, rolledTooFar, viewRows } from './geometry.js';
 import { isFresh, sameFrame, Watchdog } from './live.js';
-import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains, turnedDecision } from './logic.js';
+import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains, staleDecision, turnedDecision } from './logic.js';
 import { statusMessage } from './view.js';
 import * as visualYaw from './visualyaw.js';
 
-const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
+const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16];
 
 function close(a, b, tol) {
   return Math.abs(a - b) <= tol * Math.max(1, Math.abs(b));
@@ -203,13 +203,16 @@ export function replayVectors(vectors) {
   }
   // version 14: step 10, a decision played after the camera turned since its frame's capture
   // (version 15: with its stop and reason, an edge strip turned towards out of it stopping)
-  for (const v of vectors.turned || []) {
-    checks += 1;
-    const before = { stop: v.stop ?? v.heading_deg === null, heading_deg: v.heading_deg, pan: v.pan };
-    if ('reason' in v) before.reason = v.reason;
-    const got = turnedDecision(before, v.turn_deg, v.fov_deg);
-    const bad = compareDecision(got, v.expect, tol);
-    if (bad.length) fail({ scenario: 'turned', field: `heading ${v.heading_deg} turn ${v.turn_deg} fov ${v.fov_deg}`, got: bad[0].got, expected: bad[0].expected });
+  // version 16: the same without the turn's sign (a gyroscope not followed), a stop past half a strip
+  for (const [name, play] of [['turned', turnedDecision], ['stale', staleDecision]]) {
+    for (const v of vectors[name] || []) {
+      checks += 1;
+      const before = { stop: v.stop ?? v.heading_deg === null, heading_deg: v.heading_deg, pan: v.pan };
+      if ('reason' in v) before.reason = v.reason;
+      const got = play(before, v.turn_deg, v.fov_deg);
+      const bad = compareDecision(got, v.expect, tol);
+      if (bad.length) fail({ scenario: name, field: `heading ${v.heading_deg} turn ${v.turn_deg} fov ${v.fov_deg}`, got: bad[0].got, expected: bad[0].expected });
+    }
   }
   checks += replayVisualYaw(vectors.visual_yaw, tol, fail);
   return { version: vectors.version, scenarios: vectors.scenarios.length, steps, checks, failures, nFailures, maxRelDiff };
