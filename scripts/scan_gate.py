@@ -20,13 +20,13 @@ decision logic (``runtime.listen.judge_scans``): every frame after the still sec
 in view, with the turn from a gyroscope and the turn read from the frames, the worse of the two
 counted (``--heard-after S``: judged when heard, the beacon turned by the gyroscope until then, as
 the app plays it; each point also keeps the same decisions heard late as two other players play
-them, in :data:`LATE_PLAYS`: not turned, a player without a gyroscope, ``…_unturned``; a stop once
-half a strip stale, the app while its gyroscope is not followed, ``…_stale``). Per photographer a curve in
-choose_gate's format, pooled and chosen with its rule (confidently wrong <= 0.5 % of
-goal-in-view frames, the most beacon-on), and each photographer measured at the threshold chosen
-on the others. Each point also counts the photos its
-wrong frames come from (``confidently_wrong_photos``): a misread photo stays wrong over many
-frames, so a choice can rest on a handful of photos. Writes ``CV/scan_gate[_window|_phone]….json``.
+them, in :data:`LATE_PLAYS`: not turned, a player without a gyroscope, ``…_unturned``; a stop
+once half a strip stale, the app while its gyroscope is not followed, ``…_stale``). Per
+photographer a curve in choose_gate's format, pooled and chosen with its rule (confidently wrong
+<= 0.5 % of goal-in-view frames, the most beacon-on), and each photographer measured at the
+threshold chosen on the others. Each point also counts the photos its wrong frames come from
+(``confidently_wrong_photos``): a misread photo stays wrong over many frames, so a choice can
+rest on a handful of photos. Writes ``CV/scan_gate[_window|_phone]….json``.
 
 ``--cap GATE_JSON`` (choose_gate's result, in CV): also write ``GATE_JSON`` with the view's
 threshold lowered to the scans' choice where that is lower (``…_scan.json``; a file already named
@@ -117,12 +117,12 @@ def scan_curve(plays: list[Path], bundle: Path, source: str, view: str, scales: 
         got = {k: judged[k] for k in readings}
         frames = got[readings[0]]["in_view"]
         on = min(g["on"] for g in got.values()) / frames
-        late = {kind: [judged[k] for k in keys] for kind, keys in LATE_PLAYS.items()} if heard_after else {}
+        late = LATE_PLAYS if heard_after else {}
         counts = {}
-        for kind, gs in late.items():
-            counts[f"confidently_wrong_{kind}_frames"] = max(g["wrong"] for g in gs)
-            counts[f"beacon_on_{kind}_frames"] = min(g["on"] for g in gs)
-        shown = {**got, **{k: judged[k] for keys in LATE_PLAYS.values() for k in keys}} if heard_after else got
+        for kind, keys in late.items():
+            counts[f"confidently_wrong_{kind}_frames"] = max(judged[k]["wrong"] for k in keys)
+            counts[f"beacon_on_{kind}_frames"] = min(judged[k]["on"] for k in keys)
+        shown = {k: judged[k] for k in (*readings, *(k for keys in late.values() for k in keys))}
         curve.append({"scale": m, "beacon_on": on, "beacon_on_goal_in_view": on,
                       "confidently_wrong": max(g["wrong"] for g in got.values()) / frames,
                       "confidently_wrong_photos": max(g["wrong_photos"] for g in got.values()),
@@ -134,9 +134,10 @@ def scan_curve(plays: list[Path], bundle: Path, source: str, view: str, scales: 
             "curve": curve}
 
 
-def cap(gate_path: Path, view: str, scanned: dict) -> Path:
+def cap(gate_path: Path, view: str, scanned: dict) -> tuple[Path, float]:
     """``gate_path`` (choose_gate's result) with ``view``'s threshold lowered to the scans' choice
-    where that is lower, written as ``…_scan.json``; its still figures read at the capped scale."""
+    where that is lower, written as ``…_scan.json``; its still figures read at the capped scale.
+    The file written and the view's threshold now."""
     g = json.loads(gate_path.read_text())
     rec = g if view == "landscape" else g.get(view)
     if rec is None:
@@ -150,13 +151,12 @@ def cap(gate_path: Path, view: str, scanned: dict) -> Path:
         scan_rec["capped_from"] = {"scale": rec["scale"], "threshold": rec["threshold"]}
         rec.update(scale=still["scale"], threshold=still["scale"] * FAR_MASS_REFERENCE, at_scale=still)
     # every check the view passed, one per sweep and hearing (a file stamped before the list: its one check)
+    checks = rec.pop("scans", None) or ([rec.pop("scan")] if "scan" in rec else [])
     same = (scan_rec.get("scanned"), scan_rec["heard_after_s"])
-    rec["scans"] = [s for s in rec.pop("scans", None) or ([rec["scan"]] if "scan" in rec else [])
-                    if (s.get("scanned"), s["heard_after_s"]) != same] + [scan_rec]
-    rec.pop("scan", None)
+    rec["scans"] = [s for s in checks if (s.get("scanned"), s["heard_after_s"]) != same] + [scan_rec]
     out = gate_path if gate_path.stem.endswith("_scan") else gate_path.with_name(f"{gate_path.stem}_scan.json")
     atomic_write_text(out, json.dumps(g, indent=1))
-    return out
+    return out, rec["threshold"]
 
 
 def main(argv=None) -> int:
@@ -264,12 +264,11 @@ def main(argv=None) -> int:
 def capped(gate_path: Path, view: str, result: dict) -> int:
     """:func:`cap` with its line: the file written and the view's threshold, or the error."""
     try:
-        out = cap(gate_path, view, result)
+        out, threshold = cap(gate_path, view, result)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
-    g = json.loads(out.read_text())
-    print(f"capped: {out} ({view} at far mass {(g if view == 'landscape' else g[view])['threshold']:.5f})")
+    print(f"capped: {out} ({view} at far mass {threshold:.5f})")
     return 0
 
 

@@ -115,26 +115,27 @@ def _gate(path: Path, scale: float) -> Path:
 def test_cap_lowers_a_view_to_the_scans_choice_only_where_that_is_lower(tmp_path):
     gate = _gate(tmp_path / "gate.json", 4.0)
     scanned = {"scale": 2.0, "threshold": 0.02, "targets_met": True, "at_scale": {"beacon_on": 0.3}, "heard_after_s": 0}
-    out = sg.cap(gate, "portrait_window", scanned)
-    assert out.name == "gate_scan.json"
+    out, threshold = sg.cap(gate, "portrait_window", scanned)
+    assert out.name == "gate_scan.json" and threshold == 0.02
     g = json.loads(out.read_text())
     w = g["portrait_window"]
     assert (w["scale"], w["threshold"], w["at_scale"]["beacon_on"]) == (2.0, 0.02, 0.2)   # still figures at the cap
     assert w["scans"][0]["capped_from"] == {"scale": 4.0, "threshold": 0.04} and g["scale"] == 4.0   # landscape untouched
     # a second cap (landscape) stacks on the first file; a looser scan choice leaves the view as it was
-    again = sg.cap(out, "landscape", {**scanned, "scale": 8.0, "threshold": 0.08})
+    again, threshold = sg.cap(out, "landscape", {**scanned, "scale": 8.0, "threshold": 0.08})
+    assert threshold == 0.04   # landscape kept its own
     g2 = json.loads(again.read_text())
     assert again == out and g2["scale"] == 4.0 and "capped_from" not in g2["scans"][0]
     assert g2["portrait_window"]["scale"] == 2.0
     # a slower sweep heard late caps the capped view further; both checks are kept, each named by its sweep
     slow = {**scanned, "scale": 2 ** 0.5, "threshold": 0.01414, "heard_after_s": 0.2,
             "scanned": {"amplitude_deg": 20.0, "rate_dps": 15.0}}
-    w3 = json.loads(sg.cap(out, "portrait_window", slow).read_text())["portrait_window"]
+    w3 = json.loads(sg.cap(out, "portrait_window", slow)[0].read_text())["portrait_window"]
     assert w3["scale"] == 2 ** 0.5 and w3["at_scale"]["beacon_on"] == pytest.approx(2 ** 0.5 / 10)
     assert [c.get("scanned", {}).get("rate_dps") for c in w3["scans"]] == [None, 15.0]
     assert w3["scans"][1]["capped_from"] == {"scale": 2.0, "threshold": 0.02}
     # the same sweep checked again replaces its record instead of adding one
-    w4 = json.loads(sg.cap(out, "portrait_window", {**slow, "scale": 4.0}).read_text())["portrait_window"]
+    w4 = json.loads(sg.cap(out, "portrait_window", {**slow, "scale": 4.0})[0].read_text())["portrait_window"]
     assert len(w4["scans"]) == 2 and w4["scale"] == 2 ** 0.5 and "capped_from" not in w4["scans"][1]
     with pytest.raises(ValueError, match="not swept at scale"):
         sg.cap(gate, "landscape", {**scanned, "scale": 3.0})

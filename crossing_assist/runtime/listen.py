@@ -18,14 +18,14 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, replace
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
 from crossing_assist.actions import UNKNOWN, heading_to_x, x_to_bin, x_to_heading
 from crossing_assist.fileio import atomic_path
 from crossing_assist.runtime.belief import PROBS_MEASURES
-from crossing_assist.runtime.decide import Decider, DecisionConfig, stale, turned
+from crossing_assist.runtime.decide import Decider, Decision, DecisionConfig, stale, turned
 from crossing_assist.runtime.engine import Engine, Prediction
 from crossing_assist.runtime.gate import GATE_HOLD
 
@@ -331,7 +331,8 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
 
 
 def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
-                      psi: np.ndarray, rates: np.ndarray, fps: float, lag: int = 0, play=None,
+                      psi: np.ndarray, rates: np.ndarray, fps: float, lag: int = 0,
+                      play: Callable[[Decision, float, float], Decision] | None = None,
                       overrides: dict | None = None) -> dict:
     start = int(round(SCAN_STILL_S * fps))
     c = dict.fromkeys(("in_view", "on", "wrong", "wrong_hold", "wrong_photos", "out_of_view", "out_on",
