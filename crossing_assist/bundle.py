@@ -156,7 +156,12 @@ class UncertaintySpec:
     ``narrow_fov_deg``): the threshold for portrait frames whose camera sees at most
     ``narrow_fov_deg`` across (e.g. 9:16 portrait video, ~41 deg), whose central goals spread over
     neighbouring strips; older readers ignore it and give such frames the stricter
-    ``portrait_threshold``. ``fitted_threshold`` (optional, informative): the threshold as fitted
+    ``portrait_threshold``. ``wide_fov_deg`` (optional): the camera's width picks the threshold,
+    whatever the frame's orientation: frames at least ``wide_fov_deg`` across take ``threshold``
+    (chosen on landscape photos), narrower ones ``portrait_threshold`` (chosen on a phone held in
+    portrait; a square frame of the same sensor sees what that phone sees) and those at most
+    ``narrow_fov_deg`` across ``narrow_threshold``; older readers ignore it and go by orientation.
+    ``fitted_threshold`` (optional, informative): the threshold as fitted
     on the calibration frames, before the held-out scales (``scripts/choose_gate.py``) made
     ``threshold`` and ``portrait_threshold``; tools that re-scale the gate start from it
     (``scripts/stamp_bundle.py --rescale-gate``)."""
@@ -167,20 +172,27 @@ class UncertaintySpec:
     fitted_threshold: float | None = None
     narrow_threshold: float | None = None
     narrow_fov_deg: float | None = None
+    wide_fov_deg: float | None = None
 
     def __post_init__(self) -> None:
         if (self.narrow_threshold is None) != (self.narrow_fov_deg is None):
             raise ValueError("narrow_threshold and narrow_fov_deg go together")
+        if None not in (self.wide_fov_deg, self.narrow_fov_deg) and self.wide_fov_deg <= self.narrow_fov_deg:
+            raise ValueError(f"wide_fov_deg {self.wide_fov_deg:g} must exceed narrow_fov_deg {self.narrow_fov_deg:g}")
 
     def which(self, orientation: str, fov_deg: float | None = None) -> str:
         """Which threshold frames of this orientation (``landscape`` or ``portrait``) from a
         camera ``fov_deg`` across (None: the orientation's own) take: ``landscape`` (the
-        ``threshold``), ``portrait`` or ``narrow``."""
-        if orientation != "portrait":
+        ``threshold``), ``portrait`` or ``narrow``; with ``wide_fov_deg`` and a known FOV, by the
+        camera's width alone."""
+        narrow = self.narrow_threshold is not None and fov_deg is not None and fov_deg <= self.narrow_fov_deg
+        if self.wide_fov_deg is not None and fov_deg is not None:
+            portrait = fov_deg < self.wide_fov_deg
+        elif orientation != "portrait":
             return "landscape"
-        if self.narrow_threshold is not None and fov_deg is not None and fov_deg <= self.narrow_fov_deg:
-            return "narrow"
-        return "landscape" if self.portrait_threshold is None else "portrait"
+        else:
+            portrait = True
+        return "narrow" if narrow else "portrait" if portrait and self.portrait_threshold is not None else "landscape"
 
     def threshold_for(self, orientation: str, fov_deg: float | None = None) -> float:
         """The threshold for frames of this orientation from a camera ``fov_deg`` across (:meth:`which`)."""
@@ -191,13 +203,18 @@ class UncertaintySpec:
         """The gate threshold a frame gets, in words: ``far_mass 0.0383 (a narrow camera's:
         portrait frames at most 42 deg across)``."""
         which = self.which(orientation, fov_deg)
-        why = (f"a narrow camera's: portrait frames at most {self.narrow_fov_deg:g} deg across" if which == "narrow"
-               else which)
+        if which == "narrow":
+            frames = "portrait frames" if self.wide_fov_deg is None else "frames"
+            why = f"a narrow camera's: {frames} at most {self.narrow_fov_deg:g} deg across"
+        elif self.wide_fov_deg is not None and fov_deg is not None:
+            why = f"{which}: frames {'under' if which == 'portrait' else 'at least'} {self.wide_fov_deg:g} deg across"
+        else:
+            why = which
         return f"{self.measure} {self.threshold_for(orientation, fov_deg):.4g} ({why})"
 
     def to_json(self) -> dict:
         d = {"measure": self.measure, "threshold": self.threshold}
-        for k in ("portrait_threshold", "narrow_threshold", "narrow_fov_deg", "fitted_threshold"):
+        for k in ("portrait_threshold", "narrow_threshold", "narrow_fov_deg", "wide_fov_deg", "fitted_threshold"):
             if getattr(self, k) is not None:
                 d[k] = getattr(self, k)
         return d
@@ -363,7 +380,18 @@ def _parse_calibration(d: Any) -> Calibration:
     if isinstance(u, Mapping) and (u.get("narrow_threshold") is None) != (u.get("narrow_fov_deg") is None):
         raise BundleError("bundle.json: calibration.uncertainty.narrow_threshold and narrow_fov_deg go together; "
                           "set both or neither")
-    unc = UncertaintySpec(
+    try:
+        unc = _uncertainty(u)
+    except BundleError:
+        raise
+    except ValueError as exc:   # the fields' own checks passed; how they stand together did not
+        raise BundleError(f"bundle.json: calibration.uncertainty: {exc}") from None
+    return Calibration(temperature=temp, conformal=conformal, uncertainty=unc)
+
+
+def _uncertainty(u: Mapping) -> UncertaintySpec:
+    """``calibration.uncertainty``, each field checked (:class:`BundleError`), then together (ValueError)."""
+    return UncertaintySpec(
         measure=_choice(_get(u, "measure", "calibration.uncertainty"), "calibration.uncertainty.measure",
                         UNCERTAINTY_MEASURES),
         threshold=_num(_get(u, "threshold", "calibration.uncertainty"), "calibration.uncertainty.threshold",
@@ -376,8 +404,9 @@ def _parse_calibration(d: Any) -> Calibration:
         _num(u["narrow_threshold"], "calibration.uncertainty.narrow_threshold", 0.0, 1e6, lo_open=True),
         narrow_fov_deg=None if u.get("narrow_fov_deg") is None else
         _num(u["narrow_fov_deg"], "calibration.uncertainty.narrow_fov_deg", *FOV_RANGE_DEG),
+        wide_fov_deg=None if u.get("wide_fov_deg") is None else
+        _num(u["wide_fov_deg"], "calibration.uncertainty.wide_fov_deg", *FOV_RANGE_DEG),
     )
-    return Calibration(temperature=temp, conformal=conformal, uncertainty=unc)
 
 
 def _parse_geometry(d: Any, fov_deg: float, version: int) -> Geometry:

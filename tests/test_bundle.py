@@ -128,6 +128,37 @@ def test_a_narrow_cameras_threshold_round_trips_and_applies_to_narrow_portrait_f
             B.parse_meta(bad, need_bytes=False)
 
 
+def test_wide_fov_picks_the_threshold_by_the_cameras_width_whatever_the_orientation():
+    """``wide_fov_deg``: a frame at least that wide takes ``threshold``, a narrower one
+    ``portrait_threshold`` and one at most ``narrow_fov_deg`` ``narrow_threshold``, landscape or
+    portrait (a square frame of a 4:3 sensor, ~53 deg, is the portrait phone's); a frame whose FOV
+    is not given keeps its orientation's; without the field, orientation decides as before. Not
+    above ``narrow_fov_deg``, or outside 20..170: refused in one line."""
+    from crossing_assist import bundle as B
+
+    unc = B.UncertaintySpec("far_mass", 0.009, 0.022, narrow_threshold=0.037, narrow_fov_deg=42.0, wide_fov_deg=60.0)
+    meta = B.make_meta(**_typed_parts(calibration=B.Calibration(1.0, B.ConformalSpec(0.9, 0.1, 5), unc)))
+    assert meta["calibration"]["uncertainty"]["wide_fov_deg"] == 60.0
+    got = B.parse_meta(meta, need_bytes=False).calibration.uncertainty
+    assert got == unc
+    for orientation in ("landscape", "portrait"):
+        assert [got.threshold_for(orientation, f) for f in (36.6, 42.0, 52.8, 59.9, 60.0, 67.0)] == \
+            [0.037, 0.037, 0.022, 0.022, 0.009, 0.009]
+    assert (got.threshold_for("landscape"), got.threshold_for("portrait")) == (0.009, 0.022)
+    assert got.describe("landscape", 52.8) == "far_mass 0.022 (portrait: frames under 60 deg across)"
+    assert got.describe("portrait", 65.0) == "far_mass 0.009 (landscape: frames at least 60 deg across)"
+    assert got.describe("landscape", 40.0) == "far_mass 0.037 (a narrow camera's: frames at most 42 deg across)"
+    old = B.UncertaintySpec("far_mass", 0.009, 0.022, narrow_threshold=0.037, narrow_fov_deg=42.0)
+    assert (old.threshold_for("landscape", 52.8), old.threshold_for("portrait", 65.0)) == (0.009, 0.022)
+    for change, msg in (({"wide_fov_deg": 42.0}, "wide_fov_deg 42 must exceed narrow_fov_deg 42"),
+                        ({"wide_fov_deg": 200}, "wide_fov_deg = 200 is out of range")):
+        bad = json.loads(json.dumps(meta))
+        bad["calibration"]["uncertainty"].update(change)
+        with pytest.raises(B.BundleError, match=msg) as err:
+            B.parse_meta(bad, need_bytes=False)
+        assert "\n" not in str(err.value)
+
+
 def test_mirror_tta_is_written_only_when_on_and_read_back():
     """``mc.mirror``: absent (older bundles, and mirror off) reads as False."""
     from crossing_assist import bundle as B

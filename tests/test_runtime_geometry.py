@@ -234,6 +234,24 @@ def test_a_narrow_portrait_camera_gets_the_narrow_threshold(tmp_path, toy2):
         assert r.returncode == 0 and said in r.stdout, (r.stdout, r.stderr)
 
 
+def test_with_wide_fov_a_square_frame_takes_the_portrait_threshold(tmp_path, toy2):
+    """``wide_fov_deg``: a square frame (landscape by its sides, ~53 deg across as a crop of the
+    4:3 sensor) takes the portrait threshold and guides where the landscape threshold silences it;
+    a 4:3 frame stays silent; without the field the square frame takes the landscape one."""
+    from crossing_assist.geometry import Geometry
+
+    base = Engine(toy2).decision_config().threshold
+    geo = Geometry(camera_fov_deg=(67.0, 53.0), sensor_aspect=4 / 3)   # a square frame: ~52.8 deg
+    square = bar_frame(bin_center_x(STRIP), h=96, w=96)
+    for wide, heard in ((60.0, KIND_BEACON), (None, KIND_STOP)):
+        folder = make_toy_bundle(tmp_path / f"b{wide}", TOY2, threshold=1e-3, portrait_threshold=base,
+                                 wide_fov_deg=wide, geometry=geo)
+        pipe = Pipeline(Engine(folder))
+        steps = _run(pipe, [square] * 10)
+        assert pipe.decider.cfg.fov_deg < 60.0 and steps[-1].cue.kind == heard, wide
+        assert all(s.cue.kind == KIND_STOP for s in _run(pipe, [_landscape()] * 10, t0=1.0))
+
+
 @pytest.mark.parametrize("bad", [-1.0, 0.0, "1.2", float("inf")])
 def test_a_bad_portrait_threshold_is_one_line(tmp_path, bad):
     from crossing_assist.bundle import read_bundle

@@ -115,6 +115,25 @@ def test_narrow_camera_vectors_speak_only_at_the_narrow_threshold(stored):
     assert guided == {((1080, 1920), True), ((480, 640), False), ((1920, 1080), False)}
 
 
+def test_wide_fov_vectors_pick_the_threshold_by_the_cameras_width(stored):
+    """Version 17: with ``wide_fov_deg`` a square frame (~53 deg) takes the portrait threshold, 4:3
+    the landscape one, 9:16 video the narrow one, and a 3:4 frame set to 65 deg the landscape one;
+    frames whose doubt lies between the landscape and portrait thresholds guide only on the
+    frames under 60 deg."""
+    sc = next(sc for sc in stored["scenarios"] if sc["name"] == "wide_fov_square_frame")
+    unc = sc["uncertainty"]
+    assert {tuple(r["frame"]): r["threshold"] for r in sc["steps"]} == {
+        (480, 480): unc["portrait_threshold"], (640, 480): unc["threshold"],
+        (1080, 1920): unc["narrow_threshold"], (480, 640): unc["portrait_threshold"]}
+    assert all(unc["threshold"] < r["obs"]["uncertainty"] < unc["portrait_threshold"] for r in sc["steps"])
+    guided = {(tuple(r["frame"]), not r["expect"]["stop"]) for i, r in enumerate(sc["steps"]) if i % 30 >= 10}
+    assert guided == {((480, 480), True), ((640, 480), False), ((1080, 1920), True), ((480, 640), True)}
+    wide = next(sc for sc in stored["scenarios"] if sc["name"] == "wide_fov_portrait_set_wide")
+    assert {(tuple(r["frame"]), r["fov_deg"], r["threshold"]) for r in wide["steps"]} == {
+        ((480, 640), 65.0, unc["threshold"]), ((640, 480), 67.0, unc["threshold"])}
+    assert all(r["expect"]["stop"] for r in wide["steps"])
+
+
 def test_no_direction_from_before_a_stall_comes_back(stored):
     """Version 10, step 4a: guided before a 1 s stall; when frames showing nothing come back,
     the beacon stays off (the hold and belief from before the stall put the old heading back on
@@ -180,7 +199,7 @@ def test_stale_cases_play_as_decided_within_half_a_strip_and_stop_beyond(stored)
 
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == VERSION == 16
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == VERSION == 17
     assert "decision steps" in capsys.readouterr().out
 
 

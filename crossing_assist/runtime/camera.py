@@ -3,7 +3,7 @@
 The camera-geometry contract (docs/contracts.md, "Camera geometry") on the JSON the phone app
 reads: :func:`geometry_of` (schema 1 reads as one FOV for both orientations),
 :func:`camera_fov` (the frame's orientation -> the override or the bundle's ``camera_fov_deg``,
-narrowed to a crop's with ``sensor_aspect``, refused outside 20..170 degrees) and :func:`gate_threshold` (the orientation's threshold, a narrow camera's in portrait).
+narrowed to a crop's with ``sensor_aspect``, refused outside 20..170 degrees) and :func:`gate_threshold` (the orientation's threshold, a narrow camera's in portrait; by the camera's width with ``wide_fov_deg``).
 They agree with :meth:`crossing_assist.bundle.Bundle.camera_fov` and
 :meth:`~crossing_assist.bundle.UncertaintySpec.threshold_for`, which they call; the app's
 ``android_demo/www/js/geometry.js`` is the same rule, checked against the shared test vectors
@@ -39,10 +39,11 @@ def camera_fov(geometry: dict, width: int, height: int, override: float | None =
 
 def gate_threshold(uncertainty: dict, width: int, height: int, fov_deg: float | None = None) -> float:
     """The gate threshold for a ``width x height`` frame from a camera ``fov_deg`` across (its
-    :func:`camera_fov`): a bundle's ``calibration.uncertainty`` ``narrow_threshold`` for portrait
-    frames at most ``narrow_fov_deg`` across when it has one, else ``portrait_threshold`` for
-    portrait frames when it has one, else its ``threshold``."""
+    :func:`camera_fov`), by :meth:`UncertaintySpec.which` from a bundle's ``calibration.uncertainty``:
+    ``narrow_threshold`` for portrait frames at most ``narrow_fov_deg`` across when it has one, else
+    ``portrait_threshold`` for portrait frames when it has one, else its ``threshold``; with
+    ``wide_fov_deg``, by the camera's width whatever the orientation (narrower than it: portrait)."""
     spec = UncertaintySpec(uncertainty.get("measure", "entropy"), uncertainty["threshold"],
                            uncertainty.get("portrait_threshold"), narrow_threshold=uncertainty.get("narrow_threshold"),
-                           narrow_fov_deg=uncertainty.get("narrow_fov_deg"))
+                           narrow_fov_deg=uncertainty.get("narrow_fov_deg"), wide_fov_deg=uncertainty.get("wide_fov_deg"))
     return spec.threshold_for(orientation(width, height), fov_deg)

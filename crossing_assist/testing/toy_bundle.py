@@ -64,6 +64,7 @@ class Toy:
     portrait_threshold: float | None = None  # the same for portrait frames (None: threshold)
     narrow_threshold: float | None = None    # portrait frames at most narrow_fov_deg across (None: none)
     narrow_fov_deg: float | None = None
+    wide_fov_deg: float | None = None        # by the camera's width: narrower frames take portrait_threshold
     geometry: Geometry | None = None  # None: a schema-1 bundle
     name: str = "toy-bright-strip"
 
@@ -93,7 +94,7 @@ def toy_meta(toy: Toy = RUNTIME_TOY) -> dict:
         mc=McSpec(toy.samples, toy.drop_p),
         calibration=Calibration(1.0, ConformalSpec(0.9, 0.05, 0), UncertaintySpec(
             "entropy", toy.threshold, toy.portrait_threshold, narrow_threshold=toy.narrow_threshold,
-            narrow_fov_deg=toy.narrow_fov_deg)),
+            narrow_fov_deg=toy.narrow_fov_deg, wide_fov_deg=toy.wide_fov_deg)),
         training={"backbone": toy.name, "head": "none", "data": "none", "counts": {}},
         provenance={"command": "crossing_assist.testing.toy_bundle", "created": "test"},
     )

@@ -114,6 +114,13 @@ heading out of the strip (where the goal is is unknown then, as for step 3's hol
 Version 16: ``stale``, step 10 without the turn's sign (:func:`crossing_assist.runtime.decide.stale`,
 the app's play while its gyroscope reports but is not followed): the same decisions and FOVs, and
 turns on both sides of half a strip; the decision as played (``expect``). The scenarios are unchanged.
+
+Version 17: the camera's width picks the gate threshold (``calibration.uncertainty.wide_fov_deg``,
+:meth:`crossing_assist.bundle.UncertaintySpec.which`): scenarios ``wide_fov_square_frame``
+and ``wide_fov_portrait_set_wide``: a square frame (~53 deg across, landscape by its sides: the
+portrait threshold), 4:3 landscape (67 deg: the landscape one), 9:16 video upright (~41 deg: the
+narrow one), 3:4 portrait (53 deg: the portrait one), then 3:4 portrait the user set to 65 deg
+(the landscape one). The earlier scenarios are unchanged.
 """
 
 from __future__ import annotations
@@ -142,7 +149,7 @@ from crossing_assist.runtime import visual_yaw as vy
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 16
+VERSION = 17
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -310,6 +317,17 @@ def _geometry_scenarios(rng: np.random.Generator) -> list[tuple]:
     sizes = ((1080, 1920), (480, 640), (1920, 1080), (1080, 1920))
     steps = [(i / FPS, 0.0, _frame(13, 4, 0.5, own), sizes[i // 30]) for i in range(120)]
     out.append(("narrow_threshold_9x16_video", GEOMETRY_V3_SENSOR, {}, narrow, steps))
+    # Version 17: by the camera's width. Frames whose doubt (~1.4 nats, as version 3's) lies
+    # between the landscape and the portrait thresholds speak on a square frame (~53 deg: the
+    # portrait threshold), not on 4:3 landscape; and not on 3:4 portrait the user set to 65 deg
+    # (the landscape threshold).
+    own = np.random.default_rng(17)
+    wide = {**narrow, "wide_fov_deg": 60.0}
+    sizes = ((480, 480), (640, 480), (1080, 1920), (480, 640))
+    steps = [(i / FPS, 0.0, _frame(13, 4, 0.7, own), sizes[i // 30]) for i in range(120)]
+    out.append(("wide_fov_square_frame", GEOMETRY_V3_SENSOR, {}, wide, steps))
+    steps = [(i / FPS, 0.0, _frame(13, 4, 0.7, own), FRAME_SIZES[1 - i // 30]) for i in range(60)]
+    out.append(("wide_fov_portrait_set_wide", GEOMETRY_V3_SENSOR, {"portrait": 65.0}, wide, steps))
     return out
 
 

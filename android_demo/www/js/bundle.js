@@ -100,6 +100,9 @@ function parseCalibration(d) {
   if ((u.narrow_threshold == null) !== (u.narrow_fov_deg == null)) {
     throw new BundleError('bundle.json: calibration.uncertainty.narrow_threshold and narrow_fov_deg go together; set both or neither');
   }
+  if (u.wide_fov_deg != null && u.narrow_fov_deg != null && !(u.wide_fov_deg > u.narrow_fov_deg)) {
+    throw new BundleError(`bundle.json: calibration.uncertainty: wide_fov_deg ${u.wide_fov_deg} must exceed narrow_fov_deg ${u.narrow_fov_deg}`);
+  }
   return {
     temperature: num(get(d, 'temperature', 'calibration'), 'calibration.temperature', 0, 100, { loOpen: true }),
     conformal: {
@@ -118,6 +121,9 @@ function parseCalibration(d) {
         : num(u.narrow_threshold, 'calibration.uncertainty.narrow_threshold', 0, 1e6, { loOpen: true }),
       narrow_fov_deg: u.narrow_fov_deg == null ? null
         : num(u.narrow_fov_deg, 'calibration.uncertainty.narrow_fov_deg', FOV_RANGE_DEG[0], FOV_RANGE_DEG[1]),
+      // optional: the camera's width picks the threshold (frames under wide_fov_deg: portrait's)
+      wide_fov_deg: u.wide_fov_deg == null ? null
+        : num(u.wide_fov_deg, 'calibration.uncertainty.wide_fov_deg', FOV_RANGE_DEG[0], FOV_RANGE_DEG[1]),
     },
   };
 }

@@ -13,7 +13,8 @@
 // * a schema-1 bundle has one fov_deg for both orientations (parseGeometry in bundle.js);
 // * the gate threshold is the orientation's too: calibration.uncertainty.portrait_threshold for
 //   portrait frames when the bundle has one, else calibration.uncertainty.threshold (portrait
-//   strips are narrower, so the same doubt in degrees reads as a higher entropy);
+//   strips are narrower, so the same doubt in degrees reads as a higher entropy); with
+//   calibration.uncertainty.wide_fov_deg the camera's width picks it instead (gateKind);
 // * a new FOV or threshold (the phone turned) starts a fresh Decider.
 //
 // The model fits the frame onto its canvas inside the ONNX graph (letterbox or stretch), and
@@ -134,13 +135,16 @@ export function cameraFov(geometry, width, height, override = null) {
  * takes (Python: bundle.py UncertaintySpec.which): 'narrow' (narrow_threshold, for portrait
  * frames at most narrow_fov_deg across, when the bundle has one), 'portrait'
  * (portrait_threshold, for other portrait frames, when it has one), else 'landscape' (threshold).
+ * With wide_fov_deg and a known `fov` the camera's width decides, whatever the orientation:
+ * at most narrow_fov_deg 'narrow', under wide_fov_deg 'portrait', else 'landscape'.
  * `uncertainty` is the bundle's calibration.uncertainty.
  */
 export function gateKind(uncertainty, width, height, fov = null) {
-  if (orientation(width, height) !== 'portrait') return 'landscape';
-  const { narrow_threshold: narrow, narrow_fov_deg: narrowFov, portrait_threshold: portrait } = uncertainty;
+  const { narrow_threshold: narrow, narrow_fov_deg: narrowFov, portrait_threshold: portrait, wide_fov_deg: wideFov } = uncertainty;
+  const byWidth = wideFov != null && fov != null;
+  if (!byWidth && orientation(width, height) !== 'portrait') return 'landscape';
   if (narrow != null && narrowFov != null && fov != null && fov <= narrowFov) return 'narrow';
-  return portrait != null ? 'portrait' : 'landscape';
+  return portrait != null && (!byWidth || fov < wideFov) ? 'portrait' : 'landscape';
 }
 
 /** The gate threshold of that frame (Python: runtime/camera.py gate_threshold). */

@@ -13,7 +13,7 @@ import { Decider, decisionConfig, itdSeconds, observationFromOutputs, panGains, 
 import { statusMessage } from './view.js';
 import * as visualYaw from './visualyaw.js';
 
-const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16];
+const SUPPORTED_VERSIONS = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17];
 
 function close(a, b, tol) {
   return Math.abs(a - b) <= tol * Math.max(1, Math.abs(b));
