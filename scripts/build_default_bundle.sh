@@ -148,6 +148,10 @@ fi
 # (NARROW_FOV= for none). Keep the cut near the windows: portrait phone views at 45 deg were 0.92 %
 # confidently wrong at the windows' far-mass threshold (README, "What the user hears").
 NARROW_FOV=${NARROW_FOV-42}
+# The camera's width, not the frame's orientation, picks the threshold (WIDE_FOV= for orientation):
+# frames under WIDE_FOV degrees take the portrait one, e.g. a square frame (~53 deg, the portrait
+# phone's width; docs/results.md, "Square frames").
+WIDE_FOV=${WIDE_FOV-60}
 RESCALE=()
 if [ -f "$CV_DIR/$STAMP_JSON" ]; then
     RESCALE=(--rescale-gate)
@@ -155,4 +159,5 @@ if [ -f "$CV_DIR/$STAMP_JSON" ]; then
         RESCALE+=(--narrow-fov "$NARROW_FOV")
     fi
 fi
+[ -n "$WIDE_FOV" ] && RESCALE+=(--wide-fov "$WIDE_FOV")
 "$PY" scripts/stamp_bundle.py "$SRC" "$OUT" --cv "$CV_DIR" --gate-json "$STAMP_JSON" "${RESCALE[@]}"

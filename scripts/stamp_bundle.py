@@ -3,7 +3,7 @@ geometry schema) into its bundle.json and the graph's embedded copy, writing a n
 atomically. The graph itself is left as it is.
 
     .venv/bin/python scripts/stamp_bundle.py SRC OUT --cv runs/default/cv --gate-json gate_mirror.json
-        [--rescale-gate [--narrow-fov 42]] [--view-crop] [--sensor-aspect 4:3]
+        [--rescale-gate [--narrow-fov 42]] [--wide-fov 60] [--view-crop] [--sensor-aspect 4:3]
     .venv/bin/python scripts/stamp_bundle.py SRC OUT --gate-from crossing_assist/assets/default_bundle
 
 * ``--cv CV``: ``metrics.leave_one_photographer_out`` from ``CV/cv.json`` (the folds' checkpoints),
@@ -20,6 +20,11 @@ atomically. The graph itself is left as it is.
   (``portrait_window``: a ~41 deg camera, what 9:16 portrait video gives) becomes
   ``narrow_threshold``, for portrait frames at most DEG across (``narrow_fov_deg``); without it a
   rescaled bundle has none.
+* ``--wide-fov DEG``: ``calibration.uncertainty.wide_fov_deg`` = DEG: the camera's width picks each
+  frame's threshold, whatever its orientation: at least DEG across the landscape one, narrower the
+  portrait one (at most the narrow FOV the narrow one). A square frame of the 4:3 sensor sees ~53 deg,
+  as the phone held in portrait whose threshold that is; by orientation it took the landscape one.
+  60 is midway between the cameras the two thresholds were chosen on (67 and 53 deg).
 * ``--gate-from REF``: the gate of bundle REF (its ``calibration.uncertainty``: measure and
   thresholds) replaces SRC's, so two models are judged at one gate, e.g. a candidate at the
   default's thresholds (docs/models.md, "Look-alikes in training"). Not with ``--rescale-gate``;
@@ -147,6 +152,9 @@ def main(argv=None) -> int:
     ap.add_argument("--narrow-fov", type=float, metavar="DEG",
                     help="with --rescale-gate: portrait frames at most DEG across take the threshold chosen on the "
                          "3:4 windows (calibration.uncertainty.narrow_threshold, narrow_fov_deg)")
+    ap.add_argument("--wide-fov", type=float, metavar="DEG",
+                    help="calibration.uncertainty.wide_fov_deg: frames under DEG across take the portrait threshold, "
+                         "at least DEG the landscape one, whatever their orientation")
     ap.add_argument("--gate-from", type=Path, metavar="REF",
                     help="the gate (calibration.uncertainty) of bundle REF instead of SRC's: two models at one gate")
     ap.add_argument("--view-crop", action="store_true", help="current schema, geometry.view_crop true")
@@ -159,10 +167,11 @@ def main(argv=None) -> int:
         ap.error("--rescale-gate needs --cv")
     if a.rescale_gate and a.gate_from is not None:
         ap.error("--gate-from and --rescale-gate: one gate at a time")
-    if a.cv is None and a.gate_from is None and not a.view_crop and a.sensor_aspect is None:
-        ap.error("nothing to stamp: give --cv, --gate-from, --view-crop or --sensor-aspect")
-    if a.narrow_fov is not None and not FOV_RANGE_DEG[0] <= a.narrow_fov <= FOV_RANGE_DEG[1]:
-        ap.error(f"--narrow-fov {a.narrow_fov:g}: valid {FOV_RANGE_DEG[0]:g}..{FOV_RANGE_DEG[1]:g} degrees")
+    if a.cv is None and a.gate_from is None and not a.view_crop and a.sensor_aspect is None and a.wide_fov is None:
+        ap.error("nothing to stamp: give --cv, --gate-from, --wide-fov, --view-crop or --sensor-aspect")
+    for flag, fov in (("--narrow-fov", a.narrow_fov), ("--wide-fov", a.wide_fov)):
+        if fov is not None and not FOV_RANGE_DEG[0] <= fov <= FOV_RANGE_DEG[1]:
+            ap.error(f"{flag} {fov:g}: valid {FOV_RANGE_DEG[0]:g}..{FOV_RANGE_DEG[1]:g} degrees")
     try:
         aspect = None if a.sensor_aspect is None else check_sensor_aspect(_number_or_ratio(a.sensor_aspect))
     except GeometryError as exc:
@@ -186,6 +195,14 @@ def main(argv=None) -> int:
         gate = json.loads((a.gate_from / "bundle.json").read_text())["calibration"]["uncertainty"]
         meta["calibration"]["uncertainty"] = gate
         stamped.append(f"gate of {a.gate_from} ({gate['measure']}, threshold {gate['threshold']:.4g})")
+    if a.wide_fov is not None:
+        unc = meta["calibration"]["uncertainty"]
+        if unc.get("narrow_fov_deg") is not None and not a.wide_fov > unc["narrow_fov_deg"]:
+            print(f"error: --wide-fov {a.wide_fov:g}: must exceed the bundle's narrow_fov_deg {unc['narrow_fov_deg']:g}",
+                  file=sys.stderr)
+            return 2
+        unc["wide_fov_deg"] = a.wide_fov
+        stamped.append(f"gate threshold by the camera's width: frames under {a.wide_fov:g} deg take the portrait one")
     if a.view_crop:
         if b.geometry.fit != "letterbox":
             print(f"error: {a.src} is not letterboxed (geometry.fit = {b.geometry.fit}); no view crop", file=sys.stderr)

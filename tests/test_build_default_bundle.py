@@ -63,6 +63,7 @@ def test_build_default_bundle_exports_the_zoomed_view_with_the_held_out_gate(tmp
     assert "gate measure: far_mass" in r.stderr
     assert (unc.measure, unc.threshold, unc.portrait_threshold, unc.fitted_threshold) == ("far_mass", 0.007, 0.015, None)
     assert (unc.narrow_threshold, unc.narrow_fov_deg) == (0.038, 42.0)   # the windows' choice, NARROW_FOV's default
+    assert unc.wide_fov_deg == 60.0 and unc.threshold_for("landscape", 52.8) == 0.015   # WIDE_FOV's default
     assert b.metrics["gate_held_out"]["threshold"] == 0.007 and b.metrics["gate_held_out"]["portrait"]["threshold"] == 0.015
     assert b.metrics["leave_one_photographer_out"]["accuracy"]["mean"] == 0.6
     q = b.metrics.get("int8_vs_fp32")   # int8 kept only within 1 point of fp32 and not slower, else fp32

@@ -198,6 +198,36 @@ def test_narrow_fov_stamps_the_windows_threshold_for_narrow_portrait_frames(ship
     assert not (tmp_path / "bad").exists()
 
 
+def test_wide_fov_stamps_the_width_rule_and_a_square_frame_takes_the_portrait_threshold(shipped, tmp_path):
+    """``--wide-fov DEG`` (alone or beside a re-scale): ``wide_fov_deg`` in bundle.json and the
+    graph's copy; a square frame (~53 deg with the 4:3 sensor) then takes the portrait threshold
+    and a 3:4 frame the user set to 65 deg the landscape one. Not above the narrow FOV, or out of
+    20..170: one line, nothing written."""
+    from crossing_assist.runtime.engine import Engine
+
+    src, cv = shipped
+    fm = _far_mass_gate
+    (cv / "gate_far_mass.json").write_text(json.dumps(fm(0.007) | {"portrait": fm(0.015), "portrait_window": fm(0.038)}))
+    r = _stamp(src, tmp_path / "out", "--cv", cv, "--rescale-gate", "--gate-json", "gate_far_mass.json",
+               "--narrow-fov", 42, "--wide-fov", 60, "--sensor-aspect", "4:3")
+    assert r.returncode == 0, r.stderr
+    assert "frames under 60 deg take the portrait one" in r.stdout
+    eng = Engine(tmp_path / "out")   # check_session: the graph's copy agrees
+    assert eng.bundle.calibration.uncertainty.wide_fov_deg == 60.0
+    square, portrait = eng.camera_fov(480, 480), eng.camera_fov(480, 640, 65.0)
+    assert eng.decision_config("landscape", square).threshold == 0.015
+    assert eng.decision_config("portrait", portrait).threshold == 0.007
+    r = _stamp(tmp_path / "out", tmp_path / "again", "--wide-fov", 55)   # alone: the rest is kept
+    assert r.returncode == 0, r.stderr
+    unc = read_bundle(tmp_path / "again").calibration.uncertainty
+    assert (unc.wide_fov_deg, unc.narrow_threshold, unc.portrait_threshold) == (55.0, 0.038, 0.015)
+    for flag, said in ((["--wide-fov", 40], "--wide-fov 40: must exceed the bundle's narrow_fov_deg 42"),
+                       (["--wide-fov", 200], "--wide-fov 200: valid 20..170 degrees")):
+        r = _stamp(tmp_path / "out", tmp_path / "bad", *flag)
+        assert r.returncode == 2 and said in r.stderr.strip().splitlines()[-1], r.stderr   # argparse's usage above
+        assert not (tmp_path / "bad").exists()
+
+
 def test_gate_from_judges_a_bundle_at_another_bundles_gate(shipped, tmp_path):
     """``--gate-from REF`` (no CV needed) gives SRC REF's gate, measure and thresholds, in bundle.json
     and the graph's copy alike, and leaves SRC's figures alone; a REF that fits frames otherwise, or
