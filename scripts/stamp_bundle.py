@@ -129,7 +129,7 @@ def stamp_held_out(a: argparse.Namespace, b, meta: dict) -> list[str] | None:
             unc["threshold"] = fitted * g["scale"]
             if "portrait" in g:
                 unc["portrait_threshold"] = fitted * g["portrait"]["scale"]
-            for k in ("narrow_threshold", "narrow_fov_deg"):   # a rescaled gate keeps no stale narrow threshold
+            for k in ("narrow_threshold", "narrow_fov_deg", "wide_fov_deg"):   # a rescaled gate keeps no stale rule
                 unc.pop(k, None)
             unc.update(narrow(a.narrow_fov, window and fitted * window["scale"]))
             stamped.append(f"gate thresholds = fitted {fitted:.4f} x held-out scales {g['scale']:.4f} (landscape), "

@@ -221,6 +221,9 @@ def test_wide_fov_stamps_the_width_rule_and_a_square_frame_takes_the_portrait_th
     assert r.returncode == 0, r.stderr
     unc = read_bundle(tmp_path / "again").calibration.uncertainty
     assert (unc.wide_fov_deg, unc.narrow_threshold, unc.portrait_threshold) == (55.0, 0.038, 0.015)
+    r = _stamp(tmp_path / "again", tmp_path / "plain", "--cv", cv, "--rescale-gate", "--gate-json", "gate_far_mass.json")
+    assert r.returncode == 0, r.stderr   # a re-chosen gate keeps no rule it was not given
+    assert read_bundle(tmp_path / "plain").calibration.uncertainty.wide_fov_deg is None
     for flag, said in ((["--wide-fov", 40], "--wide-fov 40: must exceed the bundle's narrow_fov_deg 42"),
                        (["--wide-fov", 200], "--wide-fov 200: valid 20..170 degrees")):
         r = _stamp(tmp_path / "out", tmp_path / "bad", *flag)
