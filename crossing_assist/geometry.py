@@ -24,8 +24,10 @@ from a camera of horizontal FOV ``f`` first loses the rows above and below what 
 show at the training photos' pixels per degree (:func:`view_rows`), then is letterboxed. A phone
 held in portrait (3:4, ~53 deg across) keeps its middle ~3:3 at the training scale instead of
 being shrunk to 3/4 of it with sky and feet added; a 4:3 landscape frame at the training FOV, a
-16:9 video frame, or a narrower camera lose nothing. Columns are never cropped: the 12 strips
-span the whole frame.
+16:9 video frame, or a narrower portrait camera lose nothing. A narrower camera's frame that is
+shorter than that view (a landscape camera zoomed in, or set narrower than its sensor's FOV) gets
+rows of ``pad_rgb`` above and below instead: letterboxed as it is, it would fill the canvas
+magnified (:func:`take_rows`). Columns are never cropped: the 12 strips span the whole frame.
 
 *Levelling* (:func:`level`): a phone is rarely held level. Where its orientation sensor says how
 far the camera is rolled about its own axis, the frame is turned back by that roll (at most
@@ -70,23 +72,47 @@ MIN_LEVEL_DEG = 0.5   # a smaller roll is left alone
 MAX_GUIDED_ROLL_DEG = MAX_LEVEL_DEG + 15.0
 
 
+#: :func:`view_rows` pads a frame only when it is more than 1 / PAD_SLACK shorter than the view.
+PAD_SLACK = 50
+
+
 def view_rows(height: int, width: int, fov_deg: float, canvas: tuple[int, int],
               train_fov_deg: float = TRAIN_FOV_DEG, zoom: float = 1.0) -> tuple[int, int]:
     """The rows of a ``height x width`` frame (horizontal FOV ``fov_deg``) that the canvas shows
     at the training camera's angular scale (``zoom`` = 1), or magnified by up to ``zoom``:
-    ``(top, rows)``, centred.
+    ``(top, rows)``, centred; ``rows`` > ``height`` (``top`` < 0) means rows of padding added
+    above and below (:func:`take_rows`).
 
-    ``rows = min(height, max(1, floor(width * H * t / W + 0.5)))`` for the canvas (H, W), with
-    ``t = max(1, tan(train / 2) / tan(fov / 2) / zoom)``; ``top = (height - rows) // 2``. A camera
-    wider than the training one (``t`` would be < 1) cannot reach the training scale without losing
-    columns, so its frame is fitted by its width and keeps the rows the canvas shows at that
-    scale. A narrower camera's frame is shown ``min(tan(train / 2) / tan(fov / 2), zoom)`` times
-    magnified (a large zoom: its middle rows fill the canvas). The phone app computes the same
-    (android_demo/www/js/geometry.js); the shared test vectors hold both to it."""
+    ``rows = max(1, floor(width * H * t / W + 0.5))`` for the canvas (H, W), with
+    ``t = max(1, tan(train / 2) / tan(fov / 2) / zoom)``, and at most ``height`` when ``t`` = 1 or
+    when it exceeds ``height`` by at most ``height // PAD_SLACK`` rows (a crop of the sensor, e.g. a
+    3:4 window of a photo at its own FOV, is the view's height but for rounding: no padding);
+    ``top = (height - rows) // 2``. A camera wider than the training one (``t`` would be < 1)
+    cannot reach the training scale without losing columns, so its frame is fitted by its width and
+    keeps the rows the canvas shows at that scale. A narrower camera's frame is shown
+    ``min(tan(train / 2) / tan(fov / 2), zoom)`` times magnified (a large zoom: its middle rows fill
+    the canvas): cropped to those rows when taller, padded to them when shorter (a landscape frame
+    zoomed in, which letterboxed as it is would fill the canvas magnified further). The phone app
+    computes the same (android_demo/www/js/geometry.js); the shared test vectors hold both to it."""
     ch, cw = canvas
     t = max(1.0, math.tan(math.radians(train_fov_deg) / 2) / math.tan(math.radians(fov_deg) / 2) / zoom)
-    rows = min(int(height), max(1, math.floor(width * ch * t / cw + 0.5)))
+    rows = max(1, math.floor(width * ch * t / cw + 0.5))
+    if t == 1.0 or rows <= height + height // PAD_SLACK:   # a frame the view's height, to rounding: as it is
+        rows = min(int(height), rows)
     return (int(height) - rows) // 2, rows
+
+
+def take_rows(frame: np.ndarray, top: int, rows: int, pad_rgb: tuple[int, int, int] = PAD_RGB) -> np.ndarray:
+    """``rows`` rows of an H x W x C frame from row ``top`` (:func:`view_rows`): a view of the frame
+    when they lie inside it, else a copy with the rows beyond it filled with ``pad_rgb``."""
+    h = frame.shape[0]
+    if 0 <= top and top + rows <= h:
+        return frame[top:top + rows]
+    out = np.empty((rows,) + frame.shape[1:], frame.dtype)
+    out[:] = np.asarray(pad_rgb, frame.dtype)
+    lo, hi = max(0, top), min(h, top + rows)
+    out[lo - top:hi - top] = frame[lo:hi]
+    return out
 
 
 def window_fov(fraction: float, fov_deg: float) -> float:
@@ -195,18 +221,17 @@ class Geometry:
 
     def view(self, frame: np.ndarray, fov_deg: float, canvas: tuple[int, int]) -> np.ndarray:
         """The part of an H x W x C frame (horizontal FOV ``fov_deg``) the graph should see
-        (:meth:`rows_seen`; a view, not a copy; the frame itself without ``view_crop``)."""
+        (:meth:`rows_seen`: a view of its rows, or a padded copy, :func:`take_rows`; the frame
+        itself without ``view_crop``)."""
         if not self.view_crop:
             return frame
-        top, rows = self.rows_seen(frame.shape[0], frame.shape[1], fov_deg, canvas)
-        return frame[top:top + rows]
+        return take_rows(frame, *self.rows_seen(frame.shape[0], frame.shape[1], fov_deg, canvas), self.pad_rgb)
 
     def camera_view(self, frame: np.ndarray, canvas: tuple[int, int], fov_deg: float | None = None) -> np.ndarray:
         """:meth:`view` at the frame's camera FOV (:meth:`camera_fov`): what a consumer gives the
         graph for a frame of any orientation, as ``Engine.predict`` does. GeometryError for a
         frame too narrow for any camera."""
-        top, rows = self.camera_rows(frame.shape[0], frame.shape[1], canvas, fov_deg)
-        return frame[top:top + rows]
+        return take_rows(frame, *self.camera_rows(frame.shape[0], frame.shape[1], canvas, fov_deg), self.pad_rgb)
 
     def camera_rows(self, height: int, width: int, canvas: tuple[int, int],
                     fov_deg: float | None = None) -> tuple[int, int]:

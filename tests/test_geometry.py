@@ -181,12 +181,35 @@ def test_view_rows_keeps_the_training_cameras_angular_scale():
     canvas = (168, 224)
     assert view_rows(480, 640, 67.0, canvas) == (0, 480)             # the training camera: nothing
     assert view_rows(720, 1280, 67.0, canvas) == (0, 720)            # 16:9 video: already shorter
-    assert view_rows(640, 480, 40.0, canvas) == (0, 640)             # a narrower camera (a 3:4 window)
+    assert view_rows(640, 480, 40.8, canvas) == (0, 640)             # a 3:4 window of a 67 deg 4:3 photo
+    assert view_rows(640, 480, 40.0, canvas) == (-8, 655)            # narrower still: a little shorter, padded
+    assert view_rows(480, 640, 41.0, canvas) == (-185, 850)          # a landscape camera zoomed in: padded
     top, rows = view_rows(640, 480, 53.0, canvas)                    # a phone held in portrait
     assert rows == 478 and top == 81                                 # its middle ~3:3
     assert view_rows(480, 640, 100.0, canvas) == (0, 480)            # a wide-angle lens, 4:3: fitted by width
     assert view_rows(640, 480, 100.0, canvas) == (140, 360)          # ... held in portrait: a 4:3 band
     assert view_rows(64, 1, 67.0, canvas) == (31, 1)                 # never below one row
+
+
+def test_a_zoomed_landscape_frame_is_padded_to_the_training_scale_not_magnified():
+    """A 4:3 frame from a camera narrower than the training one (zoomed in, ~41 deg) is shorter than
+    the view the canvas shows at the training scale: its rows are padded with pad_rgb above and
+    below (take_rows), so the letterbox shows it at that scale (its width on 41/67 of the canvas,
+    in tangents) instead of filling the canvas magnified ~1.8 times."""
+    from crossing_assist.geometry import content_window, take_rows
+
+    frame = np.full((48, 64, 3), 200, np.uint8)
+    geo = Geometry(view_crop=True, pad_rgb=(1, 2, 3))
+    seen = geo.view(frame, 41.0, (168, 224))
+    top, rows = geo.rows_seen(48, 64, 41.0, (168, 224))
+    assert seen.shape == (rows, 64, 3) and rows > 48 and top < 0
+    assert np.array_equal(seen[-top:-top + 48], frame)
+    assert (seen[0] == (1, 2, 3)).all() and (seen[-1] == (1, 2, 3)).all()
+    x0, x1 = content_window(seen.shape[0], seen.shape[1], (168, 224))   # the frame's columns on the canvas
+    ratio = np.tan(np.radians(20.5)) / np.tan(np.radians(33.5))
+    assert abs((x1 - x0) - ratio) < 0.01, (x0, x1, ratio)
+    assert take_rows(frame, 8, 30).base is frame                        # inside: a view, no copy
+    assert geo.rows_seen(48, 64, 67.0, (168, 224)) == (0, 48)          # the training camera: as it is
 
 
 def test_geometry_view_crops_only_when_the_bundle_says_so():

@@ -216,6 +216,15 @@ def test_geometry_scenarios_cover_both_orientations_and_several_aspects(stored):
     assert {tuple(c["frame"]) for c in refused if c["override"] is None} == {(100, 1000), (180, 1440)}
 
 
+def _documented_rows(c: dict) -> int:
+    """A view-rows case's rows by the formula in docs (geometry.view_rows), from its JSON alone."""
+    (w, h), (ch, cw) = c["frame"], c["canvas"]
+    t = max(1.0, math.tan(math.radians(c["train_fov_deg"]) / 2) / math.tan(math.radians(c["fov_deg"]) / 2)
+            / c.get("zoom", 1.0))
+    full = max(1, math.floor(w * ch * t / cw + 0.5))
+    return full if t > 1 and full > h + h // 50 else min(h, full)
+
+
 def test_view_crop_vectors_cover_orientations_aspects_and_fovs(stored):
     """Version 4: the view crop's rows for portrait and landscape frames of several aspects, the
     orientation's default FOV and overrides, every canvas; each case replays from its JSON alone
@@ -235,9 +244,10 @@ def test_view_crop_vectors_cover_orientations_aspects_and_fovs(stored):
     for c in cases:
         w, h = c["frame"]
         assert [c["top"], c["rows"]] == list(view_rows(h, w, c["fov_deg"], tuple(c["canvas"]), c["train_fov_deg"]))
-        t = max(1.0, math.tan(math.radians(c["train_fov_deg"]) / 2) / math.tan(math.radians(c["fov_deg"]) / 2))
-        assert c["rows"] == min(h, max(1, math.floor(w * c["canvas"][0] * t / c["canvas"][1] + 0.5)))
+        assert c["rows"] == _documented_rows(c)
         assert c["top"] == (h - c["rows"]) // 2
+    padded = {(c["frame"][1] > c["frame"][0]) for c in cases if c["rows"] > c["frame"][1]}
+    assert False in padded                                      # landscape frames set narrower are padded
 
 
 def test_view_zoom_vectors_magnify_narrow_frames_up_to_their_zoom(stored):
@@ -250,8 +260,7 @@ def test_view_zoom_vectors_magnify_narrow_frames_up_to_their_zoom(stored):
     assert {1.0, 4.0} < {c["zoom"] for c in cases}
     for c in cases:
         w, h = c["frame"]
-        t = max(1.0, math.tan(math.radians(c["train_fov_deg"]) / 2) / math.tan(math.radians(c["fov_deg"]) / 2) / c["zoom"])
-        assert c["rows"] == min(h, max(1, math.floor(w * c["canvas"][0] * t / c["canvas"][1] + 0.5)))
+        assert c["rows"] == _documented_rows(c)
         assert c["top"] == (h - c["rows"]) // 2
         if c["zoom"] == 1.0:
             assert [c["top"], c["rows"]] == list(view_rows(h, w, c["fov_deg"], tuple(c["canvas"]), c["train_fov_deg"]))

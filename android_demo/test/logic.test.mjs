@@ -254,7 +254,9 @@ test('viewRows: the training camera keeps everything; portrait loses sky and fee
   const canvas = [168, 224];
   assert.deepEqual(viewRows(480, 640, 67, canvas, 67), [0, 480]); // the training camera itself
   assert.deepEqual(viewRows(720, 1280, 67, canvas, 67), [0, 720]); // 16:9: already shorter
-  assert.deepEqual(viewRows(640, 480, 40, canvas, 67), [0, 640]); // a narrower camera
+  assert.deepEqual(viewRows(640, 480, 40.8, canvas, 67), [0, 640]); // a 3:4 window of a 67 deg photo
+  assert.deepEqual(viewRows(640, 480, 40, canvas, 67), [-8, 655]); // narrower still: padded a little
+  assert.deepEqual(viewRows(480, 640, 41, canvas, 67), [-185, 850]); // a landscape camera zoomed in: padded
   const [top, rows] = viewRows(640, 480, 53, canvas, 67); // a phone held in portrait
   assert.ok(rows < 640 && rows > 400 && top === Math.floor((640 - rows) / 2), `${top} ${rows}`);
   assert.deepEqual(viewRows(480, 640, 100, canvas, 67), [0, 480]); // a wide-angle lens, 4:3: fitted by width
@@ -274,6 +276,15 @@ test('viewRows: the training camera keeps everything; portrait loses sky and fee
   assert.deepEqual([v.rgb[0], v.rgb[v.rgb.length - 1]], [t, t + r - 1]);
   const off = frameView({ rgb, width: w, height: h }, { ...geometry, view_crop: false }, 90, [16, 16]);
   assert.ok(off.rgb === rgb && off.height === h && off.top === 0 && off.rows === h);
+  // shorter than the view (a landscape camera zoomed in): a copy padded with pad_rgb above and below
+  const short = Uint8Array.from({ length: 4 * 3 * 3 }, (_, i) => 10 + Math.floor(i / 12)); // 4 x 3, byte = 10 + row
+  const p = frameView({ rgb: short, width: 4, height: 3 }, { ...geometry, pad_rgb: [1, 2, 3] }, 45, [16, 16]);
+  const [pt, pr] = viewRows(3, 4, 45, [16, 16], 67);
+  assert.ok(pt < 0 && pr > 3, `${pt} ${pr}`);
+  assert.deepEqual([p.top, p.rows, p.height, p.width, p.rgb.length], [pt, pr, pr, 4, pr * 4 * 3]);
+  assert.deepEqual(Array.from(p.rgb.subarray(0, 3)), [1, 2, 3]);
+  assert.deepEqual(Array.from(p.rgb.subarray(p.rgb.length - 3)), [1, 2, 3]);
+  assert.deepEqual(Array.from(p.rgb.subarray(-pt * 12, (-pt + 3) * 12)), Array.from(short));
 });
 
 test('the shared vectors hold the view crop, and a wrong viewRows is caught', { skip: noVectors }, () => {

@@ -26,7 +26,7 @@ from ..actions import UNKNOWN
 from ..data_tools import augment
 from ..data_tools.images import ImageError, flag_value, load_frame, load_rgb
 from ..data_tools.manifest import Dataset, Row
-from ..geometry import PAD_RGB, GeometryError, content_window, letterbox, letterbox_geometry
+from ..geometry import PAD_RGB, GeometryError, content_window, letterbox, letterbox_geometry, take_rows
 
 
 @dataclass(frozen=True)
@@ -111,7 +111,7 @@ def load_variants(ds: Dataset, row: Row, size: tuple[int, int], variants: tuple[
         top, rows = geo.camera_rows(fh, fw, size)   # as geo.camera_view crops
     except GeometryError as exc:
         raise ImageError(f"{path}: {exc}") from None
-    base = frame[top:top + rows]
+    base = take_rows(frame, top, rows, geo.pad_rgb)
     far_y = flag_value(row.flags, "far_y")   # a fraction of the frame's height: of the rows kept
     far_y = 0.5 if far_y is None else (float(far_y) * fh - top) / rows
     scale = 2 * max(size) / max(base.shape[:2])

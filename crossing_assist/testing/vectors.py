@@ -120,7 +120,11 @@ Version 17: the camera's width picks the gate threshold (``calibration.uncertain
 and ``wide_fov_portrait_set_wide``: a square frame (~53 deg across, landscape by its sides: the
 portrait threshold), 4:3 landscape (67 deg: the landscape one), 9:16 video upright (~41 deg: the
 narrow one), 3:4 portrait (53 deg: the portrait one), then 3:4 portrait the user set to 65 deg
-(the landscape one). The earlier scenarios are unchanged.
+(the landscape one). The earlier scenarios are unchanged. And the view rows of a frame shorter than
+the view the canvas shows at the training scale (a landscape camera set or zoomed narrower) are now
+more than its height (``top`` < 0: rows of ``pad_rgb`` above and below, ``geometry.take_rows``),
+where they were its height (it filled the canvas magnified); a frame within ``height // 50`` rows of
+that view keeps its height.
 """
 
 from __future__ import annotations

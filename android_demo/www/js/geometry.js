@@ -170,28 +170,44 @@ export function zoomedFov(fov, settings = {}, capabilities = {}) {
 /**
  * The rows of a height x width frame (horizontal FOV `fovDeg`) that the canvas [H, W] (bundle.json
  * input.size) shows at the training camera's angular scale, or magnified by up to `zoom`
- * (geometry.view_zoom, schema 4): [top, rows], centred. Python: crossing_assist/geometry.py
- * view_rows, the same integers (the shared test vectors check it):
+ * (geometry.view_zoom, schema 4): [top, rows], centred; rows > height (top < 0) means rows of
+ * padding above and below (frameView). Python: crossing_assist/geometry.py view_rows, the same
+ * integers (the shared test vectors check it):
  *   t = max(1, tan(train / 2) / tan(fov / 2) / zoom)
- *   rows = min(height, max(1, floor(width * H * t / W + 0.5))), top = (height - rows) // 2
- * (a camera wider than the training one, t < 1, is fitted by its width: no further crop).
+ *   rows = max(1, floor(width * H * t / W + 0.5)), at most height when t = 1 or when it is at
+ *   most height + floor(height / 50); top = (height - rows) // 2
+ * (a camera wider than the training one, t < 1, is fitted by its width: no further crop; a
+ * narrower one's frame shorter than the view, a landscape camera zoomed in, is padded to it).
  */
 export function viewRows(height, width, fovDeg, canvas, trainFovDeg, zoom = 1) {
   const [ch, cw] = canvas;
   const rad = Math.PI / 180; // as Python's math.radians: x * (pi / 180)
   const t = Math.max(1, Math.tan((trainFovDeg * rad) / 2) / Math.tan((fovDeg * rad) / 2) / zoom);
-  const rows = Math.min(height, Math.max(1, Math.floor((width * ch * t) / cw + 0.5)));
+  const full = Math.max(1, Math.floor((width * ch * t) / cw + 0.5));
+  // a frame the view's height but for rounding (a crop of the sensor) as it is (Python: PAD_SLACK)
+  const rows = t === 1 || full <= height + Math.floor(height / 50) ? Math.min(height, full) : full;
   return [Math.floor((height - rows) / 2), rows];
 }
 
 /**
  * What of a frame ({rgb: row-major RGB bytes, width, height}) goes into the graph, for a frame
- * whose horizontal FOV is `fovDeg`: with geometry.view_crop, its viewRows (a subarray, no copy),
- * else the whole frame. Returns {rgb, width, height, top, rows}.
+ * whose horizontal FOV is `fovDeg`: with geometry.view_crop, its viewRows (a subarray, no copy;
+ * a padded copy when the frame is shorter than the view), else the whole frame. Returns {rgb,
+ * width, height, top, rows}.
  */
 export function frameView(frame, geometry, fovDeg, canvas) {
   const { rgb, width, height } = frame;
   if (!geometry.view_crop) return { rgb, width, height, top: 0, rows: height };
   const [top, rows] = viewRows(height, width, fovDeg, canvas, geometry.train_fov_deg, geometry.view_zoom ?? 1);
-  return { rgb: rgb.subarray(top * width * 3, (top + rows) * width * 3), width, height: rows, top, rows };
+  if (top >= 0 && top + rows <= height) {
+    return { rgb: rgb.subarray(top * width * 3, (top + rows) * width * 3), width, height: rows, top, rows };
+  }
+  // shorter than the view (Python: geometry.take_rows): padded above and below with pad_rgb
+  const out = new Uint8Array(rows * width * 3);
+  const pad = geometry.pad_rgb ?? PAD_RGB;
+  for (let i = 0; i < out.length; i += 3) { out[i] = pad[0]; out[i + 1] = pad[1]; out[i + 2] = pad[2]; }
+  const lo = Math.max(0, top);
+  const hi = Math.min(height, top + rows);
+  out.set(rgb.subarray(lo * width * 3, hi * width * 3), (lo - top) * width * 3);
+  return { rgb: out, width, height: rows, top, rows };
 }
