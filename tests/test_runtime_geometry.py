@@ -284,7 +284,13 @@ def test_demo_summary_says_which_rows_a_view_crop_bundle_saw(tmp_path):
         if name == "portrait":
             assert rows < h and f"the model sees rows {top}-{top + rows} of {h} (view crop" in r.stdout
         else:
-            assert rows == h and "view crop" not in r.stdout
+            assert rows == h and "view crop" not in r.stdout and "padded" not in r.stdout
+    # a landscape clip set narrower than its camera (zoomed in): padded to the training scale, said so
+    r = subprocess.run([*DEMO, str(tmp_path / "landscape.mp4"), "--bundle", str(bundle), "--out", str(tmp_path / "z"),
+                        "--no-video", "--quiet", "--fov", "41"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    rows = view_rows(96, 128, 41.0, size, 67.0)[1]
+    assert rows > 96 and f"the model sees the frame padded to {rows} rows" in r.stdout, r.stdout
 
 
 def test_demo_gives_9_16_video_its_crops_fov_with_sensor_aspect(tmp_path):

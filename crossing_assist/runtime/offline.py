@@ -90,6 +90,9 @@ class Summary:
             if self.view_rows and self.view_rows[1] < h:
                 top, rows = self.view_rows
                 seen = f"; the model sees rows {top}-{top + rows} of {h} (view crop: the training camera's view)"
+            elif self.view_rows and self.view_rows[1] > h:
+                seen = (f"; the model sees the frame padded to {self.view_rows[1]} rows (narrower than its default "
+                        "camera: shown at the training scale, not magnified)")
             portrait = h > w
             out.insert(1, f"frames {w}x{h} ({'portrait' if portrait else 'landscape'}); headings assume a "
                           f"horizontal field of view of {fovs} deg{seen}")

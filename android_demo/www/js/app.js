@@ -295,7 +295,8 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   // The view crop (schema 3): the graph sees the rows the training camera would have seen at
   // this frame's FOV; the FOV, orientation and threshold above are the whole frame's.
   const seen = frameView(frame, app.meta.geometry, cam.fov, app.meta.input.size);
-  const crop = seen.rows < frame.height ? `, rows ${seen.top}–${seen.top + seen.rows} seen` : '';
+  const crop = seen.rows < frame.height ? `, rows ${seen.top}–${seen.top + seen.rows} seen`
+    : seen.rows > frame.height ? `, padded to ${seen.rows} rows (a camera narrower than its default)` : '';
   const narrow = gateKind(app.meta.calibration.uncertainty, frame.width, frame.height, cam.fov) === 'narrow'
     ? ', a narrow camera’s gate threshold' : '';
   const levelled = frame.roll_deg ? `, turned ${Math.abs(frame.roll_deg).toFixed(0)}° ${frame.roll_deg > 0 ? 'clockwise' : 'counter-clockwise'} to level` : '';
