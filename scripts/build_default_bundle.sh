@@ -148,12 +148,11 @@ fi
 # (NARROW_FOV= for none). Keep the cut near the windows: portrait phone views at 45 deg were 0.92 %
 # confidently wrong at the windows' far-mass threshold (README, "What the user hears").
 NARROW_FOV=${NARROW_FOV-42}
-# WIDE_FOV=60: the camera's width, not the frame's orientation, picks the threshold (frames under
-# 60 deg take the portrait one, e.g. a square frame, ~53 deg, as the phone held in portrait). Off
-# by default: a landscape frame narrower than its orientation's FOV (a zoomed camera, a user's
-# setting) is shown magnified, not at the training scale, and is confidently wrong more often at
-# the looser thresholds (docs/results.md, "Square frames, zoomed cameras").
-WIDE_FOV=${WIDE_FOV-}
+# The camera's width, not the frame's orientation, picks the threshold (WIDE_FOV= for orientation):
+# frames under WIDE_FOV degrees take the portrait one, e.g. a square frame (~53 deg, the portrait
+# phone's width) or a landscape camera zoomed in, which the view crop pads to the training scale
+# (docs/results.md, "Square frames, zoomed cameras").
+WIDE_FOV=${WIDE_FOV-60}
 RESCALE=()
 if [ -f "$CV_DIR/$STAMP_JSON" ]; then
     RESCALE=(--rescale-gate)

@@ -63,7 +63,7 @@ def test_build_default_bundle_exports_the_zoomed_view_with_the_held_out_gate(tmp
     assert "gate measure: far_mass" in r.stderr
     assert (unc.measure, unc.threshold, unc.portrait_threshold, unc.fitted_threshold) == ("far_mass", 0.007, 0.015, None)
     assert (unc.narrow_threshold, unc.narrow_fov_deg) == (0.038, 42.0)   # the windows' choice, NARROW_FOV's default
-    assert unc.wide_fov_deg is None   # WIDE_FOV is off by default
+    assert unc.wide_fov_deg == 60.0 and unc.threshold_for("landscape", 52.8) == 0.015   # WIDE_FOV's default
     assert b.metrics["gate_held_out"]["threshold"] == 0.007 and b.metrics["gate_held_out"]["portrait"]["threshold"] == 0.015
     assert b.metrics["leave_one_photographer_out"]["accuracy"]["mean"] == 0.6
     q = b.metrics.get("int8_vs_fp32")   # int8 kept only within 1 point of fp32 and not slower, else fp32
@@ -98,9 +98,9 @@ def test_build_default_bundle_with_members_ships_their_ensemble_at_its_held_out_
     # GATE_TOP=16: the choice of the sweep carried on to x16, the narrow camera's threshold with it
     (cv / "gate_mirror_far_mass_top16_ensemble3.json").write_text(json.dumps(
         fm(0.02) | {"portrait": fm(0.03), "portrait_window": fm(0.0617)}))
-    r = _build(tmp_path, OUT=str(tmp_path / "top"), MEMBERS=f"{run} {one}", GATE_TOP="16", WIDE_FOV="60", **env)
+    r = _build(tmp_path, OUT=str(tmp_path / "top"), MEMBERS=f"{run} {one}", GATE_TOP="16", WIDE_FOV="", **env)
     assert r.returncode == 0, r.stderr
     assert "gate_mirror_far_mass_top16_ensemble3.json" in r.stderr
     unc = read_bundle(tmp_path / "top").calibration.uncertainty
     assert (unc.threshold, unc.portrait_threshold, unc.narrow_threshold, unc.narrow_fov_deg) == (0.02, 0.03, 0.0617, 42.0)
-    assert unc.wide_fov_deg == 60.0 and unc.threshold_for("landscape", 52.8) == 0.03   # WIDE_FOV=60: by width
+    assert unc.wide_fov_deg is None and unc.threshold_for("landscape", 52.8) == 0.02   # WIDE_FOV=: by orientation
