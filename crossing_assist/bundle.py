@@ -176,7 +176,7 @@ class UncertaintySpec:
 
     def __post_init__(self) -> None:
         if (self.narrow_threshold is None) != (self.narrow_fov_deg is None):
-            raise ValueError("narrow_threshold and narrow_fov_deg go together")
+            raise ValueError("narrow_threshold and narrow_fov_deg go together; set both or neither")
         if None not in (self.wide_fov_deg, self.narrow_fov_deg) and self.wide_fov_deg <= self.narrow_fov_deg:
             raise ValueError(f"wide_fov_deg {self.wide_fov_deg:g} must exceed narrow_fov_deg {self.narrow_fov_deg:g}")
 
@@ -377,9 +377,6 @@ def _parse_calibration(d: Any) -> Calibration:
         n_frames=_int(_get(c, "n_frames", "calibration.conformal"), "calibration.conformal.n_frames", 0),
     )
     u = _get(d, "uncertainty", "calibration")
-    if isinstance(u, Mapping) and (u.get("narrow_threshold") is None) != (u.get("narrow_fov_deg") is None):
-        raise BundleError("bundle.json: calibration.uncertainty.narrow_threshold and narrow_fov_deg go together; "
-                          "set both or neither")
     try:
         unc = _uncertainty(u)
     except BundleError:

@@ -108,7 +108,7 @@ def load_variants(ds: Dataset, row: Row, size: tuple[int, int], variants: tuple[
     frame = load_frame(path, row.flags)
     geo, (fh, fw) = letterbox_geometry(fov_deg, view_zoom=zoom), frame.shape[:2]
     try:
-        top, rows = geo.camera_rows(fh, fw, size)   # as geo.camera_view crops
+        top, rows = geo.camera_rows(fh, fw, size)   # as geo.camera_view takes them (crop or pad)
     except GeometryError as exc:
         raise ImageError(f"{path}: {exc}") from None
     base = take_rows(frame, top, rows, geo.pad_rgb)

@@ -205,9 +205,14 @@ export function frameView(frame, geometry, fovDeg, canvas) {
   // shorter than the view (Python: geometry.take_rows): padded above and below with pad_rgb
   const out = new Uint8Array(rows * width * 3);
   const pad = geometry.pad_rgb ?? PAD_RGB;
-  for (let i = 0; i < out.length; i += 3) { out[i] = pad[0]; out[i + 1] = pad[1]; out[i + 2] = pad[2]; }
   const lo = Math.max(0, top);
   const hi = Math.min(height, top + rows);
-  out.set(rgb.subarray(lo * width * 3, hi * width * 3), (lo - top) * width * 3);
+  const [a, b] = [(lo - top) * width * 3, (hi - top) * width * 3]; // the frame's rows in `out`
+  for (let i = 0; i < out.length; i += 3) {
+    if (i === a) i = b; // only the padding is filled
+    if (i >= out.length) break;
+    out[i] = pad[0]; out[i + 1] = pad[1]; out[i + 2] = pad[2];
+  }
+  out.set(rgb.subarray(lo * width * 3, hi * width * 3), a);
   return { rgb: out, width, height: rows, top, rows };
 }
