@@ -20,8 +20,9 @@ decision logic (``runtime.listen.judge_scans``): every frame after the still sec
 in view, with the turn from a gyroscope and the turn read from the frames, the worse of the two
 counted (``--heard-after S``: judged when heard, the beacon turned by the gyroscope until then, as
 the app plays it; each point also keeps the same decisions heard late as two other players play
-them, in :data:`LATE_PLAYS`: not turned, a player without a gyroscope, ``…_unturned``; a stop
-once half a strip stale, the app while its gyroscope is not followed, ``…_stale``). Per
+them, in :data:`LATE_PLAYS`: not turned, ``…_unturned``; a stop once half a strip stale, the app
+while its gyroscope is not followed, ``…_stale``; a stop once the turn rate read at its frame makes
+it half a strip stale by the end of its play, a player without a gyroscope, ``…_read_stale``). Per
 photographer a curve in choose_gate's format, pooled and chosen with its rule (confidently wrong
 <= 0.5 % of goal-in-view frames, the most beacon-on), and each photographer measured at the
 threshold chosen on the others. Each point also counts the photos its wrong frames come from
@@ -63,9 +64,10 @@ from crossing_assist.models.evaluate import GATE_TOP, gate_scales  # noqa: E402
 from crossing_assist.runtime.listen import Listener, judge_scans, scan_yaw  # noqa: E402
 
 #: Heard late, the plays kept beside the app's turned one, each the worse of its readings
-#: (``runtime.listen.judge_scans``): as decided (a player without a gyroscope), and a stop once
-#: half a strip stale (the app while its gyroscope reports but is not yet followed)
-LATE_PLAYS = {"unturned": ("gyro", "camera"), "stale": ("camera_stale",)}
+#: (``runtime.listen.judge_scans``): as decided (a player without a gyroscope before 2026-12-07),
+#: a stop once half a strip stale (the app while its gyroscope reports but is not yet followed),
+#: and a stop once the rate read at its frame makes it so (a player without a gyroscope)
+LATE_PLAYS = {"unturned": ("gyro", "camera"), "stale": ("camera_stale",), "read_stale": ("camera_read_stale",)}
 
 #: choose_gate's view each scanning camera checks: landscape, the narrow camera's (3:4 windows) or
 #: the phone held in portrait's threshold
@@ -238,20 +240,24 @@ def main(argv=None) -> int:
     atomic_write_text(a.cv / name, json.dumps(result, indent=1))
     print(f"{view} scanned, {len(folds)} photographers x {len(runs)} run(s), "
           f"{folds[0]['photos']}+ photos each, {best['frames']} goal-in-view frames:")
-    late = " not turned (no gyroscope): wrong | a gyroscope not followed: on / wrong |" if a.heard_after else ""
+    late = (" not turned: wrong | a gyroscope not followed: on / wrong | no gyroscope: on / wrong |"
+            if a.heard_after else "")
     print(f"| far mass | beacon on | confidently wrong (frames) | photos with a wrong frame, of {photos} |{late}\n"
-          f"|---|---:|---:|---:|{'---:|---:|' if late else ''}")
+          f"|---|---:|---:|---:|{'---:|---:|---:|' if late else ''}")
     for c in curve:
         print(f"| {c['scale'] * FAR_MASS_REFERENCE:.5f} | {100 * c['beacon_on']:.1f} % | "
               f"{100 * c['confidently_wrong']:.2f} % ({c['confidently_wrong_frames']}) | {c['confidently_wrong_photos']} |"
               + (f" {100 * c['confidently_wrong_unturned']:.2f} % | {100 * c['beacon_on_stale']:.1f} % / "
-                 f"{100 * c['confidently_wrong_stale']:.2f} % |" if late else ""))
+                 f"{100 * c['confidently_wrong_stale']:.2f} % | {100 * c['beacon_on_read_stale']:.1f} % / "
+                 f"{100 * c['confidently_wrong_read_stale']:.2f} % |" if late else ""))
     print(f"chosen: far mass {result['threshold']:.5f} ({'targets met' if met else 'targets NOT met; nearest point'}): "
           f"beacon on {100 * best['beacon_on']:.1f} %, confidently wrong {100 * best['confidently_wrong']:.2f} % "
           f"({best['confidently_wrong_frames']} frames from {best['confidently_wrong_photos']} of {photos} photos)"
-          + (f"; not turned (a player without a gyroscope) {100 * best['confidently_wrong_unturned']:.2f} %; "
+          + (f"; not turned {100 * best['confidently_wrong_unturned']:.2f} %; "
              f"a stop once half a strip stale (a gyroscope not followed) {100 * best['beacon_on_stale']:.1f} % on, "
-             f"{100 * best['confidently_wrong_stale']:.2f} % wrong" if a.heard_after else ""))
+             f"{100 * best['confidently_wrong_stale']:.2f} % wrong; a stop once the rate read makes it so "
+             f"(no gyroscope) {100 * best['beacon_on_read_stale']:.1f} % on, "
+             f"{100 * best['confidently_wrong_read_stale']:.2f} % wrong" if a.heard_after else ""))
     if lopo:
         print(f"chosen on the other photographers, measured on each: beacon on {100 * lopo['beacon_on']:.1f} %, "
               f"confidently wrong {100 * lopo['confidently_wrong']:.2f} % (per photographer "

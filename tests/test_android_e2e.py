@@ -943,6 +943,31 @@ def test_without_the_gyroscope_the_turn_is_read_from_the_picture_as_python_reads
     assert turning >= 5, f"only {turning} frames turning 5 deg/s or more"
 
 
+def test_without_a_gyroscope_a_decision_the_picture_turn_makes_stale_plays_as_a_stop(portrait: dict) -> None:
+    """No gyroscope reports in the portrait run, so nothing turns a decision once its frame is read.
+    A decision plays until the next one, so one whose turn read from the picture, carried from its
+    capture past its decision by a frame interval, passes half a strip plays as a stop (trace
+    ``picture_stale``), as Python's live loop plays it (``Pipeline.heard``): every frame whose turn
+    up to its decision alone passes half a strip, and no frame whose whole turn stays within it.
+    The sample clip pans right at up to ~45 deg/s, so some do."""
+    r = portrait["result"]
+    frames = {e["id"]: e for e in r["trace"] if e["kind"] == "frame"}
+    stale = {e["frame"]: e for e in r["trace"] if e["kind"] == "picture_stale"}
+    assert stale, "no decision was made stale by the picture's turn"
+    for i, e in stale.items():
+        f = frames[i]
+        half = f["decision_fov_deg"] / 24
+        assert f["fresh"] and not f["decision"]["stop"] and f["yaw_source"] == "camera"
+        assert abs(e["turn_deg"]) > half and abs(e["turn_deg"]) >= abs(f["yaw_rate_dps"]) * (f["decided"] - f["t"]) - 1e-9
+    for i, f in frames.items():
+        if not f["fresh"] or f["decision"]["stop"] or f["yaw_source"] != "camera":
+            continue
+        if abs(f["yaw_rate_dps"]) * (f["decided"] - f["t"]) > f["decision_fov_deg"] / 24:
+            assert i in stale, f
+        if abs(f["yaw_rate_dps"]) <= f["decision_fov_deg"] / 24:   # within half a strip even a second on
+            assert i not in stale, (f, stale.get(i))
+
+
 def test_a_tilt_sensor_that_stops_leaves_no_stale_roll_and_is_said_once(portrait: dict) -> None:
     """The sensor falls silent while its last reading says 75 deg (beyond levelling): frames
     grabbed more than ROLL_FRESH_S after that reading are neither turned nor stopped as rolled

@@ -323,3 +323,58 @@ def test_the_audio_watch_counts_a_stream_whose_callbacks_stop_as_lost(capsys):
     assert (la.lost, la.reopened) == (1, 1)
     err = capsys.readouterr().err
     assert err.count("audio output lost") == 1 and err.count("audio output back") == 1
+
+
+def _panning_frames(still: int, turning: int, px: int) -> list[np.ndarray]:
+    """A smoothed random texture (something to read the turn from) with one bright bar (the toy's
+    goal, in view throughout), seen still for ``still`` frames, then panned ``px`` pixels a frame."""
+    rng = np.random.default_rng(3)
+    h, w = 72, 96
+    scene = rng.uniform(0, 255, (h, w + px * turning, 3))
+    for axis in (0, 1):
+        scene = sum(np.roll(scene, k, axis=axis) for k in range(-3, 4)) / 7
+    scene = np.clip((scene - scene.mean()) * 2 + 60, 0, 120)
+    scene[:, 86:94] = 240
+    scene = scene.astype(np.uint8)
+    offsets = [0] * still + [px * k for k in range(1, turning + 1)]
+    # a pixel's worth of sensor noise: a still camera's frames are never identical (else frozen)
+    return [np.ascontiguousarray(scene[:, o:o + w]) + rng.integers(0, 2, (h, w, 3), dtype=np.uint8) for o in offsets]
+
+
+@pytest.mark.parametrize("visual_yaw", [True, False])
+def test_without_a_gyroscope_a_decision_the_turn_makes_stale_plays_as_a_stop(toy_bundle, monkeypatch, visual_yaw):  # noqa: F811
+    """Live, a decision plays from the end of its model run (0.15 s here, each frame read as the
+    last one is decided) until the next one, 0.15 s later, while the user may keep turning. With no gyroscope nothing turns it, so a frame
+    whose turn read from the picture (4 px a frame of 96, 30-50 deg/s) carries it past half a strip
+    by then plays the stop cue, and the trace gives that turn; still frames play the beacon as
+    decided. With the picture's turn off (``visual_yaw=False``) nothing is told and nothing stopped."""
+    from crossing_assist.runtime.pipeline import trace_record
+
+    engine, clock = Engine(toy_bundle), FakeClock()
+    real = engine.predict
+
+    def slow(frame, fov_deg=None, roll_deg=None):
+        clock.now += 0.15
+        return real(frame, fov_deg, roll_deg)
+
+    monkeypatch.setattr(engine, "predict", slow)
+    frames = _panning_frames(6, 8, 4)
+    pipeline = Pipeline(engine, engine.decision_config(), BEACON, visual_yaw=visual_yaw)
+    steps: list = []
+    run_live(((clock.now - 100.0, f) for f in frames), pipeline, CuePlayer(BEACON), LiveConfig(),
+             clock=clock, on_step=lambda i, s: steps.append(s))
+    assert len(steps) == len(frames)
+    still, turning = steps[1:6], steps[7:]
+    assert all(not s.decision.stop and s.stale_turn_deg is None for s in still), [s.decision.reason for s in still]
+    fov = pipeline.decider.cfg.fov_deg
+    if not visual_yaw:
+        assert all(s.yaw_rate_dps == 0 and s.stale_turn_deg is None for s in steps)
+        assert not turning[-1].decision.stop
+        return
+    assert all(s.yaw_rate_dps > 20 for s in turning), [s.yaw_rate_dps for s in turning]   # turning right
+    for s in turning:
+        assert s.decision.stop and s.cue.kind == KIND_STOP and _is_stop(s.loop)
+        # the rate read, carried through the model's run and the frame interval until the next decision
+        assert s.stale_turn_deg == pytest.approx(s.yaw_rate_dps * 0.3) and s.stale_turn_deg > fov / 24
+    rec = trace_record(7, turning[0])
+    assert rec["stop"] and rec["stale_turn_deg"] == turning[0].stale_turn_deg and rec["yaw_rate_dps"] > 20

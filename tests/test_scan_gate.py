@@ -85,7 +85,7 @@ def test_heard_late_counts_the_worse_of_the_turned_readings(two_runs):
     for f in res["folds"]:
         for c in f["curve"]:
             r = c["readings"]
-            assert set(r) == {"gyro_turned", "camera_turned", "gyro", "camera", "camera_stale"}
+            assert set(r) == {"gyro_turned", "camera_turned", "gyro", "camera", "camera_stale", "camera_read_stale"}
             turned = [r["gyro_turned"], r["camera_turned"]]
             assert c["confidently_wrong"] * f["frames"] == pytest.approx(max(g["wrong"] for g in turned))
             assert c["beacon_on"] * f["frames"] == pytest.approx(min(g["on"] for g in turned))
@@ -94,8 +94,11 @@ def test_heard_late_counts_the_worse_of_the_turned_readings(two_runs):
             assert c["confidently_wrong_unturned_frames"] == max(r["gyro"]["wrong"], r["camera"]["wrong"])
             assert (c["confidently_wrong_stale_frames"], c["beacon_on_stale_frames"]) == (
                 r["camera_stale"]["wrong"], r["camera_stale"]["on"])
+            assert (c["confidently_wrong_read_stale_frames"], c["beacon_on_read_stale_frames"]) == (
+                r["camera_read_stale"]["wrong"], r["camera_read_stale"]["on"])
     for i, c in enumerate(res["curve"]):
-        for rate in ("confidently_wrong_unturned", "confidently_wrong_stale", "beacon_on_stale"):
+        for rate in ("confidently_wrong_unturned", "confidently_wrong_stale", "beacon_on_stale",
+                     "confidently_wrong_read_stale", "beacon_on_read_stale"):
             n = sum(f["curve"][i][f"{rate}_frames"] for f in res["folds"])
             assert c[rate] == pytest.approx(n / c["frames"])
     # a turn of 30°/s heard 0.3 s late, 9° (1.6 strips), not turned: the toy's right headings go wrong;

@@ -293,6 +293,13 @@ TURNED_READINGS = {"gyro_turned": ("gyro", "turn from a gyroscope, the beacon tu
 STALE_READINGS = {"camera_stale": ("camera", "turn read from the frames, a stop once half a strip stale "
                                              "(a gyroscope not followed)")}
 
+#: And a player with no gyroscope at all (the Python live loop, the app on a phone without one):
+#: nothing measures the turn once the frame is read, so each decision of the picture's reading is a
+#: stop when the rate read at its frame, carried to the end of its play (heard, then one frame more),
+#: passes half a strip (:meth:`~crossing_assist.runtime.pipeline.Pipeline.heard`).
+READ_STALE_READINGS = {"camera_read_stale": ("camera", "turn read from the frames, a stop once the rate read "
+                                                       "at its frame makes it half a strip stale (no gyroscope)")}
+
 
 def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
                 psi: np.ndarray, camera_rates: np.ndarray, fps: float = SCAN_FPS,
@@ -311,7 +318,9 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
     against the goal and the camera's turn then (the phone app, in its e2e run: heard 0.28 s to
     0.51 s after capture; docs/results.md, "Heard when it plays"). It adds :data:`TURNED_READINGS`:
     a reading's decisions with the beacon turned by the gyroscope's turn since the capture, and
-    :data:`STALE_READINGS`: with only that turn's size known, each a stop past half a strip.
+    :data:`STALE_READINGS`: with only that turn's size known, each a stop past half a strip, and
+    :data:`READ_STALE_READINGS`: with no turn known once the frame is read, each a stop when the
+    rate read at its frame makes it half a strip stale by the end of its play.
     ``overrides``: decision settings for every clip instead of the bundle's (e.g. ``threshold``
     and ``measure``: a gate swept, :meth:`Engine.decision_config`)."""
     psi = np.asarray(psi, float)
@@ -327,13 +336,16 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
             for name, (reading, _) in readings.items():
                 res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, play=play,
                                               overrides=overrides)
+        for name, (reading, _) in READ_STALE_READINGS.items():
+            res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, play=stale,
+                                          overrides=overrides, turn_read=True)
     return res
 
 
 def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
                       psi: np.ndarray, rates: np.ndarray, fps: float, lag: int = 0,
                       play: Callable[[Decision, float, float], Decision] | None = None,
-                      overrides: dict | None = None) -> dict:
+                      overrides: dict | None = None, turn_read: bool = False) -> dict:
     start = int(round(SCAN_STILL_S * fps))
     c = dict.fromkeys(("in_view", "on", "wrong", "wrong_hold", "wrong_photos", "out_of_view", "out_on",
                        "out_wrong_side"), 0)
@@ -348,8 +360,10 @@ def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], lab
             h = j + lag    # the frame whose moment the decision is heard at
             if j < start or h >= len(clip):
                 continue
-            if play is not None:   # played as heard: the decision and the gyroscope's turn since its capture
-                d = play(d, float(psi[h] - psi[j]), fov)
+            if play is not None:   # played as heard: the decision and the gyroscope's turn since its capture,
+                # or (turn_read) the turn the rate read at its frame makes by the end of its play
+                turn = float(clip_rates[j]) * (lag + 1) / fps if turn_read else float(psi[h] - psi[j])
+                d = play(d, turn, fov)
             label = int(labs[h])
             if label != UNKNOWN:
                 c["in_view"] += 1

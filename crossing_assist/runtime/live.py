@@ -60,6 +60,8 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
     dog = Watchdog(cfg.watchdog_s, lambda: player.set_loop(stop_loop), clock=clock).start()
     start = clock()
     prev: np.ndarray | None = None
+    interval = 0.0          # between the last two frames' captures: how long a decision plays
+    last_captured: float | None = None
     n = 0
     try:
         for i, (t, frame) in enumerate(frames):
@@ -72,10 +74,16 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
             if cfg.frozen_check and _same(prev, frame):
                 continue  # a frozen camera repeats its last frame: not fresh, let the watchdog act
             prev = frame
+            if last_captured is not None:
+                interval = max(0.0, captured - last_captured)
+            last_captured = captured
             step = pipeline.step(frame, captured - start)
-            fresh = is_fresh(clock(), captured, cfg.watchdog_s)
+            decided = clock()
+            fresh = is_fresh(decided, captured, cfg.watchdog_s)
             if not fresh:   # decided too late to play: the stop cue, and the trace says so
                 step = replace(step, cue=Cue(KIND_STOP), loop=stop_loop, late=True)
+            else:           # no gyroscope: a stop if the turn goes on past half a strip before the next one
+                step = pipeline.heard(step, decided - captured + interval)
             player.set_loop(step.loop)
             if fresh:
                 dog.beat(captured)

@@ -16,7 +16,7 @@ import numpy as np
 
 from crossing_assist.geometry import level, rolled_too_far
 from crossing_assist.runtime.beacon import BeaconConfig, Cue, cue_for, render_cue
-from crossing_assist.runtime.decide import Decider, Decision, DecisionConfig
+from crossing_assist.runtime.decide import Decider, Decision, DecisionConfig, stale
 from crossing_assist.runtime.engine import Engine, Prediction
 from crossing_assist.runtime.visual_yaw import VisualYaw
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
@@ -26,13 +26,18 @@ from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
 class Step:
     """Everything one frame produced; ``loop`` is the cue's prepared (n, 2) float32 samples.
     ``late``: live, the decision came after the watchdog period from its frame's capture (a
-    board too slow for the bundle), so ``cue`` and ``loop`` are the stop cue that played instead."""
+    board too slow for the bundle), so ``cue`` and ``loop`` are the stop cue that played instead.
+    ``yaw_rate_dps``: the turn rate the decision logic was told with this frame. ``stale_turn_deg``:
+    live, the turn that rate carries the decision through by the end of its play, when that made
+    it a stop (:meth:`Pipeline.heard`); ``decision``, ``cue`` and ``loop`` are then the stop's."""
 
     prediction: Prediction
     decision: Decision
     cue: Cue
     loop: np.ndarray
     late: bool = False
+    yaw_rate_dps: float = 0.0
+    stale_turn_deg: float | None = None
 
 
 @lru_cache(maxsize=16)
@@ -99,7 +104,22 @@ class Pipeline:
             self.visual_yaw.reset()     # the gyroscope's turn; a later frame without one starts afresh
         decision = self.decider.step(t, obs, yaw_rate_dps)
         cue = cue_for(decision)
-        return Step(pred, decision, cue, cached_loop(cue, self.beacon_cfg))
+        return Step(pred, decision, cue, cached_loop(cue, self.beacon_cfg), yaw_rate_dps=float(yaw_rate_dps))
+
+    def heard(self, step: Step, play_s: float) -> Step:
+        """``step`` as a player with no gyroscope plays it: until ``play_s`` seconds after its
+        frame's capture (the model's run, then until the next decision), while the camera keeps
+        turning at the rate the decision logic was told. No turn is measured once the frame is
+        read, so the decision cannot be turned with the user (step 10 with a gyroscope); when the
+        turn that rate makes by then, ``yaw_rate_dps * play_s``, passes half a strip, the decision
+        plays as a stop (:func:`~crossing_assist.runtime.decide.stale`). Decided as it is, a 30
+        deg/s scan heard 0.2 s late was 10.5 % confidently wrong (docs/runtime.md, step 10)."""
+        turn = step.yaw_rate_dps * play_s
+        played = stale(step.decision, turn, self.decider.cfg.fov_deg)
+        if played is step.decision:
+            return step
+        cue = cue_for(played)
+        return replace(step, decision=played, cue=cue, loop=cached_loop(cue, self.beacon_cfg), stale_turn_deg=turn)
 
 
 def open_pipeline(bundle: str | os.PathLike, *, fov_deg: float | None = None, watchdog_s: float = DEFAULT_WATCHDOG_S,
@@ -118,13 +138,16 @@ def open_pipeline(bundle: str | os.PathLike, *, fov_deg: float | None = None, wa
 
 def trace_record(i: int, step: Step) -> dict:
     """One trace.jsonl line: frame index, model outputs, the cue played (``late``: the stop cue
-    played because the decision came too late, live only) and the decision."""
+    played because the decision came too late, live only), the turn rate the decision logic was
+    told, the turn that made the decision a stop as played (``stale_turn_deg``, live only) and the
+    decision (as played)."""
     p, d = step.prediction, step.decision
     rec = {"frame": i, "ok": p.ok, "error": p.error or None, "action": p.action if p.ok else None,
            "probs": None if p.probs is None else [round(float(v), 5) for v in p.probs],
            "entropy": p.entropy if p.ok else None, "mutual_info": p.mutual_info if p.ok else None,
            "uncertainty": p.uncertainty if p.ok else None, "conformal_set": list(p.conformal_set),
-           "cue": step.cue.kind, "late": step.late}
+           "cue": step.cue.kind, "late": step.late, "yaw_rate_dps": step.yaw_rate_dps,
+           "stale_turn_deg": step.stale_turn_deg}
     rec.update(d.to_json())
     rec["belief"] = [round(v, 5) for v in rec["belief"]]
     return rec

@@ -357,6 +357,16 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
     if (fresh && d.heading_deg !== null && (gyroFollowed() || gyroReporting())) {
       app.turning = { id: (app.frameId || 0) + 1, d, captured, fov: decider.cfg.fov_deg, rendered: null };
       heard = followTurn(); // turned by the turn made while the model ran (or stopped once stale)
+    } else if (fresh && yawSource === 'camera') {
+      // No gyroscope: nothing measures the turn once the frame is read, so the decision cannot turn
+      // with the user. It plays until the next one, about a frame interval after it: a stop when
+      // the turn read from the picture, carried that far from the capture, passes half a strip
+      // (staleDecision; Python's Pipeline.heard). Played as decided, a 30 deg/s scan heard 0.2 s
+      // late was 10.5 % confidently wrong (docs/runtime.md, step 10).
+      const turn = cameraTurn * (decided - captured + dt);
+      heard = staleDecision(d, turn, decider.cfg.fov_deg);
+      if (heard !== d) record({ kind: 'picture_stale', t: decided, frame: (app.frameId || 0) + 1, turn_deg: turn });
+      app.audio.render(cueFor(heard));
     } else {
       app.audio.render(fresh ? cueFor(d) : STOP_CUE);
     }
