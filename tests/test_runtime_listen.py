@@ -517,9 +517,11 @@ def test_judge_scans_heard_late_counts_the_turn_since_the_capture(toy_bundle):  
     assert late["gyro_turned"]["beacon_on"] == late["gyro"]["beacon_on"] == 1.0
     assert late["gyro_turned"]["confidently_wrong"] == 0.0
     # no gyroscope (camera_read_stale): the rate read at each frame, carried to the end of its play
-    # (0.2 s heard + a frame), decides; 60 deg/s read makes every turning frame a stop, never wrong,
-    # while a rate read as 5 deg/s (1.5 deg, under half a 5.6 deg strip) lets the lagging heading play
-    read = np.asarray([[0.0] * 10 + [60.0] * 10])
+    # (0.2 s heard + a frame), decides, and so do the frames read after it by the moment heard;
+    # 60 deg/s read makes every turning frame a stop, never wrong, even the first one, whose own
+    # frame read no turn (the next one did), while a rate read as 5 deg/s (1.5 deg, under half a
+    # 5.6 deg strip) lets the lagging heading play
+    read = np.asarray([[0.0] * 11 + [60.0] * 9])
     stopped = judge_scans(engine, [clip], labels, psi, read, heard_after_s=0.2)["camera_read_stale"]
     assert stopped["in_view"] == 8 and stopped["on"] == 0 and stopped["wrong"] == 0
     slow = judge_scans(engine, [clip], labels, psi, read / 12, heard_after_s=0.2)["camera_read_stale"]

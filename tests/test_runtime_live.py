@@ -346,7 +346,8 @@ def test_without_a_gyroscope_a_decision_the_turn_makes_stale_plays_as_a_stop(toy
     """Live, a decision plays from the end of its model run (0.15 s here, each frame read as the
     last one is decided) until the next one, 0.15 s later, while the user may keep turning. With no gyroscope nothing turns it, so a frame
     whose turn read from the picture (4 px a frame of 96, 30-50 deg/s) carries it past half a strip
-    by then plays the stop cue, and the trace gives that turn; still frames play the beacon as
+    by then plays the stop cue, and the trace gives that turn; so does the still frame's decision
+    once the first turned frame is read (before its model run); still frames play the beacon as
     decided. With the picture's turn off (``visual_yaw=False``) nothing is told and nothing stopped."""
     from crossing_assist.runtime.pipeline import trace_record
 
@@ -361,14 +362,21 @@ def test_without_a_gyroscope_a_decision_the_turn_makes_stale_plays_as_a_stop(toy
     frames = _panning_frames(6, 8, 4)
     pipeline = Pipeline(engine, engine.decision_config(), BEACON, visual_yaw=visual_yaw)
     steps: list = []
-    run_live(((clock.now - 100.0, f) for f in frames), pipeline, CuePlayer(BEACON), LiveConfig(),
+    played: list = []   # each loop handed to the player, and how many steps had come by then
+
+    class Player(CuePlayer):
+        def set_loop(self, loop):
+            played.append((len(steps), _is_stop(loop)))
+            super().set_loop(loop)
+
+    run_live(((clock.now - 100.0, f) for f in frames), pipeline, Player(BEACON), LiveConfig(),
              clock=clock, on_step=lambda i, s: steps.append(s))
     assert len(steps) == len(frames)
-    still, turning = steps[1:6], steps[7:]
+    still, turning = steps[1:6], steps[6:]
     assert all(not s.decision.stop and s.stale_turn_deg is None for s in still), [s.decision.reason for s in still]
     fov = pipeline.decider.cfg.fov_deg
     if not visual_yaw:
-        assert all(s.yaw_rate_dps == 0 and s.stale_turn_deg is None for s in steps)
+        assert all(s.yaw_rate_dps == 0 and s.stale_turn_deg is None and s.cut_turn_deg is None for s in steps)
         assert not turning[-1].decision.stop
         return
     assert all(s.yaw_rate_dps > 20 for s in turning), [s.yaw_rate_dps for s in turning]   # turning right
@@ -376,5 +384,11 @@ def test_without_a_gyroscope_a_decision_the_turn_makes_stale_plays_as_a_stop(toy
         assert s.decision.stop and s.cue.kind == KIND_STOP and _is_stop(s.loop)
         # the rate read, carried through the model's run and the frame interval until the next decision
         assert s.stale_turn_deg == pytest.approx(s.yaw_rate_dps * 0.3) and s.stale_turn_deg > fov / 24
-    rec = trace_record(7, turning[0])
+    # the still frame's decision was playing when the first turned frame was read: its turn since
+    # then, carried through the next model run, stopped it before that frame's decision came
+    assert not steps[5].decision.stop and turning[0].cut_turn_deg == pytest.approx(turning[0].yaw_rate_dps * 0.3)
+    assert all(s.cut_turn_deg is None for s in steps[:6] + turning[1:])   # the turning ones were stops already
+    assert played[played.index((5, False)) + 1] == (6, True)   # the stop played before that frame's decision
+    rec = trace_record(6, turning[0])
     assert rec["stop"] and rec["stale_turn_deg"] == turning[0].stale_turn_deg and rec["yaw_rate_dps"] > 20
+    assert rec["cut_turn_deg"] == turning[0].cut_turn_deg

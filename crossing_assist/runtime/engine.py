@@ -115,6 +115,15 @@ class Engine:
         kw = {"fov_deg": fov, "measure": unc.measure, "threshold": unc.threshold_for(orientation, fov), **overrides}
         return DecisionConfig(n_actions=self.bundle.actions.n, **kw)
 
+    def frame_fov(self, frame_rgb: np.ndarray) -> float | None:
+        """The FOV :meth:`predict` gives this frame (None where it refuses the frame before knowing
+        it), without running the model: a turn can be read from the frame first."""
+        try:
+            self._check_frame(frame_rgb)
+            return self.camera_fov(frame_rgb.shape[1], frame_rgb.shape[0])
+        except Exception:  # noqa: BLE001  predict says why
+            return None
+
     def _check_frame(self, frame: np.ndarray) -> np.ndarray:
         frame = inference.check_frame(frame)
         check_frame_shape(frame.shape[0], frame.shape[1])   # e.g. 1 x N or 1:10: never a heading

@@ -296,7 +296,9 @@ STALE_READINGS = {"camera_stale": ("camera", "turn read from the frames, a stop 
 #: And a player with no gyroscope at all (the Python live loop, the app on a phone without one):
 #: nothing measures the turn once the frame is read, so each decision of the picture's reading is a
 #: stop when the rate read at its frame, carried to the end of its play (heard, then one frame more),
-#: passes half a strip (:meth:`~crossing_assist.runtime.pipeline.Pipeline.heard`).
+#: passes half a strip, or when by the moment heard the frames read since (those captured before
+#: it) turned that far, carried on at the last one's rate to the end of its play
+#: (:meth:`~crossing_assist.runtime.pipeline.Pipeline.heard`, checked as the live loop checks it).
 READ_STALE_READINGS = {"camera_read_stale": ("camera", "turn read from the frames, a stop once the rate read "
                                                        "at its frame makes it half a strip stale (no gyroscope)")}
 
@@ -319,8 +321,8 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
     0.51 s after capture; docs/results.md, "Heard when it plays"). It adds :data:`TURNED_READINGS`:
     a reading's decisions with the beacon turned by the gyroscope's turn since the capture, and
     :data:`STALE_READINGS`: with only that turn's size known, each a stop past half a strip, and
-    :data:`READ_STALE_READINGS`: with no turn known once the frame is read, each a stop when the
-    rate read at its frame makes it half a strip stale by the end of its play.
+    :data:`READ_STALE_READINGS`: with no turn measured but the frames', each a stop when the turn
+    read at its frame, or by the frames read since, makes it half a strip stale by the end of its play.
     ``overrides``: decision settings for every clip instead of the bundle's (e.g. ``threshold``
     and ``measure``: a gate swept, :meth:`Engine.decision_config`)."""
     psi = np.asarray(psi, float)
@@ -360,10 +362,13 @@ def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], lab
             h = j + lag    # the frame whose moment the decision is heard at
             if j < start or h >= len(clip):
                 continue
-            if play is not None:   # played as heard: the decision and the gyroscope's turn since its capture,
-                # or (turn_read) the turn the rate read at its frame makes by the end of its play
-                turn = float(clip_rates[j]) * (lag + 1) / fps if turn_read else float(psi[h] - psi[j])
-                d = play(d, turn, fov)
+            if turn_read:   # no gyroscope: the turn read at its frame, carried to the end of its play;
+                # then the turn read by the frames since (captured before h), carried on as far
+                d = play(d, float(clip_rates[j]) * (lag + 1) / fps, fov)
+                if h - 1 > j:
+                    d = play(d, float(np.sum(clip_rates[j + 1:h]) + clip_rates[h - 1] * 2) / fps, fov)
+            elif play is not None:   # played as heard: the decision and the gyroscope's turn since its capture
+                d = play(d, float(psi[h] - psi[j]), fov)
             label = int(labs[h])
             if label != UNKNOWN:
                 c["in_view"] += 1

@@ -1,5 +1,9 @@
 """Live loop: frames -> decisions -> the cue the audio stream plays, guarded by the watchdog.
 
+With no gyroscope, nothing turns a decision with the user once its frame is read: a decision the
+turn read from the frames makes half a strip stale by the end of its play is played as a stop,
+checked when it is decided and again when the next frame is read (:meth:`Pipeline.heard`).
+
 Threads: this loop (capture, inference, decision, cue rendering), the watchdog (swaps in the
 stop cue when decisions stop coming), and the audio callback (only copies samples). The cue is
 handed over by a reference swap (:meth:`CuePlayer.set_loop`), never under a lock.
@@ -60,8 +64,9 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
     dog = Watchdog(cfg.watchdog_s, lambda: player.set_loop(stop_loop), clock=clock).start()
     start = clock()
     prev: np.ndarray | None = None
-    interval = 0.0          # between the last two frames' captures: how long a decision plays
     last_captured: float | None = None
+    playing: Step | None = None   # the last frame's decision, while it plays a direction
+    model_s = 0.0                 # the last frame's capture to its decision: how long one waits for the next
     n = 0
     try:
         for i, (t, frame) in enumerate(frames):
@@ -74,16 +79,28 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
             if cfg.frozen_check and _same(prev, frame):
                 continue  # a frozen camera repeats its last frame: not fresh, let the watchdog act
             prev = frame
-            if last_captured is not None:
-                interval = max(0.0, captured - last_captured)
+            interval = 0.0 if last_captured is None else max(0.0, captured - last_captured)
+            seen = pipeline.read(frame, captured - start)
+            cut = None      # the turn that stopped the playing decision now, if one did
+            if playing is not None:
+                # no gyroscope: the turn read since the playing decision's frame, carried on through
+                # this frame's model run; past half a strip it is stale, a stop from now on
+                checked = pipeline.heard(playing, seen.yaw_rate_dps * (interval + model_s))
+                if checked is not playing:
+                    player.set_loop(checked.loop)
+                    cut = checked.stale_turn_deg
             last_captured = captured
-            step = pipeline.step(frame, captured - start)
+            step = pipeline.decide(seen)
             decided = clock()
+            model_s = max(0.0, decided - captured)
             fresh = is_fresh(decided, captured, cfg.watchdog_s)
             if not fresh:   # decided too late to play: the stop cue, and the trace says so
                 step = replace(step, cue=Cue(KIND_STOP), loop=stop_loop, late=True)
             else:           # no gyroscope: a stop if the turn goes on past half a strip before the next one
-                step = pipeline.heard(step, decided - captured + interval)
+                step = pipeline.heard(step, step.yaw_rate_dps * (model_s + interval))
+            if cut is not None:
+                step = replace(step, cut_turn_deg=cut)
+            playing = step if fresh and not step.decision.stop else None
             player.set_loop(step.loop)
             if fresh:
                 dog.beat(captured)

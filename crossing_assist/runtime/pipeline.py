@@ -28,8 +28,10 @@ class Step:
     ``late``: live, the decision came after the watchdog period from its frame's capture (a
     board too slow for the bundle), so ``cue`` and ``loop`` are the stop cue that played instead.
     ``yaw_rate_dps``: the turn rate the decision logic was told with this frame. ``stale_turn_deg``:
-    live, the turn that rate carries the decision through by the end of its play, when that made
-    it a stop (:meth:`Pipeline.heard`); ``decision``, ``cue`` and ``loop`` are then the stop's."""
+    live, with no gyroscope, the turn read from the frames by the end of its play that made it a
+    stop when decided (:meth:`Pipeline.heard`; ``decision``, ``cue`` and ``loop`` are then the
+    stop's); ``cut_turn_deg``: the one that stopped the decision before it, still playing, when
+    this frame was read."""
 
     prediction: Prediction
     decision: Decision
@@ -38,6 +40,19 @@ class Step:
     late: bool = False
     yaw_rate_dps: float = 0.0
     stale_turn_deg: float | None = None
+    cut_turn_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class Seen:
+    """A frame read, before the model (:meth:`Pipeline.read`): the frame (levelled when its roll
+    was given and a turn is read from it), its capture time, the roll still to level (None when
+    none), and the turn rate the decision logic will be told with it."""
+
+    frame: np.ndarray | None
+    t: float
+    roll_deg: float | None
+    yaw_rate_dps: float
 
 
 @lru_cache(maxsize=16)
@@ -77,7 +92,13 @@ class Pipeline:
         """Process a frame taken at ``t`` seconds (None = no new frame, a watchdog tick); ``yaw_rate_dps``:
         the turn rate from a gyroscope (None: read from the frames, or none, see the class);
         ``roll_deg``: the camera's roll when it was taken, from an orientation sensor (None: none;
-        the frame is used as it is, :meth:`Engine.predict`)."""
+        the frame is used as it is, :meth:`Engine.predict`). :meth:`read`, then :meth:`decide`."""
+        return self.decide(self.read(frame_rgb, t, yaw_rate_dps, roll_deg))
+
+    def read(self, frame_rgb: np.ndarray | None, t: float, yaw_rate_dps: float | None = None,
+             roll_deg: float | None = None) -> Seen:
+        """The first half of :meth:`step`, before the model: the frame levelled and its turn since
+        the last one (cheap; the live loop checks the decision still playing with it)."""
         if roll_deg is not None and frame_rgb is not None and self.visual_yaw and not rolled_too_far(roll_deg):
             # levelled here, once: the turn is read from the frame the model sees, as the app reads it
             # (unlevelled, a turn moves the picture along the rolled axis: 0.3-0.7 deg mean error a
@@ -86,7 +107,18 @@ class Pipeline:
                 frame_rgb, roll_deg = level(frame_rgb, roll_deg, self.engine.bundle.geometry.pad_rgb), None
             except Exception:  # noqa: BLE001  an unreadable frame: the engine says why
                 pass
-        pred = (self.engine.predict(frame_rgb, roll_deg=roll_deg) if frame_rgb is not None
+        if yaw_rate_dps is None:
+            fov = self.engine.frame_fov(frame_rgb) if frame_rgb is not None else None
+            seen = self.visual_yaw.update(frame_rgb, t, fov) if self.visual_yaw else 0.0
+            yaw_rate_dps = seen if frame_rgb is not None else 0.0
+        elif self.visual_yaw:
+            self.visual_yaw.reset()     # the gyroscope's turn; a later frame without one starts afresh
+        return Seen(frame_rgb, t, roll_deg, float(yaw_rate_dps))
+
+    def decide(self, seen: Seen) -> Step:
+        """The second half of :meth:`step`: the model, the decision logic and the cue."""
+        frame_rgb = seen.frame
+        pred = (self.engine.predict(frame_rgb, roll_deg=seen.roll_deg) if frame_rgb is not None
                 else Prediction(ok=False, error="no frame"))
         obs = pred.observation() if frame_rgb is not None else None
         if pred.fov_deg is not None:
@@ -97,29 +129,23 @@ class Pipeline:
                 self._fov_lost = False
         elif frame_rgb is not None:
             self._fov_lost = True
-        if yaw_rate_dps is None:
-            seen = self.visual_yaw.update(frame_rgb, t, pred.fov_deg) if self.visual_yaw else 0.0
-            yaw_rate_dps = seen if frame_rgb is not None else 0.0
-        elif self.visual_yaw:
-            self.visual_yaw.reset()     # the gyroscope's turn; a later frame without one starts afresh
-        decision = self.decider.step(t, obs, yaw_rate_dps)
+        decision = self.decider.step(seen.t, obs, seen.yaw_rate_dps)
         cue = cue_for(decision)
-        return Step(pred, decision, cue, cached_loop(cue, self.beacon_cfg), yaw_rate_dps=float(yaw_rate_dps))
+        return Step(pred, decision, cue, cached_loop(cue, self.beacon_cfg), yaw_rate_dps=seen.yaw_rate_dps)
 
-    def heard(self, step: Step, play_s: float) -> Step:
-        """``step`` as a player with no gyroscope plays it: until ``play_s`` seconds after its
-        frame's capture (the model's run, then until the next decision), while the camera keeps
-        turning at the rate the decision logic was told. No turn is measured once the frame is
-        read, so the decision cannot be turned with the user (step 10 with a gyroscope); when the
-        turn that rate makes by then, ``yaw_rate_dps * play_s``, passes half a strip, the decision
-        plays as a stop (:func:`~crossing_assist.runtime.decide.stale`). Decided as it is, a 30
-        deg/s scan heard 0.2 s late was 10.5 % confidently wrong (docs/runtime.md, step 10)."""
-        turn = step.yaw_rate_dps * play_s
-        played = stale(step.decision, turn, self.decider.cfg.fov_deg)
+    def heard(self, step: Step, turn_deg: float) -> Step:
+        """``step`` as a player with no gyroscope plays it once the camera has turned ``turn_deg``
+        since its frame's capture (the turn read from the frames, carried on at their rate to the
+        end of its play). Nothing measures the turn once the frame is read, so the decision cannot
+        be turned with the user (step 10 with a gyroscope); past half a strip it plays as a stop
+        (:func:`~crossing_assist.runtime.decide.stale`; the live loop checks it when decided and
+        again when the next frame is read). Decided as it is, a 30 deg/s scan heard 0.2 s late was
+        10.5 % confidently wrong (docs/runtime.md, step 10)."""
+        played = stale(step.decision, turn_deg, self.decider.cfg.fov_deg)
         if played is step.decision:
             return step
         cue = cue_for(played)
-        return replace(step, decision=played, cue=cue, loop=cached_loop(cue, self.beacon_cfg), stale_turn_deg=turn)
+        return replace(step, decision=played, cue=cue, loop=cached_loop(cue, self.beacon_cfg), stale_turn_deg=turn_deg)
 
 
 def open_pipeline(bundle: str | os.PathLike, *, fov_deg: float | None = None, watchdog_s: float = DEFAULT_WATCHDOG_S,
@@ -139,15 +165,15 @@ def open_pipeline(bundle: str | os.PathLike, *, fov_deg: float | None = None, wa
 def trace_record(i: int, step: Step) -> dict:
     """One trace.jsonl line: frame index, model outputs, the cue played (``late``: the stop cue
     played because the decision came too late, live only), the turn rate the decision logic was
-    told, the turn that made the decision a stop as played (``stale_turn_deg``, live only) and the
-    decision (as played)."""
+    told, the turns that made the decision, or the one before it, a stop as played
+    (``stale_turn_deg``, ``cut_turn_deg``; live only) and the decision (as played)."""
     p, d = step.prediction, step.decision
     rec = {"frame": i, "ok": p.ok, "error": p.error or None, "action": p.action if p.ok else None,
            "probs": None if p.probs is None else [round(float(v), 5) for v in p.probs],
            "entropy": p.entropy if p.ok else None, "mutual_info": p.mutual_info if p.ok else None,
            "uncertainty": p.uncertainty if p.ok else None, "conformal_set": list(p.conformal_set),
            "cue": step.cue.kind, "late": step.late, "yaw_rate_dps": step.yaw_rate_dps,
-           "stale_turn_deg": step.stale_turn_deg}
+           "stale_turn_deg": step.stale_turn_deg, "cut_turn_deg": step.cut_turn_deg}
     rec.update(d.to_json())
     rec["belief"] = [round(v, 5) for v in rec["belief"]]
     return rec
