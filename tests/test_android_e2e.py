@@ -949,10 +949,13 @@ def test_without_a_gyroscope_a_decision_the_picture_turn_makes_stale_plays_as_a_
     capture past its decision by a frame interval, passes half a strip plays as a stop (trace
     ``picture_stale``), as Python's live loop plays it (``Pipeline.heard``): every frame whose turn
     up to its decision alone passes half a strip, and no frame whose whole turn stays within it.
-    The sample clip pans right at up to ~45 deg/s, so some do."""
+    One that plays is checked again when the next frame is read (``cut``): the turn read since its
+    capture, carried on through the next model run. The sample clip pans right at up to ~45 deg/s,
+    so some decisions are stopped."""
     r = portrait["result"]
     frames = {e["id"]: e for e in r["trace"] if e["kind"] == "frame"}
-    stale = {e["frame"]: e for e in r["trace"] if e["kind"] == "picture_stale"}
+    records = [e for e in r["trace"] if e["kind"] == "picture_stale"]
+    stale = {e["frame"]: e for e in records if not e.get("cut")}
     assert stale, "no decision was made stale by the picture's turn"
     for i, e in stale.items():
         f = frames[i]
@@ -966,6 +969,11 @@ def test_without_a_gyroscope_a_decision_the_picture_turn_makes_stale_plays_as_a_
             assert i in stale, f
         if abs(f["yaw_rate_dps"]) <= f["decision_fov_deg"] / 24:   # within half a strip even a second on
             assert i not in stale, (f, stale.get(i))
+    for e in records:
+        if e.get("cut"):   # played when decided, stopped once the next frame (captured after it) is read
+            f = frames[e["frame"]]
+            assert e["frame"] not in stale and not f["decision"]["stop"] and e["t"] > f["t"]
+            assert abs(e["turn_deg"]) > f["decision_fov_deg"] / 24
 
 
 def test_a_tilt_sensor_that_stops_leaves_no_stale_roll_and_is_said_once(portrait: dict) -> None:

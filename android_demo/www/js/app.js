@@ -103,6 +103,8 @@ const app = {
   visualYaw: new VisualYaw(), // turns read from the camera picture (without the gyroscope)
   cameraTurn: null, // its last rate (deg/s) for the helper view; null while it is not the source
   turning: null, // the decision played turned with the gyroscope (followTurn), until another cue plays
+  playing: null, // no gyroscope: the decision playing, checked again when the next frame is read (checkPlaying)
+  modelS: 0, // the last frame's capture to its decision (s): how long a decision waits for the next
 };
 window.crossingAssist = app;
 const view = new HelperView(document);
@@ -263,6 +265,7 @@ function resetDecisions() {
   app.generation += 1;
   app.decider = null;
   app.fov = null;
+  app.playing = null;
   app.visualYaw.reset(); // no turn read against a frame from before
 }
 
@@ -310,6 +313,7 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   if (!picture) app.visualYaw.reset(); // turned on later: afresh, not against an old frame
   const cameraTurn = picture ? app.visualYaw.update(frame, captured, cam.fov) : 0;
   app.cameraTurn = picture ? cameraTurn : null;
+  if (yawSource === 'camera') checkPlaying(cameraTurn, captured);
   const decider = app.decider;
   let outputs = null;
   let obs;
@@ -348,6 +352,8 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
   }
   const d = decider.step(captured, obs, yaw);
   const decided = now();
+  app.modelS = decided - captured;
+  app.playing = null; // this frame's decision replaces it
   const fresh = isFresh(decided, captured);
   if (fresh) app.watchdog.beat(captured);
   app.last = d;
@@ -367,6 +373,7 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
       heard = staleDecision(d, turn, decider.cfg.fov_deg);
       if (heard !== d) record({ kind: 'picture_stale', t: decided, frame: (app.frameId || 0) + 1, turn_deg: turn });
       app.audio.render(cueFor(heard));
+      if (!heard.stop) app.playing = { id: (app.frameId || 0) + 1, d, captured, fov: decider.cfg.fov_deg, rendered: app.audio.cue };
     } else {
       app.audio.render(fresh ? cueFor(d) : STOP_CUE);
     }
@@ -596,6 +603,24 @@ function followTurn() {
   f.rendered = app.audio.cue;
   record({ kind: followed ? 'turned' : 'stale', t, frame: f.id, turn_deg: turn, heading_deg: played.heading_deg });
   return played;
+}
+
+/**
+ * No gyroscope, the turn read from the picture followed: the decision still playing (the last
+ * frame's), checked when the next frame is read, before its model run. The turn read since its
+ * frame's capture, carried on at this frame's rate through the model run to come (as long as the
+ * last one took), past half a strip makes it stale: the stop cue from now on (staleDecision;
+ * Python's run_live checks it the same way). Only while its cue is still the one playing.
+ */
+function checkPlaying(cameraTurn, captured) {
+  const p = app.playing;
+  if (!p || !app.audio || app.audioFailed || app.audio.cue !== p.rendered) return;
+  const turn = cameraTurn * (captured - p.captured + (app.modelS || 0));
+  const played = staleDecision(p.d, turn, p.fov);
+  if (played === p.d) return;
+  app.playing = null;
+  app.audio.render(cueFor(played));
+  record({ kind: 'picture_stale', t: captured, frame: p.id, turn_deg: turn, cut: true });
 }
 
 /** A sensor setting for this visit: the URL flag's (?gyro=1, ?tilt=0, ?visualyaw=0) else the kept setting. */
