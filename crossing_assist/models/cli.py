@@ -246,9 +246,9 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                           f"{e['median']:.1f} deg, mean {e['mean']:.1f} deg, p90 {e['p90']:.1f} deg")
         scan = m.get("listen", {}).get("scan")
         if scan:
-            from ..runtime.listen import SCAN_YAW_INPUTS, STALE_READINGS, TURNED_READINGS
+            from ..runtime.listen import LATE_READINGS, SCAN_YAW_INPUTS
 
-            names = {**SCAN_YAW_INPUTS, **{k: name for k, (_, name) in (TURNED_READINGS | STALE_READINGS).items()}}
+            names = {**SCAN_YAW_INPUTS, **{k: name for k, (_, name) in LATE_READINGS.items()}}
             heard = scan.get("heard_after_s") or 0
             print(f"{'scan':>15} ({scan['photos']} photos, each turned 0 -> +{scan['amplitude_deg']:g} -> "
                   f"-{scan['amplitude_deg']:g} -> 0 deg at {scan['rate_dps']:g} deg/s; every frame after the first second, "

@@ -276,7 +276,7 @@ def _listen_scans(cfg: EvalConfig, engine, part: Dataset) -> dict:
     should be silent)."""
     from tqdm import tqdm
 
-    from ..runtime.listen import SCAN_YAW_INPUTS, STALE_READINGS, TURNED_READINGS, judge_scans, scan_yaw
+    from ..runtime.listen import LATE_READINGS, SCAN_YAW_INPUTS, judge_scans, scan_yaw
 
     psi = scan_yaw(cfg.scan_deg, cfg.scan_dps)
 
@@ -307,7 +307,7 @@ def _listen_scans(cfg: EvalConfig, engine, part: Dataset) -> dict:
         out["portrait_window"] = narrow
     if negatives := _negative_rows(cfg):
         out["no_crossing"] = none = play(negatives, "listen scans, no crossing")
-        for k in (*SCAN_YAW_INPUTS, *TURNED_READINGS, *STALE_READINGS):   # every judged frame is out of view: silence is the beacon off
+        for k in (*SCAN_YAW_INPUTS, *LATE_READINGS):   # every judged frame is out of view: silence is the beacon off
             if k in none:
                 none[k]["silence"] = 1.0 - none[k]["out_of_view_on"]
     return out

@@ -302,6 +302,10 @@ STALE_READINGS = {"camera_stale": ("camera", "turn read from the frames, a stop 
 READ_STALE_READINGS = {"camera_read_stale": ("camera", "turn read from the frames, a stop once the rate read "
                                                        "at its frame makes it half a strip stale (no gyroscope)")}
 
+#: Every reading :func:`judge_scans` adds when decisions are heard late: name -> (the
+#: :data:`SCAN_YAW_INPUTS` reading it plays, what it is)
+LATE_READINGS = {**TURNED_READINGS, **STALE_READINGS, **READ_STALE_READINGS}
+
 
 def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
                 psi: np.ndarray, camera_rates: np.ndarray, fps: float = SCAN_FPS,
