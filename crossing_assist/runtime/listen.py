@@ -299,8 +299,8 @@ STALE_READINGS = {"camera_stale": ("camera", "turn read from the frames, a stop 
 #: passes half a strip, or when by the moment heard the frames read since (those captured before
 #: it) turned that far, carried on at the last one's rate to the end of its play
 #: (:meth:`~crossing_assist.runtime.pipeline.Pipeline.heard`, checked as the live loop checks it).
-READ_STALE_READINGS = {"camera_read_stale": ("camera", "turn read from the frames, a stop once the rate read "
-                                                       "at its frame makes it half a strip stale (no gyroscope)")}
+READ_STALE_READINGS = {"camera_read_stale": ("camera", "turn read from the frames, a stop once the turn read at "
+                                                       "its frame or since makes it half a strip stale (no gyroscope)")}
 
 #: Every reading :func:`judge_scans` adds when decisions are heard late: name -> (the
 #: :data:`SCAN_YAW_INPUTS` reading it plays, what it is)
