@@ -108,9 +108,11 @@ class Pipeline:
             except Exception:  # noqa: BLE001  an unreadable frame: the engine says why
                 pass
         if yaw_rate_dps is None:
-            fov = self.engine.frame_fov(frame_rgb) if frame_rgb is not None else None
-            seen = self.visual_yaw.update(frame_rgb, t, fov) if self.visual_yaw else 0.0
-            yaw_rate_dps = seen if frame_rgb is not None else 0.0
+            yaw_rate_dps = 0.0
+            if self.visual_yaw:
+                fov = self.engine.frame_fov(frame_rgb) if frame_rgb is not None else None
+                seen = self.visual_yaw.update(frame_rgb, t, fov)
+                yaw_rate_dps = seen if frame_rgb is not None else 0.0
         elif self.visual_yaw:
             self.visual_yaw.reset()     # the gyroscope's turn; a later frame without one starts afresh
         return Seen(frame_rgb, t, roll_deg, float(yaw_rate_dps))

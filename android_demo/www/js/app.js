@@ -369,11 +369,12 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
       // the turn read from the picture, carried that far from the capture, passes half a strip
       // (staleDecision; Python's Pipeline.heard). Played as decided, a 30 deg/s scan heard 0.2 s
       // late was 10.5 % confidently wrong (docs/runtime.md, step 10).
+      const id = (app.frameId || 0) + 1; // this frame's, assigned below
       const turn = cameraTurn * (decided - captured + dt);
       heard = staleDecision(d, turn, decider.cfg.fov_deg);
-      if (heard !== d) record({ kind: 'picture_stale', t: decided, frame: (app.frameId || 0) + 1, turn_deg: turn });
+      if (heard !== d) record({ kind: 'picture_stale', t: decided, frame: id, turn_deg: turn });
       app.audio.render(cueFor(heard));
-      if (!heard.stop) app.playing = { id: (app.frameId || 0) + 1, d, captured, fov: decider.cfg.fov_deg, rendered: app.audio.cue };
+      if (!heard.stop) app.playing = { id, d, captured, fov: decider.cfg.fov_deg, rendered: app.audio.cue };
     } else {
       app.audio.render(fresh ? cueFor(d) : STOP_CUE);
     }
@@ -615,7 +616,7 @@ function followTurn() {
 function checkPlaying(cameraTurn, captured) {
   const p = app.playing;
   if (!p || !app.audio || app.audioFailed || app.audio.cue !== p.rendered) return;
-  const turn = cameraTurn * (captured - p.captured + (app.modelS || 0));
+  const turn = cameraTurn * (captured - p.captured + app.modelS);
   const played = staleDecision(p.d, turn, p.fov);
   if (played === p.d) return;
   app.playing = null;
