@@ -392,3 +392,40 @@ def test_without_a_gyroscope_a_decision_the_turn_makes_stale_plays_as_a_stop(toy
     rec = trace_record(6, turning[0])
     assert rec["stop"] and rec["stale_turn_deg"] == turning[0].stale_turn_deg and rec["yaw_rate_dps"] > 20
     assert rec["cut_turn_deg"] == turning[0].cut_turn_deg
+
+
+def test_a_video_played_live_behind_a_slow_model_drops_frames_as_a_camera_does(toy_bundle, monkeypatch):  # noqa: F811
+    """``pace``: a 10 fps video behind a model that takes 0.25 s a frame. Each decision is of the
+    newest frame due when the loop asks (the others are dropped, as a camera's are), so it stays
+    fresh to the end; played frame by frame instead, the loop fell 0.15 s further behind each frame
+    and every decision from the fifth on came too late to play."""
+    engine, clock = Engine(toy_bundle), FakeClock()
+    real = engine.predict
+
+    def slow(frame, fov_deg=None, roll_deg=None):
+        clock.now += 0.25
+        return real(frame, fov_deg, roll_deg)
+
+    def sleep(s):
+        assert s > 0
+        clock.now += s
+
+    monkeypatch.setattr(engine, "predict", slow)
+    video = [(i / 10, bar_frame(0.2 + 0.01 * (i % 2))) for i in range(60)]   # 6 s
+    pipeline = Pipeline(engine, engine.decision_config(watchdog_s=0.5), BEACON)
+    steps: list = []
+    n = run_live(video, pipeline, CuePlayer(BEACON), LiveConfig(watchdog_s=0.5, pace=True, frozen_check=False),
+                 clock=clock, sleep=sleep, on_step=lambda i, s: steps.append((i, clock.now, s)))
+    index = [i for i, _, _ in steps]
+    assert n == 60 and index[0] == 0 and index[-1] >= 57   # the whole video, in its own time
+    assert 20 <= len(steps) <= 26, len(steps)               # ~one frame decided every 0.25 s
+    assert index == sorted(set(index))                      # the video's own frame numbers, in order
+    for i, decided, s in steps:
+        assert not s.late and decided - (100.0 + i / 10) <= 0.35 + 1e-9, (i, decided)   # its frame's age
+    assert not steps[-1][2].decision.stop
+    # a fast model reads every frame, each at its time
+    monkeypatch.setattr(engine, "predict", real)
+    clock.now, steps = 100.0, []
+    run_live(video, pipeline, CuePlayer(BEACON), LiveConfig(watchdog_s=0.5, pace=True, frozen_check=False),
+             clock=clock, sleep=sleep, on_step=lambda i, s: steps.append((i, clock.now, s)))
+    assert [i for i, _, _ in steps] == list(range(60)) and all(t == 100.0 + i / 10 for i, t, _ in steps)

@@ -135,15 +135,24 @@ def run_live_demo(cfg: DemoConfig) -> None:
     trace_path = cfg.out_dir / "trace.jsonl"
     with LiveAudio(player, device=cfg.audio_device), open(trace_path, "w", encoding="utf-8") as trace:
         print("live: playing the beacon; Ctrl-C to stop", file=sys.stderr)
+        decided = 0
+
+        def on_step(i: int, step) -> None:
+            nonlocal decided
+            decided += 1
+            trace.write(json.dumps(trace_record(i, step)) + "\n")
+
         try:
             n = run_live(source, pipeline, player,
                          LiveConfig(watchdog_s=cfg.watchdog_s, pace=cfg.camera is None,
                                     frozen_check=cfg.camera is not None, max_seconds=cfg.max_seconds),
-                         on_step=lambda i, s: trace.write(json.dumps(trace_record(i, s)) + "\n"),
-                         video_time=cfg.camera is None)
+                         on_step=on_step, video_time=cfg.camera is None)
         except KeyboardInterrupt:
             n = -1
-    print(f"live run ended{'' if n < 0 else f' after {n} frames'}; trace: {trace_path}")
+    dropped = n - decided if cfg.camera is None and n > decided else 0
+    print(f"live run {'stopped' if n < 0 else 'ended'} after {decided} frames decided"
+          + (f" of the video's first {n}; the other {dropped} came while the model ran and were dropped, "
+             f"as a camera's are" if dropped else "") + f"; trace: {trace_path}")
 
 
 def run(cfg: DemoConfig) -> None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -25,8 +25,8 @@ from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 @dataclass(frozen=True)
 class LiveConfig:
-    """``watchdog_s``: longest time without a fresh decision; ``pace``: sleep so a video plays
-    in real time (its ``t`` are offsets from the start); ``frozen_check``: a frame identical to
+    """``watchdog_s``: longest time without a fresh decision; ``pace``: a video plays in real
+    time as a camera would give it (its ``t`` are offsets from the start; :func:`paced`); ``frozen_check``: a frame identical to
     the previous one (a frozen camera) does not count as fresh; ``max_seconds``: stop after."""
 
     watchdog_s: float = DEFAULT_WATCHDOG_S
@@ -51,13 +51,36 @@ def is_fresh(now: float, captured: float, watchdog_s: float) -> bool:
     return now - captured <= watchdog_s
 
 
+def paced(frames: Iterable[tuple[int, tuple[float, np.ndarray]]], start: float, clock: Callable[[], float],
+          sleep: Callable[[float], None]) -> Iterator[tuple[int, tuple[float, np.ndarray]]]:
+    """A video's numbered frames as a camera would hand them over, ``t`` seconds after ``start``:
+    it waits for a frame that is not due yet, and when the loop is behind (a model slower than
+    the video's frame period) gives only the newest frame due, dropping those it had no time for,
+    as :class:`~crossing_assist.runtime.sources.CameraSource` does. Played one by one instead, a
+    slow model fell further behind each frame until every decision came too late to play."""
+    it = iter(frames)
+    nxt = next(it, None)
+    while nxt is not None:
+        cur, nxt = nxt, next(it, None)
+        while nxt is not None and start + nxt[1][0] <= clock():
+            cur, nxt = nxt, next(it, None)
+        wait = start + cur[1][0] - clock()
+        if wait > 0:
+            sleep(wait)
+        yield cur
+
+
 def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, player: CuePlayer,
              cfg: LiveConfig, *, clock: Callable[[], float] = time.monotonic,
+             sleep: Callable[[float], None] = time.sleep,
              on_step: Callable[[int, Step], None] | None = None, video_time: bool = True) -> int:
-    """Run until ``frames`` ends (or ``max_seconds``); returns the number of frames processed.
+    """Run until ``frames`` ends (or ``max_seconds``); returns the number of frames read from
+    ``frames`` up to the last one processed. ``on_step`` gets each frame's index in ``frames``.
 
     ``video_time=True``: frame times are offsets from the start of a video (mapped onto
-    ``clock`` at the first frame); False: they already are ``clock`` times (camera).
+    ``clock`` at the first frame); False: they already are ``clock`` times (camera). With
+    ``cfg.pace`` a video plays in real time, dropping the frames a slow model has no time for
+    (:func:`paced`).
     """
     stop_loop = cached_loop(Cue(KIND_STOP), pipeline.beacon_cfg)
     player.set_loop(stop_loop)
@@ -68,13 +91,13 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
     playing: Step | None = None   # the last frame's decision, while it plays a direction
     model_s = 0.0                 # the last frame's capture to its decision: how long one waits for the next
     n = 0
+    numbered: Iterable[tuple[int, tuple[float, np.ndarray]]] = enumerate(frames)
+    if cfg.pace and video_time:
+        numbered = paced(numbered, start, clock, sleep)
     try:
-        for i, (t, frame) in enumerate(frames):
-            now = clock()
-            if cfg.max_seconds is not None and now - start > cfg.max_seconds:
+        for i, (t, frame) in numbered:
+            if cfg.max_seconds is not None and clock() - start > cfg.max_seconds:
                 break
-            if cfg.pace and video_time and start + t > now:
-                time.sleep(start + t - now)
             captured = start + t if video_time else t
             if cfg.frozen_check and _same(prev, frame):
                 continue  # a frozen camera repeats its last frame: not fresh, let the watchdog act
