@@ -8,7 +8,8 @@ threshold, PTL val scanned: 0.88 % confidently wrong where 0.04 gave 0.43 %).
 
 For each finished fold of the CV runs (``CV`` and each ``--also``), play its held-out
 photographer's unseen photos (choose_gate's draw of ``--frames``) as ``scripts/pan_probe.py``
-plays them: 1 s still, then turned right, left and back (``--amplitude``, ``--rate``), every
+plays them: 1 s still, then turned right, left and back (``--amplitude``, ``--rate``; ``--sway``:
+swung either side by a walker's sway instead, ``runtime.listen.sway_yaw``), every
 frame re-rendered as the turned camera sees it; ``--window``: the narrow camera's middle 3:4
 window; ``--phone``: a phone held in portrait (3:4 at the bundle's portrait FOV, choose_gate's
 ``portrait`` view of each turned frame). The model's outputs are saved in the fold
@@ -61,7 +62,7 @@ from crossing_assist.data_tools.images import load_frame  # noqa: E402
 from crossing_assist.data_tools.manifest import read_manifest  # noqa: E402
 from crossing_assist.fileio import atomic_write_text  # noqa: E402
 from crossing_assist.models.evaluate import GATE_TOP, gate_scales  # noqa: E402
-from crossing_assist.runtime.listen import Listener, judge_scans, scan_yaw  # noqa: E402
+from crossing_assist.runtime.listen import Listener, judge_scans, scan_yaw, sway_yaw  # noqa: E402
 
 #: Heard late, the plays kept beside the app's turned one, each the worse of its readings
 #: (``runtime.listen.judge_scans``): as decided (a player without a gyroscope before 2026-12-07),
@@ -74,13 +75,15 @@ LATE_PLAYS = {"unturned": ("gyro", "camera"), "stale": ("camera_stale",), "read_
 VIEWS = {"landscape": "landscape", "window": "portrait_window", "phone": "portrait"}
 
 
-def scan_suffix(amplitude: float, rate: float) -> str:
+def scan_suffix(amplitude: float, rate: float, sway: bool = False) -> str:
     """The file-name part a scan other than the default (±20° at 30°/s) adds."""
+    if sway:
+        return f"_sway_a{amplitude:g}_r{rate:g}"
     return "" if (amplitude, rate) == (20.0, 30.0) else f"_a{amplitude:g}_r{rate:g}"
 
 
-def scan_cache(fold: Path, cam: str, n: int, seed: int, amplitude: float, rate: float) -> Path:
-    return fold / f"scanned{camera_suffix(cam)}_{n}_{seed}{scan_suffix(amplitude, rate)}.npz"
+def scan_cache(fold: Path, cam: str, n: int, seed: int, amplitude: float, rate: float, sway: bool = False) -> Path:
+    return fold / f"scanned{camera_suffix(cam)}_{n}_{seed}{scan_suffix(amplitude, rate, sway)}.npz"
 
 
 def scan_fold(fold: Path, source: str, ptl, neg, used: set[str], a) -> tuple[Path, Path]:
@@ -88,14 +91,15 @@ def scan_fold(fold: Path, source: str, ptl, neg, used: set[str], a) -> tuple[Pat
     play and the bundle."""
     from crossing_assist.runtime.engine import Engine
 
-    path, bundle = scan_cache(fold, camera(a), a.frames, a.seed, a.amplitude, a.rate), fold_bundle(fold, source, ptl)
+    path = scan_cache(fold, camera(a), a.frames, a.seed, a.amplitude, a.rate, a.sway)
+    bundle = fold_bundle(fold, source, ptl)
     if path.is_file():
         return path, bundle
     rows = [r for r in held_out_rows(ptl, neg, source, used, a.frames, a.seed)[0] if r.far_x is not None]
     if not rows:
         raise ValueError(f"{fold}: {source} has no unseen photo with a crossing")
     engine = Engine(bundle, threads=1)
-    psi = scan_yaw(a.amplitude, a.rate)
+    psi = sway_yaw(a.amplitude, a.rate) if a.sway else scan_yaw(a.amplitude, a.rate)
     lis, labels, rates = play(engine, (load_frame(ptl.image_path(r), r.flags) for r in rows), rows, psi, camera(a))
     lis.save(path, scan_labels=labels, psi=psi, camera_rates=rates)
     return path, bundle
@@ -168,8 +172,12 @@ def main(argv=None) -> int:
                     help="the narrow camera (the middle 3:4 window, ~41 deg): checks choose_gate's portrait_window")
     ap.add_argument("--phone", action="store_true",
                     help="a phone held in portrait (3:4 at the bundle's portrait FOV): checks choose_gate's portrait")
-    ap.add_argument("--amplitude", type=float, default=20.0, help="degrees either side of straight ahead (default 20)")
-    ap.add_argument("--rate", type=float, default=30.0, help="turn rate, degrees per second (default 30)")
+    ap.add_argument("--amplitude", type=float, default=None,
+                    help="degrees either side of straight ahead (default 20; with --sway 2.5)")
+    ap.add_argument("--rate", type=float, default=None,
+                    help="turn rate, degrees per second (default 30; with --sway the fastest, 14)")
+    ap.add_argument("--sway", action="store_true",
+                    help="a walker's sway instead of a sweep: 3 periods of a sine (runtime.listen.sway_yaw)")
     ap.add_argument("--heard-after", type=float, default=0.0, metavar="S",
                     help="judge each decision S seconds after its capture, turned by the gyroscope meanwhile")
     ap.add_argument("--grid", type=int, default=16, metavar="STEPS", help="scales a doubling (default 16)")
@@ -181,6 +189,8 @@ def main(argv=None) -> int:
     ap.add_argument("--saved", action="store_true",
                     help="with --cap: cap from the result an earlier call with these options wrote (no replay)")
     a = ap.parse_args(argv)
+    a.amplitude = a.amplitude if a.amplitude is not None else (2.5 if a.sway else 20.0)
+    a.rate = a.rate if a.rate is not None else (14.0 if a.sway else 30.0)
     if a.mirror:
         ap.error("--mirror: scans are played with the folds' plain bundles")
     if a.window and a.phone:
@@ -202,7 +212,7 @@ def main(argv=None) -> int:
         print(f"error: --cap {gate_path} not found (scripts/choose_gate.py writes it)", file=sys.stderr)
         return 2
     view = VIEWS[camera(a)]
-    name = (f"scan_gate{camera_suffix(camera(a))}{scan_suffix(a.amplitude, a.rate)}"
+    name = (f"scan_gate{camera_suffix(camera(a))}{scan_suffix(a.amplitude, a.rate, a.sway)}"
             f"{f'_heard{a.heard_after:g}' if a.heard_after else ''}.json")
     if a.saved:
         return cap_saved(gate_path, view, a.cv / name, [str(cv) for cv in runs])
@@ -232,7 +242,7 @@ def main(argv=None) -> int:
     photos = sum(f["photos"] for f in folds)
     best, met = choose(curve)
     lopo = leave_one_photographer_out(folds)
-    result = {"view": view, "scanned": {"amplitude_deg": a.amplitude, "rate_dps": a.rate},
+    result = {"view": view, "scanned": {"amplitude_deg": a.amplitude, "rate_dps": a.rate, **({"sway": True} if a.sway else {})},
               "heard_after_s": a.heard_after, "runs": [str(cv) for cv in runs], "measure": "far_mass",
               "scale": best["scale"], "threshold": best["scale"] * FAR_MASS_REFERENCE, "targets_met": met,
               "at_scale": {k: v for k, v in best.items() if k != "per_fold"},

@@ -78,6 +78,29 @@ def test_a_phone_held_in_portrait_checks_the_portrait_threshold(two_runs):
         sg.main(_args(runs, ptl, neg, "--phone", "--window"))
 
 
+def test_a_walkers_sway_is_scanned_apart_with_its_own_defaults(two_runs):
+    """--sway: the photos swung either side by a walker's sway (2.5 deg at a fastest 14 deg/s by
+    default) instead of swept, cached and written apart from the sweep."""
+    import numpy as np
+
+    from crossing_assist.runtime.listen import SCAN_FPS, SCAN_STILL_S, sway_yaw
+
+    runs, ptl, neg = two_runs
+    args = [a for a in _args(runs, ptl, neg) if a not in ("--amplitude", "30")]
+    assert sg.main([*args, "--sway", "--heard-after", "0.2"]) == 0
+    res = json.loads((runs[0] / "scan_gate_sway_a2.5_r14_heard0.2.json").read_text())
+    assert res["scanned"] == {"amplitude_deg": 2.5, "rate_dps": 14.0, "sway": True}
+    assert sorted(p.name for p in runs[0].glob("fold-*/scanned*.npz")) == ["scanned_3_0_sway_a2.5_r14.npz"] * 2
+    saved = np.load(runs[0] / "fold-src_0" / "scanned_3_0_sway_a2.5_r14.npz")
+    psi = saved["psi"]
+    np.testing.assert_array_equal(psi, sway_yaw(2.5, 14.0))
+    still = int(round(SCAN_STILL_S * SCAN_FPS))
+    assert not psi[:still].any() and abs(psi).max() == pytest.approx(2.5, abs=0.05)
+    assert np.abs(np.diff(psi)).max() * SCAN_FPS == pytest.approx(14.0, rel=0.05)   # the fastest turn
+    assert np.sum(np.diff(np.sign(psi[still + 1:])) != 0) in (5, 6)                 # three periods
+    assert res["at_scale"]["frames"] > 0 and "beacon_on_read_stale" in res["at_scale"]
+
+
 def test_heard_late_counts_the_worse_of_the_turned_readings(two_runs):
     runs, ptl, neg = two_runs
     assert sg.main(_args(runs, ptl, neg, "--heard-after", "0.3")) == 0

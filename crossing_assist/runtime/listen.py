@@ -274,6 +274,18 @@ def scan_yaw(amplitude_deg: float = 20.0, rate_dps: float = 30.0, fps: float = S
     return np.concatenate([np.zeros(int(round(SCAN_STILL_S * fps))), *legs, [0.0]])
 
 
+def sway_yaw(amplitude_deg: float = 2.5, rate_dps: float = 14.0, cycles: int = 3, fps: float = SCAN_FPS) -> np.ndarray:
+    """A walker's sway instead of a scan: ``SCAN_STILL_S`` still, then the camera's yaw swings
+    ``amplitude_deg`` either side, a sine whose fastest turn is ``rate_dps``, for ``cycles``
+    periods (the defaults: the sample clip's step sway, 2.5 deg at 0.9 Hz)."""
+    if not (0 < amplitude_deg < 90 and rate_dps > 0 and fps > 0 and cycles >= 1):
+        raise ValueError(f"Invalid sway: amplitude {amplitude_deg} deg (0..90), rate {rate_dps} deg/s, "
+                         f"{fps} fps (> 0), {cycles} cycles (>= 1)")
+    omega = rate_dps / amplitude_deg                  # rad/s: the sine's fastest turn is A * omega
+    t = np.arange(int(round(cycles * 2 * np.pi / omega * fps)) + 1) / fps
+    return np.concatenate([np.zeros(int(round(SCAN_STILL_S * fps))), amplitude_deg * np.sin(omega * t)])
+
+
 #: How a scan's turn reaches the decision logic (:func:`judge_scans`): told by a gyroscope (the
 #: app's opt-in one), read from the frames (:mod:`~crossing_assist.runtime.visual_yaw`, the app's
 #: and the Python pipeline's default without one), or not at all.
