@@ -100,6 +100,54 @@ def test_js_defaults_are_the_python_defaults() -> None:
     assert out["watchdog"] == LiveConfig().watchdog_s
 
 
+def test_js_gyroscope_integrator_and_check_match_python() -> None:
+    """The Python runtime's gyroscope (runtime/gyro.py) is the app's: the same turns between two
+    times over irregular samples with gaps, the same reporting, the same verdicts of the picture's
+    check over random pairs of turn rates."""
+    from crossing_assist.runtime.gyro import GYRO_CHECK, GyroCheck, YawIntegrator
+
+    rng = np.random.default_rng(11)
+    t, samples = 0.0, []
+    for _ in range(400):
+        t += float(rng.choice([rng.uniform(0.005, 0.02), rng.uniform(0.2, 0.5)], p=[0.97, 0.03]))
+        samples.append([t, float(rng.uniform(-80, 80))])
+    queries = [sorted(map(float, rng.uniform(0, t + 0.3, 2))) for _ in range(60)] + [[1.0, 1.0], [2.0, 1.5]]
+    pairs = [[float(rng.choice([-1, 1]) * rng.uniform(0, 40)), float(rng.choice([-1, 1]) * rng.uniform(0, 40))]
+             for _ in range(120)]
+    # the picture agreeing with the gyroscope on most turns, then (a wrong sign) disagreeing
+    same = [[g, math.copysign(c, g) if i % 5 else c] for i, (g, c) in enumerate(pairs)]
+    flip = [[g, -c if i > 50 else c] for i, (g, c) in enumerate(same)]
+    pairs = same
+    out = json.loads(run_node(f"""
+        import {{ GyroCheck, YawIntegrator }} from '{js_module("live.js")}';
+        const samples = {json.dumps(samples)}, queries = {json.dumps(queries)};
+        const y = new YawIntegrator();
+        // one query a sample, as the app asks while samples arrive (the integrator keeps 3 s)
+        const between = [], reporting = [];
+        samples.forEach(([t, r], i) => {{
+          y.add(r, t);
+          const [t0, t1] = queries[i % queries.length];
+          between.push(y.between(Math.max(t0, t - 2.5), t + t1 % 0.3));
+          reporting.push(y.reporting(t + t1 % 0.3));
+        }});
+        const verdicts = (pairs) => {{ const g = new GyroCheck(); return pairs.map(([a, b]) => [g.add(a, b), g.confirmed()]); }};
+        console.log(JSON.stringify({{ between, reporting, same: verdicts({json.dumps(pairs)}),
+                                      flip: verdicts({json.dumps(flip)}) }}));
+    """))
+    y, between, reporting = YawIntegrator(), [], []
+    for i, (t, r) in enumerate(samples):
+        y.add(r, t)
+        t0, t1 = queries[i % len(queries)]
+        between.append(y.between(max(t0, t - 2.5), t + t1 % 0.3))
+        reporting.append(y.reporting(t + t1 % 0.3))
+    np.testing.assert_allclose(out["between"], between, rtol=1e-9, atol=1e-9)
+    assert out["reporting"] == reporting and 0 < sum(reporting) < len(reporting)
+    for key, seq in (("same", pairs), ("flip", flip)):
+        g = GyroCheck(GYRO_CHECK)
+        assert out[key] == [[g.add(a, b), g.confirmed()] for a, b in seq], key
+    assert out["flip"][-1][0] == "wrong" and any(c for _, c in out["same"])
+
+
 def _random_scenario(rng: np.random.Generator, cfg: DecisionConfig, n: int) -> dict:
     """Random frames, ticks, failures, irregular times and yaw; expected decisions from Python."""
     decider = Decider(cfg)

@@ -429,3 +429,130 @@ def test_a_video_played_live_behind_a_slow_model_drops_frames_as_a_camera_does(t
     run_live(video, pipeline, CuePlayer(BEACON), LiveConfig(watchdog_s=0.5, pace=True, frozen_check=False),
              clock=clock, sleep=sleep, on_step=lambda i, s: steps.append((i, clock.now, s)))
     assert [i for i, _, _ in steps] == list(range(60)) and all(t == 100.0 + i / 10 for i, t, _ in steps)
+
+
+def _gyro_run(toy_bundle, monkeypatch, rate_dps, turning=12, follow_gyro=False, visual_yaw=True):  # noqa: F811
+    """The panning toy camera (6 still frames, then ``turning`` panned 4 px a frame) behind a 0.15 s
+    model, with a gyroscope sampled at 100 Hz (an IMU thread, here fed as the clock moves) reading
+    ``rate_dps`` while the camera pans and 0 before (None: no gyroscope)."""
+    from crossing_assist.runtime.gyro import YawIntegrator
+
+    engine, clock, gyro = Engine(toy_bundle), FakeClock(), YawIntegrator()
+    real = engine.predict
+    turning_since = [None]
+
+    def slow(frame, fov_deg=None, roll_deg=None):
+        for _ in range(15):   # 0.15 s of model run, 100 gyroscope samples a second
+            clock.now += 0.01
+            on = turning_since[0] is not None and clock.now > turning_since[0]
+            gyro.add((rate_dps or 0.0) if on else 0.0, clock.now)
+        return real(frame, fov_deg, roll_deg)
+
+    monkeypatch.setattr(engine, "predict", slow)
+    gyro.add(0.0, clock.now)
+    frames = _panning_frames(6, turning, 4)
+
+    def video():
+        for k, f in enumerate(frames):
+            if k == 6:
+                turning_since[0] = clock.now - 0.15   # the pan began at the frame before's capture
+            yield clock.now - 100.0, f
+
+    pipeline = Pipeline(engine, engine.decision_config(), BEACON, visual_yaw=visual_yaw)
+    steps: list = []
+    run_live(video(), pipeline, CuePlayer(BEACON), LiveConfig(), clock=clock,
+             on_step=lambda i, s: steps.append(s), gyro=gyro if rate_dps is not None else None,
+             follow_gyro=follow_gyro)
+    return pipeline, steps
+
+
+def test_with_a_gyroscope_followed_the_beacon_turns_with_the_user_instead_of_stopping(toy_bundle, monkeypatch):  # noqa: F811
+    """A gyroscope reporting and followed (``follow_gyro``, the app's opt-in): the decision logic is
+    told its turn, and each decision plays turned by the gyroscope's turn from its capture to its
+    decision, 0.15 s at 30 deg/s = 4.5 deg, instead of the stop the picture's turn gives without one."""
+    pipeline, steps = _gyro_run(toy_bundle, monkeypatch, 30.0, follow_gyro=True)
+    still, turning = steps[1:6], steps[7:]
+    assert all(s.yaw_source == "gyro" for s in steps)
+    assert all(not s.decision.stop and s.turn_deg == pytest.approx(0.0) for s in still)
+    assert all(s.yaw_rate_dps == pytest.approx(30.0) for s in turning)   # the gyroscope's, told the Decider
+    fov = pipeline.decider.cfg.fov_deg
+    on = [s for s in turning if not s.decision.stop]
+    assert len(on) >= len(turning) - 2, [s.decision.reason for s in turning]
+    for s in on:
+        assert s.turn_deg == pytest.approx(4.5, abs=0.01) and s.stale_turn_deg is None
+        assert s.decision.heading_deg < fov / 2   # turned right: the goal moved left of where it was seen
+    # without a gyroscope the same turning decisions are stops: the picture's turn makes them stale
+    _, without = _gyro_run(toy_bundle, monkeypatch, None)
+    assert all(s.yaw_source == "camera" and s.decision.stop and s.stale_turn_deg for s in without[7:])
+
+
+def test_a_gyroscope_is_followed_once_the_picture_confirms_it_and_never_when_it_reads_the_wrong_way(toy_bundle, monkeypatch):  # noqa: F811
+    """By default a gyroscope is followed once the picture's turn has confirmed its sign (8 frames
+    both read turning, as the app's GyroCheck); until then a decision plays as a stop once the
+    gyroscope's turn since its capture passes half a strip. One reading turns the wrong way is
+    found out by the picture and never followed: the picture's turn is the decision logic's."""
+    pipeline, right = _gyro_run(toy_bundle, monkeypatch, 30.0)
+    sources = [s.yaw_source for s in right]
+    first = sources.index("gyro")
+    assert set(sources[:first]) == {"camera"} and set(sources[first:]) == {"gyro"} and 6 + 7 <= first < len(right)
+    half_strip = pipeline.decider.cfg.fov_deg / 24
+    for s in right[7:first]:   # turning, not yet confirmed: the gyroscope's turn stops it
+        assert s.turn_deg == pytest.approx(4.5, abs=0.01) and (s.turn_deg > half_strip) == s.decision.stop
+    assert any(not s.decision.stop for s in right[first:])
+    _, wrong = _gyro_run(toy_bundle, monkeypatch, -30.0)
+    assert all(s.yaw_source == "camera" for s in wrong)
+    assert all(s.yaw_rate_dps > 15 for s in wrong[8:])   # the picture's turn, right
+
+
+def test_between_decisions_the_follower_turns_the_playing_decision_and_never_overrides_a_newer_cue(toy_bundle):  # noqa: F811
+    """The :class:`Follower` re-plays the decision playing turned by the gyroscope's turn since its
+    capture at each tick; a stop queued since (the watchdog's) is never replaced by a turned cue; a
+    gyroscope that stops reporting while a decision plays is a fault: the stop cue."""
+    from crossing_assist.runtime.beacon import cue_for
+    from crossing_assist.runtime.decide import turned
+    from crossing_assist.runtime.gyro import YawIntegrator
+    from crossing_assist.runtime.live import Follower
+
+    engine, clock, gyro = Engine(toy_bundle), FakeClock(), YawIntegrator()
+    pipeline = Pipeline(engine, engine.decision_config(), BEACON, visual_yaw=False)
+    player = CuePlayer(BEACON)
+    for k in range(5):
+        step = pipeline.step(bar_frame(0.5), k * 0.1)
+    assert not step.decision.stop
+    stop_loop = render_cue(Cue(KIND_STOP), BEACON)
+    follower = Follower(player, pipeline, gyro, stop_loop, clock)
+    fov = pipeline.decider.cfg.fov_deg
+
+    def turn_for(seconds, rate):
+        for _ in range(int(round(seconds / 0.01))):
+            clock.now += 0.01
+            gyro.add(rate, clock.now)
+
+    captured = clock.now
+    gyro.add(0.0, captured)
+    turn_for(0.1, 20.0)
+    played = follower.play(step, captured, followed=True)
+    assert played.turn_deg == pytest.approx(2.0) and played.decision.heading_deg == pytest.approx(step.decision.heading_deg - 2.0)
+    turn_for(0.1, -10.0)
+    follower.tick()   # 2 deg right, then 1 back: turned by 1
+    want = render_cue(cue_for(turned(step.decision, 1.0, fov)), BEACON)
+    assert np.array_equal(player.queued_loop, want)
+    follower.stop()   # the watchdog
+    turn_for(0.05, 20.0)
+    follower.tick()
+    assert _is_stop(player.queued_loop)
+    follower.play(step, clock.now, followed=True)
+    clock.now += 0.3   # no sample for 0.3 s: not reporting
+    follower.tick()
+    assert _is_stop(player.queued_loop)
+    # a follower's own thread ticks too
+    turn_for(0.01, 0.0)
+    follower.play(step, clock.now, followed=True)
+    turn_for(0.1, 30.0)
+    follower.start()
+    want = render_cue(cue_for(turned(step.decision, 3.0, fov)), BEACON)
+    deadline = time.monotonic() + 5
+    while not np.array_equal(player.queued_loop, want) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    follower.close()
+    assert np.array_equal(player.queued_loop, want)

@@ -1,16 +1,23 @@
 """Live loop: frames -> decisions -> the cue the audio stream plays, guarded by the watchdog.
 
-With no gyroscope, nothing turns a decision with the user once its frame is read: a decision the
-turn read from the frames makes half a strip stale by the end of its play is played as a stop,
-checked when it is decided and again when the next frame is read (:meth:`Pipeline.heard`).
+A decision plays from the end of its model run until the next one, while the user may turn. With
+a gyroscope (``run_live(gyro=…)``, a board's IMU feeding :class:`~crossing_assist.runtime.gyro.YawIntegrator`)
+it is turned with the user until then (:class:`Follower`, decision step 10), as the phone app does.
+With none, nothing turns it once its frame is read: a decision the turn read from the frames
+makes half a strip stale by the end of its play is played as a stop, checked when it is decided
+and again when the next frame is read (:meth:`Pipeline.heard`).
 
 Threads: this loop (capture, inference, decision, cue rendering), the watchdog (swaps in the
-stop cue when decisions stop coming), and the audio callback (only copies samples). The cue is
-handed over by a reference swap (:meth:`CuePlayer.set_loop`), never under a lock.
+stop cue when decisions stop coming), with a gyroscope the follower (re-turns the playing cue
+every :data:`FOLLOW_S`), and the audio callback (only copies samples). The cue is handed over by
+a reference swap (:meth:`CuePlayer.set_loop`); the loop, the watchdog and the follower queue
+theirs under the follower's lock, so a turned cue never replaces a newer one; the audio callback
+takes no lock.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass, replace
 from typing import Callable, Iterable, Iterator
@@ -19,8 +26,13 @@ import numpy as np
 
 from crossing_assist.runtime.beacon import KIND_STOP, Cue
 from crossing_assist.runtime.beacon import CuePlayer
+from crossing_assist.runtime.gyro import GyroCheck, YawIntegrator
 from crossing_assist.runtime.pipeline import Pipeline, Step, cached_loop
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
+
+
+#: How often the decision playing is turned again with the gyroscope between decisions (s).
+FOLLOW_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -70,10 +82,77 @@ def paced(frames: Iterable[tuple[int, tuple[float, np.ndarray]]], start: float, 
         yield cur
 
 
+class Follower:
+    """Decision step 10 with a gyroscope, between decisions: the decision playing is played turned
+    by the gyroscope's turn since its frame's capture (:func:`~crossing_assist.runtime.decide.turned`;
+    the gyroscope followed), or, while it reports but is not followed (not yet confirmed by the
+    picture), as a stop once that turn passes half a strip (:func:`~crossing_assist.runtime.decide.stale`).
+    Re-played every ``period_s`` on its own thread (the app: at every gyroscope sample) until the next
+    cue. Every cue the live loop and the watchdog queue goes through :meth:`play` or :meth:`stop`,
+    under one lock, so a turned cue never replaces a newer one. A gyroscope that stops reporting
+    while a decision plays is a fault: the stop cue."""
+
+    def __init__(self, player: CuePlayer, pipeline: Pipeline, gyro: YawIntegrator, stop_loop: np.ndarray,
+                 clock: Callable[[], float], period_s: float = FOLLOW_S) -> None:
+        self.player, self.pipeline, self.gyro, self.stop_loop = player, pipeline, gyro, stop_loop
+        self.clock, self.period_s = clock, period_s
+        self._lock = threading.Lock()
+        self._playing: tuple[Step, float, bool] | None = None   # the step, its capture, followed
+        self._ended = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> "Follower":
+        def loop() -> None:
+            while not self._ended.wait(self.period_s):
+                self.tick()
+        self._thread = threading.Thread(target=loop, name="crossing-follow", daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        self._ended.set()
+        if self._thread is not None:
+            self._thread.join(timeout=1.0)
+
+    def play(self, step: Step, captured: float | None = None, followed: bool = False) -> Step:
+        """Queue ``step``'s cue; with ``captured`` (a fresh direction, the gyroscope reporting),
+        played turned (``followed``) or stopped once stale from now until the next cue. Returns
+        the step as it plays now."""
+        with self._lock:
+            self._playing = (step, captured, followed) if captured is not None and not step.decision.stop else None
+            played = self._turn(step, captured, followed) if self._playing else step
+            self.player.set_loop(played.loop)
+            return played
+
+    def stop(self) -> None:
+        """The stop cue now (the watchdog's, the end), and nothing turned until the next cue."""
+        with self._lock:
+            self._playing = None
+            self.player.set_loop(self.stop_loop)
+
+    def tick(self) -> None:
+        with self._lock:
+            if self._playing is None:
+                return
+            step, captured, followed = self._playing
+            if not self.gyro.reporting(self.clock()):
+                self._playing = None
+                self.player.set_loop(self.stop_loop)
+                return
+            self.player.set_loop(self._turn(step, captured, followed).loop)
+
+    def _turn(self, step: Step, captured: float, followed: bool) -> Step:
+        turn = self.gyro.turn(captured, self.clock())
+        if followed:
+            return self.pipeline.turned(step, turn)
+        return replace(self.pipeline.heard(step, turn), turn_deg=turn)
+
+
 def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, player: CuePlayer,
              cfg: LiveConfig, *, clock: Callable[[], float] = time.monotonic,
              sleep: Callable[[float], None] = time.sleep,
-             on_step: Callable[[int, Step], None] | None = None, video_time: bool = True) -> int:
+             on_step: Callable[[int, Step], None] | None = None, video_time: bool = True,
+             gyro: YawIntegrator | None = None, follow_gyro: bool = False) -> int:
     """Run until ``frames`` ends (or ``max_seconds``); returns the number of frames read from
     ``frames`` up to the last one processed. ``on_step`` gets each frame's index in ``frames``.
 
@@ -81,14 +160,28 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
     ``clock`` at the first frame); False: they already are ``clock`` times (camera). With
     ``cfg.pace`` a video plays in real time, dropping the frames a slow model has no time for
     (:func:`paced`).
+
+    ``gyro``: a gyroscope's samples on the frames' clock (:class:`YawIntegrator`, fed by the
+    caller's IMU thread). While it reports, each decision plays from its model run's end turned
+    with the user by the gyroscope's turn since its capture (:class:`Follower`), and the decision
+    logic is told the gyroscope's turn between captures, once the picture's turn has confirmed the
+    gyroscope's sign (:class:`GyroCheck`; ``follow_gyro=True``: from the start, as the app's
+    opt-in), never after finding it the wrong way. Until then the decision plays as a stop once the
+    gyroscope's turn since its capture passes half a strip. Without a gyroscope reporting, a
+    decision the turn read from the frames makes half a strip stale is a stop (checked when it is
+    decided, and when the next frame is read).
     """
     stop_loop = cached_loop(Cue(KIND_STOP), pipeline.beacon_cfg)
-    player.set_loop(stop_loop)
-    dog = Watchdog(cfg.watchdog_s, lambda: player.set_loop(stop_loop), clock=clock).start()
+    follower = Follower(player, pipeline, gyro or YawIntegrator(), stop_loop, clock)
+    follower.stop()
+    if gyro is not None:
+        follower.start()
+    check = GyroCheck()
+    dog = Watchdog(cfg.watchdog_s, follower.stop, clock=clock).start()
     start = clock()
     prev: np.ndarray | None = None
     last_captured: float | None = None
-    playing: Step | None = None   # the last frame's decision, while it plays a direction
+    playing: Step | None = None   # no gyroscope: the last frame's decision, while it plays a direction
     model_s = 0.0                 # the last frame's capture to its decision: how long one waits for the next
     n = 0
     numbered: Iterable[tuple[int, tuple[float, np.ndarray]]] = enumerate(frames)
@@ -104,27 +197,38 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
             prev = frame
             interval = 0.0 if last_captured is None else max(0.0, captured - last_captured)
             seen = pipeline.read(frame, captured - start)
+            reporting = gyro is not None and gyro.reporting(captured)
+            followed = False
+            if reporting:
+                # the gyroscope's turn since the frame before, checked against the picture's
+                gyro_dps = gyro.between(captured - interval, captured) if interval else 0.0
+                if pipeline.visual_yaw is not None:
+                    check.add(gyro_dps, seen.yaw_rate_dps)
+                followed = check.verdict != "wrong" and (follow_gyro or check.confirmed())
+                if followed:
+                    seen = replace(seen, yaw_rate_dps=gyro_dps)
             cut = None      # the turn that stopped the playing decision now, if one did
-            if playing is not None:
+            if playing is not None and not reporting:
                 # no gyroscope: the turn read since the playing decision's frame, carried on through
                 # this frame's model run; past half a strip it is stale, a stop from now on
                 checked = pipeline.heard(playing, seen.yaw_rate_dps * (interval + model_s))
                 if checked is not playing:
-                    player.set_loop(checked.loop)
+                    follower.play(checked)
                     cut = checked.stale_turn_deg
             last_captured = captured
-            step = pipeline.decide(seen)
+            step = replace(pipeline.decide(seen), yaw_source="gyro" if followed else
+                           "camera" if pipeline.visual_yaw is not None else "off")
             decided = clock()
             model_s = max(0.0, decided - captured)
             fresh = is_fresh(decided, captured, cfg.watchdog_s)
             if not fresh:   # decided too late to play: the stop cue, and the trace says so
                 step = replace(step, cue=Cue(KIND_STOP), loop=stop_loop, late=True)
-            else:           # no gyroscope: a stop if the turn goes on past half a strip before the next one
+            elif not reporting:   # no gyroscope: a stop if the turn goes on past half a strip before the next one
                 step = pipeline.heard(step, step.yaw_rate_dps * (model_s + interval))
             if cut is not None:
                 step = replace(step, cut_turn_deg=cut)
-            playing = step if fresh and not step.decision.stop else None
-            player.set_loop(step.loop)
+            playing = step if fresh and not reporting and not step.decision.stop else None
+            step = follower.play(step, captured if fresh and reporting else None, followed)
             if fresh:
                 dog.beat(captured)
             if on_step is not None:
@@ -132,5 +236,6 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
             n = i + 1
     finally:
         dog.stop()
-        player.set_loop(stop_loop)
+        follower.close()
+        follower.stop()
     return n

@@ -16,7 +16,7 @@ import numpy as np
 
 from crossing_assist.geometry import level, rolled_too_far
 from crossing_assist.runtime.beacon import BeaconConfig, Cue, cue_for, render_cue
-from crossing_assist.runtime.decide import Decider, Decision, DecisionConfig, stale
+from crossing_assist.runtime.decide import Decider, Decision, DecisionConfig, stale, turned
 from crossing_assist.runtime.engine import Engine, Prediction
 from crossing_assist.runtime.visual_yaw import VisualYaw
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
@@ -31,7 +31,9 @@ class Step:
     live, with no gyroscope, the turn read from the frames by the end of its play that made it a
     stop when decided (:meth:`Pipeline.heard`; ``decision``, ``cue`` and ``loop`` are then the
     stop's); ``cut_turn_deg``: the one that stopped the decision before it, still playing, when
-    this frame was read."""
+    this frame was read. ``yaw_source``: where that rate came from, ``"gyro"``, ``"camera"`` (the
+    frames) or ``"off"``; ``turn_deg``: live, with a gyroscope reporting, its turn from the capture
+    to the decision, by which the decision played was turned (or stopped once stale)."""
 
     prediction: Prediction
     decision: Decision
@@ -41,6 +43,8 @@ class Step:
     yaw_rate_dps: float = 0.0
     stale_turn_deg: float | None = None
     cut_turn_deg: float | None = None
+    yaw_source: str = "camera"
+    turn_deg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -149,6 +153,15 @@ class Pipeline:
         cue = cue_for(played)
         return replace(step, decision=played, cue=cue, loop=cached_loop(cue, self.beacon_cfg), stale_turn_deg=turn_deg)
 
+    def turned(self, step: Step, turn_deg: float) -> Step:
+        """``step`` as played once the camera has turned ``turn_deg`` since its frame's capture, by
+        a gyroscope followed (decision step 10, :func:`~crossing_assist.runtime.decide.turned`)."""
+        played = turned(step.decision, turn_deg, self.decider.cfg.fov_deg)
+        if played is step.decision:
+            return replace(step, turn_deg=turn_deg)
+        cue = cue_for(played)   # rendered, not cached: a turned cue's pan takes any value
+        return replace(step, decision=played, cue=cue, loop=render_cue(cue, self.beacon_cfg), turn_deg=turn_deg)
+
 
 def open_pipeline(bundle: str | os.PathLike, *, fov_deg: float | None = None, watchdog_s: float = DEFAULT_WATCHDOG_S,
                   beacon: BeaconConfig | None = None, engine: Engine | None = None,
@@ -175,7 +188,8 @@ def trace_record(i: int, step: Step) -> dict:
            "entropy": p.entropy if p.ok else None, "mutual_info": p.mutual_info if p.ok else None,
            "uncertainty": p.uncertainty if p.ok else None, "conformal_set": list(p.conformal_set),
            "cue": step.cue.kind, "late": step.late, "yaw_rate_dps": step.yaw_rate_dps,
-           "stale_turn_deg": step.stale_turn_deg, "cut_turn_deg": step.cut_turn_deg}
+           "stale_turn_deg": step.stale_turn_deg, "cut_turn_deg": step.cut_turn_deg,
+           "yaw_source": step.yaw_source, "turn_deg": step.turn_deg}
     rec.update(d.to_json())
     rec["belief"] = [round(v, 5) for v in rec["belief"]]
     return rec

@@ -1,0 +1,111 @@
+"""A gyroscope's turn for the live loop: samples integrated into turns between two times, and the
+picture's check of the gyroscope's sign (the phone app's ``YawIntegrator`` and ``GyroCheck``,
+android_demo/www/js/live.js, with the same rules).
+
+A board with an IMU hands its yaw-rate samples to :meth:`YawIntegrator.add` from its own thread;
+:func:`~crossing_assist.runtime.live.run_live` then tells the decision logic the gyroscope's turn
+between captures and turns the beacon with the user between decisions (decision step 10), as the
+app does. Without one, a decision the picture's turn makes stale is a stop, which silences the
+beacon while the user turns, and for most of a walk: the step sway alone (2.5 deg at 0.9 Hz)
+left it on for 22 % of held-out goal-in-view frames, against 91 % turned by a gyroscope
+(docs/results.md, "A walker's sway").
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import deque
+from dataclasses import dataclass
+
+#: A sample's rate covers the time since the sample before, at most this long: a longer gap is a
+#: paused sensor, and a sensor whose last sample is older than this is not reporting.
+MAX_SAMPLE_GAP_S = 0.2
+KEEP_S = 3.0   # samples kept: longer than any pair of frames the watchdog lets through
+
+
+class YawIntegrator:
+    """Gyroscope samples (turn rate, deg/s, + right; at times on the frames' clock) integrated into
+    the turn between two times, however the sensor's rate and the frame rate compare. Thread-safe:
+    an IMU thread adds, the live loop and its audio follower read."""
+
+    def __init__(self) -> None:
+        self._samples: deque[tuple[float, float]] = deque()
+        self._lock = threading.Lock()
+
+    def add(self, rate_dps: float, t: float) -> None:
+        """A sample: turn rate ``rate_dps`` at time ``t``; a non-finite one, or one not after the
+        last, is ignored."""
+        if not (math.isfinite(rate_dps) and math.isfinite(t)):
+            return
+        with self._lock:
+            if self._samples and not t > self._samples[-1][0]:
+                return
+            self._samples.append((float(t), float(rate_dps)))
+            while len(self._samples) > 2 and self._samples[1][0] < t - KEEP_S:
+                self._samples.popleft()
+
+    def reporting(self, t: float) -> bool:
+        """Whether a sample came within :data:`MAX_SAMPLE_GAP_S` before ``t``."""
+        with self._lock:
+            return bool(self._samples) and t - self._samples[-1][0] <= MAX_SAMPLE_GAP_S
+
+    def turn(self, t0: float, t1: float) -> float:
+        """Degrees turned over [t0, t1] (0 when t1 <= t0; a stretch no sample covers adds nothing)."""
+        if not t1 > t0:
+            return 0.0
+        with self._lock:
+            samples = list(self._samples)
+        angle = 0.0
+        for (t_before, _), (t, rate) in zip(samples, samples[1:]):
+            overlap = min(t, t1) - max(t_before, t - MAX_SAMPLE_GAP_S, t0)
+            if overlap > 0:
+                angle += rate * overlap
+        return angle
+
+    def between(self, t0: float, t1: float) -> float:
+        """Mean turn rate (deg/s) over [t0, t1], as the app's ``between`` (0 when t1 <= t0)."""
+        return self.turn(t0, t1) / (t1 - t0) if t1 > t0 else 0.0
+
+
+@dataclass(frozen=True)
+class GyroCheckConfig:
+    """Frames count when both read a clear turn (``turn_dps``); of the last ``window`` counted,
+    once ``least`` were seen, a share of ``contradicted`` or more the other way is 'wrong'."""
+
+    turn_dps: float = 15.0
+    window: int = 12
+    least: int = 8
+    contradicted: float = 0.75
+
+
+GYRO_CHECK = GyroCheckConfig()
+
+
+class GyroCheck:
+    """The gyroscope's sign checked against the picture's turn, frame by frame (the app's
+    ``GyroCheck``). A gyroscope mounted or read the wrong way turns the beacon away from the
+    crossing as the user turns toward it; once found ``'wrong'`` it is not followed again. A turn
+    in the picture alone (a bus crossing a still view) or the gyroscope's alone (a blank wall)
+    proves nothing and is not counted."""
+
+    def __init__(self, cfg: GyroCheckConfig = GYRO_CHECK) -> None:
+        self.cfg = cfg
+        self.turns: deque[bool] = deque(maxlen=cfg.window)   # the last counted frames: True = confirmed
+        self.verdict = "unchecked"                           # 'unchecked' | 'ok' | 'wrong'
+
+    def add(self, gyro_dps: float, camera_dps: float) -> str:
+        """One frame's turn rates (deg/s, + right), the gyroscope's and the picture's; the verdict."""
+        c = self.cfg
+        if self.verdict == "wrong" or not (abs(gyro_dps) >= c.turn_dps and abs(camera_dps) >= c.turn_dps):
+            return self.verdict   # NaN fails the comparisons too
+        self.turns.append(gyro_dps * camera_dps > 0)
+        if len(self.turns) >= c.least:
+            bad = self.turns.count(False) / len(self.turns)
+            self.verdict = "wrong" if bad >= c.contradicted else "ok"
+        return self.verdict
+
+    def confirmed(self) -> bool:
+        """The picture vouches for the gyroscope: 'ok', with as large a share of the window
+        confirming as ``contradicted`` is of it contradicting for 'wrong'."""
+        return self.verdict == "ok" and self.turns.count(True) >= self.cfg.contradicted * len(self.turns)
