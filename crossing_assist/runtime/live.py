@@ -38,8 +38,9 @@ FOLLOW_S = 0.05
 @dataclass(frozen=True)
 class LiveConfig:
     """``watchdog_s``: longest time without a fresh decision; ``pace``: a video plays in real
-    time as a camera would give it (its ``t`` are offsets from the start; :func:`paced`); ``frozen_check``: a frame identical to
-    the previous one (a frozen camera) does not count as fresh; ``max_seconds``: stop after."""
+    time as a camera would give it (its ``t`` are offsets from the start; :func:`paced`);
+    ``frozen_check``: a frame identical to the previous one (a frozen camera) does not count as
+    fresh; ``max_seconds``: stop after."""
 
     watchdog_s: float = DEFAULT_WATCHDOG_S
     pace: bool = False
@@ -206,7 +207,7 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
                     check.add(gyro_dps, seen.yaw_rate_dps)
                 followed = check.verdict != "wrong" and (follow_gyro or check.confirmed())
                 if followed:
-                    seen = replace(seen, yaw_rate_dps=gyro_dps)
+                    seen = replace(seen, yaw_rate_dps=gyro_dps, yaw_source="gyro")
             cut = None      # the turn that stopped the playing decision now, if one did
             if playing is not None and not reporting:
                 # no gyroscope: the turn read since the playing decision's frame, carried on through
@@ -216,8 +217,7 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
                     follower.play(checked)
                     cut = checked.stale_turn_deg
             last_captured = captured
-            step = replace(pipeline.decide(seen), yaw_source="gyro" if followed else
-                           "camera" if pipeline.visual_yaw is not None else "off")
+            step = pipeline.decide(seen)
             decided = clock()
             model_s = max(0.0, decided - captured)
             fresh = is_fresh(decided, captured, cfg.watchdog_s)

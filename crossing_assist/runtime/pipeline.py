@@ -51,12 +51,14 @@ class Step:
 class Seen:
     """A frame read, before the model (:meth:`Pipeline.read`): the frame (levelled when its roll
     was given and a turn is read from it), its capture time, the roll still to level (None when
-    none), and the turn rate the decision logic will be told with it."""
+    none), and the turn rate the decision logic will be told with it, and where it came from
+    (``"gyro"``, ``"camera"``: read from the frames, ``"off"``)."""
 
     frame: np.ndarray | None
     t: float
     roll_deg: float | None
     yaw_rate_dps: float
+    yaw_source: str = "camera"
 
 
 @lru_cache(maxsize=16)
@@ -111,6 +113,7 @@ class Pipeline:
                 frame_rgb, roll_deg = level(frame_rgb, roll_deg, self.engine.bundle.geometry.pad_rgb), None
             except Exception:  # noqa: BLE001  an unreadable frame: the engine says why
                 pass
+        source = "gyro" if yaw_rate_dps is not None else "camera" if self.visual_yaw else "off"
         if yaw_rate_dps is None:
             yaw_rate_dps = 0.0
             if self.visual_yaw:
@@ -119,7 +122,7 @@ class Pipeline:
                 yaw_rate_dps = seen if frame_rgb is not None else 0.0
         elif self.visual_yaw:
             self.visual_yaw.reset()     # the gyroscope's turn; a later frame without one starts afresh
-        return Seen(frame_rgb, t, roll_deg, float(yaw_rate_dps))
+        return Seen(frame_rgb, t, roll_deg, float(yaw_rate_dps), source)
 
     def decide(self, seen: Seen) -> Step:
         """The second half of :meth:`step`: the model, the decision logic and the cue."""
@@ -137,7 +140,8 @@ class Pipeline:
             self._fov_lost = True
         decision = self.decider.step(seen.t, obs, seen.yaw_rate_dps)
         cue = cue_for(decision)
-        return Step(pred, decision, cue, cached_loop(cue, self.beacon_cfg), yaw_rate_dps=seen.yaw_rate_dps)
+        return Step(pred, decision, cue, cached_loop(cue, self.beacon_cfg), yaw_rate_dps=seen.yaw_rate_dps,
+                    yaw_source=seen.yaw_source)
 
     def heard(self, step: Step, turn_deg: float) -> Step:
         """``step`` as a player with no gyroscope plays it once the camera has turned ``turn_deg``
