@@ -195,6 +195,10 @@ def main(argv=None) -> int:
         ap.error("--mirror: scans are played with the folds' plain bundles")
     if a.window and a.phone:
         ap.error("--window and --phone: one camera scans at a time")
+    try:
+        (sway_yaw if a.sway else scan_yaw)(a.amplitude, a.rate)
+    except ValueError as exc:
+        ap.error(f"--amplitude {a.amplitude:g} / --rate {a.rate:g}: {exc}")
     if not 0 <= a.heard_after <= 1:
         ap.error(f"--heard-after {a.heard_after:g}: valid 0..1 s")
     try:

@@ -200,6 +200,11 @@ def test_bad_runs_and_options_are_one_line(tmp_path, capsys):
     (tmp_path / "cv").mkdir()
     assert sg.main([str(tmp_path / "cv"), "--cap", "gate.json"]) == 2
     assert "not found" in capsys.readouterr().err
-    for bad in (["--heard-after", "5"], ["--min-scale", "64"], ["--mirror"]):
+    for bad in (["--heard-after", "5"], ["--min-scale", "64"], ["--mirror"], ["--amplitude", "0"],
+                ["--sway", "--rate", "-3"]):
         with pytest.raises(SystemExit):
             sg.main([str(tmp_path / "cv"), *bad])
+        assert "error:" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        sg.main([str(tmp_path / "cv"), "--sway", "--amplitude", "95"])
+    assert "--amplitude 95" in capsys.readouterr().err

@@ -184,8 +184,9 @@ def open_pipeline(bundle: str | os.PathLike, *, fov_deg: float | None = None, wa
 def trace_record(i: int, step: Step) -> dict:
     """One trace.jsonl line: frame index, model outputs, the cue played (``late``: the stop cue
     played because the decision came too late, live only), the turn rate the decision logic was
-    told, the turns that made the decision, or the one before it, a stop as played
-    (``stale_turn_deg``, ``cut_turn_deg``; live only) and the decision (as played)."""
+    told and where it came from (``yaw_source``), the turns that made the decision, or the one
+    before it, a stop as played (``stale_turn_deg``, ``cut_turn_deg``; live only), the gyroscope's
+    turn it was played turned by (``turn_deg``; live only) and the decision (as played)."""
     p, d = step.prediction, step.decision
     rec = {"frame": i, "ok": p.ok, "error": p.error or None, "action": p.action if p.ok else None,
            "probs": None if p.probs is None else [round(float(v), 5) for v in p.probs],
