@@ -528,6 +528,15 @@ def test_judge_scans_heard_late_counts_the_turn_since_the_capture(toy_bundle):  
     assert slow["on"] == 8 and slow["confidently_wrong"] > 0.5
     with pytest.raises(ValueError, match="heard_after_s"):
         judge_scans(engine, [clip], labels, psi, np.zeros((1, 20)), heard_after_s=5.0)
+    # a gyroscope reporting, not followed (camera_stale): its turn since the capture, carried on at its
+    # rate to the end of the play. At 12 deg/s, 0.2 s after capture the turn is 2.4 deg, under half a
+    # 5.6 deg strip, but 3.6 deg by the end of the play: a stop (judged as it stood, it played)
+    slow_psi = np.asarray([0.0] * 10 + [1.2 * i for i in range(1, 11)])
+    slow_labels = np.asarray([[x_to_bin(heading_to_x(28.0 - a, 67.0)) for a in slow_psi]])
+    slow_clip = [pred(int(k)) for k in slow_labels[0]]
+    carried = judge_scans(engine, [slow_clip], slow_labels, slow_psi, np.zeros((1, 20)), heard_after_s=0.2)
+    assert carried["camera_stale"]["in_view"] == 8 and carried["camera_stale"]["on"] == 0
+    assert carried["gyro_turned"]["on"] == 8 and carried["gyro_turned"]["wrong"] == 0
 
 
 def test_the_embedded_bundle_is_never_written_into(tmp_path, monkeypatch):

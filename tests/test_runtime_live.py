@@ -489,7 +489,8 @@ def test_with_a_gyroscope_followed_the_beacon_turns_with_the_user_instead_of_sto
 def test_a_gyroscope_is_followed_once_the_picture_confirms_it_and_never_when_it_reads_the_wrong_way(toy_bundle, monkeypatch):  # noqa: F811
     """By default a gyroscope is followed once the picture's turn has confirmed its sign (8 frames
     both read turning, as the app's GyroCheck); until then a decision plays as a stop once the
-    gyroscope's turn since its capture passes half a strip. One reading turns the wrong way is
+    gyroscope's turn since its capture, carried on at its rate to the end of the play (the next
+    decision, a frame interval later), passes half a strip. One reading turns the wrong way is
     found out by the picture and never followed: the picture's turn is the decision logic's."""
     pipeline, right = _gyro_run(toy_bundle, monkeypatch, 30.0)
     sources = [s.yaw_source for s in right]
@@ -497,7 +498,8 @@ def test_a_gyroscope_is_followed_once_the_picture_confirms_it_and_never_when_it_
     assert set(sources[:first]) == {"camera"} and set(sources[first:]) == {"gyro"} and 6 + 7 <= first < len(right)
     half_strip = pipeline.decider.cfg.fov_deg / 24
     for s in right[7:first]:   # turning, not yet confirmed: the gyroscope's turn stops it
-        assert s.turn_deg == pytest.approx(4.5, abs=0.01) and (s.turn_deg > half_strip) == s.decision.stop
+        # 0.15 s of model run turned 4.5 deg, and 30 deg/s for the 0.15 s until the next decision
+        assert s.turn_deg == pytest.approx(9.0, abs=0.01) and (s.turn_deg > half_strip) == s.decision.stop
     assert any(not s.decision.stop for s in right[first:])
     _, wrong = _gyro_run(toy_bundle, monkeypatch, -30.0)
     assert all(s.yaw_source == "camera" for s in wrong)

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 #: paused sensor, and a sensor whose last sample is older than this is not reporting.
 MAX_SAMPLE_GAP_S = 0.2
 KEEP_S = 3.0   # samples kept: longer than any pair of frames the watchdog lets through
+#: The gyroscope's present rate is its mean over this long (the app's ``RATE_S``).
+RATE_S = 0.1
 
 
 class YawIntegrator:

@@ -300,10 +300,13 @@ TURNED_READINGS = {"gyro_turned": ("gyro", "turn from a gyroscope, the beacon tu
                    "camera_turned": ("camera", "turn read from the frames, the beacon turned by a gyroscope until heard")}
 
 #: And the app's play while its gyroscope reports but is not followed (not yet confirmed by the
-#: picture): the picture's decisions, each a stop once the turn since its capture passes half a
-#: strip (:func:`~crossing_assist.runtime.decide.stale`: the size of the turn known, not its way).
-STALE_READINGS = {"camera_stale": ("camera", "turn read from the frames, a stop once half a strip stale "
-                                             "(a gyroscope not followed)")}
+#: picture): the picture's decisions, each a stop once the gyroscope's turn since its capture,
+#: carried on at its rate to the end of the play, passes half a strip
+#: (:func:`~crossing_assist.runtime.decide.stale`: the size of the turn known, not its way), judged
+#: as :data:`READ_STALE_READINGS` with the gyroscope's turn (since 2026-12-07, night: judged as it
+#: stood, a walker's sway left held-out landscape frames 1.25 % confidently wrong, carried 0.24 %).
+STALE_READINGS = {"camera_stale": ("camera", "turn read from the frames, a stop once the gyroscope's turn "
+                                             "carried to the end of the play is half a strip (a gyroscope not followed)")}
 
 #: And a player with no gyroscope at all (the Python live loop, the app on a phone without one):
 #: nothing measures the turn once the frame is read, so each decision of the picture's reading is a
@@ -336,7 +339,8 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
     against the goal and the camera's turn then (the phone app, in its e2e run: heard 0.28 s to
     0.51 s after capture; docs/results.md, "Heard when it plays"). It adds :data:`TURNED_READINGS`:
     a reading's decisions with the beacon turned by the gyroscope's turn since the capture, and
-    :data:`STALE_READINGS`: with only that turn's size known, each a stop past half a strip, and
+    :data:`STALE_READINGS`: with only that turn's size known, each a stop once it passes half a
+    strip by the end of its play, and
     :data:`READ_STALE_READINGS`: with no turn measured but the frames', each a stop when the turn
     read at its frame, or by the frames read since, makes it half a strip stale by the end of its play.
     ``overrides``: decision settings for every clip instead of the bundle's (e.g. ``threshold``
@@ -350,24 +354,26 @@ def judge_scans(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: n
     res = {k: _judge_scan_input(engine, clips, labels, psi, rates[k], fps, lag, overrides=overrides)
            for k in SCAN_YAW_INPUTS}
     if lag:
-        for readings, play in ((TURNED_READINGS, turned), (STALE_READINGS, stale)):
+        for name, (reading, _) in TURNED_READINGS.items():
+            res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, play=turned,
+                                          overrides=overrides)
+        for readings, turn in ((STALE_READINGS, "gyro"), (READ_STALE_READINGS, None)):
             for name, (reading, _) in readings.items():
-                res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, play=play,
-                                              overrides=overrides)
-        for name, (reading, _) in READ_STALE_READINGS.items():
-            res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, play=stale,
-                                          overrides=overrides, turn_read=True)
+                res[name] = _judge_scan_input(engine, clips, labels, psi, rates[reading], fps, lag, play=stale,
+                                              overrides=overrides, turn_rates=rates[turn or reading])
     return res
 
 
 def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], labels: np.ndarray,
                       psi: np.ndarray, rates: np.ndarray, fps: float, lag: int = 0,
                       play: Callable[[Decision, float, float], Decision] | None = None,
-                      overrides: dict | None = None, turn_read: bool = False) -> dict:
+                      overrides: dict | None = None, turn_rates: np.ndarray | None = None) -> dict:
+    # turn_rates: the turn is known only as these rates (a stop once stale), not psi at the moment heard
     start = int(round(SCAN_STILL_S * fps))
     c = dict.fromkeys(("in_view", "on", "wrong", "wrong_hold", "wrong_photos", "out_of_view", "out_on",
                        "out_wrong_side"), 0)
-    for clip, labs, clip_rates in zip(clips, labels, rates):
+    for i, (clip, labs, clip_rates) in enumerate(zip(clips, labels, rates)):
+        turn_read = None if turn_rates is None else turn_rates[i]
         wrong_before = c["wrong"]
         first = next((p for p in clip if p.ok), None)
         decider = Decider(engine.decision_config((first and first.orientation) or "landscape", first and first.fov_deg,
@@ -378,11 +384,11 @@ def _judge_scan_input(engine: Engine, clips: Sequence[Sequence[Prediction]], lab
             h = j + lag    # the frame whose moment the decision is heard at
             if j < start or h >= len(clip):
                 continue
-            if turn_read:   # no gyroscope: the turn read at its frame, carried to the end of its play;
-                # then the turn read by the frames since (captured before h), carried on as far
-                d = play(d, float(clip_rates[j]) * (lag + 1) / fps, fov)
+            if turn_read is not None:   # the turn's rate at its frame, carried to the end of its play;
+                # then the turn read since (by the frames captured before h), carried on as far
+                d = play(d, float(turn_read[j]) * (lag + 1) / fps, fov)
                 if h - 1 > j:
-                    d = play(d, float(np.sum(clip_rates[j + 1:h]) + clip_rates[h - 1] * 2) / fps, fov)
+                    d = play(d, float(np.sum(turn_read[j + 1:h]) + turn_read[h - 1] * 2) / fps, fov)
             elif play is not None:   # played as heard: the decision and the gyroscope's turn since its capture
                 d = play(d, float(psi[h] - psi[j]), fov)
             label = int(labs[h])
