@@ -667,8 +667,10 @@ def test_first_run_tutorial_then_settings_are_kept(run: dict) -> None:
     i_done = next(i for i, e in enumerate(trace) if e["kind"] == "tutorial_done")
     i_start = next(i for i, e in enumerate(trace) if e["kind"] == "start")
     assert i_done < i_start and not trace[i_done]["skipped"]
+    # the screen 0.3 s after the first tap: the tutorial has begun (on a loaded machine the
+    # snapshot can come late enough to hold its next sentence too)
     spoken = [s["text"] for s in run["result"]["states"]["tutorial"]["speech"]]
-    assert spoken == ["Sound check. A beep in your left ear."], spoken
+    assert spoken[:1] == ["Sound check. A beep in your left ear."] and set(spoken[1:]) <= set(texts), spoken
     assert run["result"]["offline"]["tutorial"] == 0, "the tutorial came back after a reload"
 
 
