@@ -304,7 +304,7 @@ TURNED_READINGS = {"gyro_turned": ("gyro", "turn from a gyroscope, the beacon tu
 #: carried on at its rate to the end of the play, passes half a strip
 #: (:func:`~crossing_assist.runtime.decide.stale`: the size of the turn known, not its way), judged
 #: as :data:`READ_STALE_READINGS` with the gyroscope's turn (since 2026-12-07, night: judged as it
-#: stood, a walker's sway left held-out landscape frames 1.25 % confidently wrong, carried 0.24 %).
+#: stood, a walker's sway left held-out landscape frames 1.25 % confidently wrong, carried 0.23 %).
 STALE_READINGS = {"camera_stale": ("camera", "turn read from the frames, a stop once the gyroscope's turn "
                                              "carried to the end of the play is half a strip (a gyroscope not followed)")}
 

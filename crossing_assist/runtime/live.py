@@ -89,7 +89,7 @@ class Follower:
     the gyroscope followed), or, while it reports but is not followed (not yet confirmed by the
     picture), as a stop once that turn, carried on at the gyroscope's present rate to the end of
     its play, passes half a strip (:func:`~crossing_assist.runtime.decide.stale`; as it stood, a
-    walker's sway left held-out landscape frames 1.25 % confidently wrong, carried 0.24 %).
+    walker's sway left held-out landscape frames 1.25 % confidently wrong, carried 0.23 %).
     Re-played every ``period_s`` on its own thread (the app: at every gyroscope sample) until the next
     cue. Every cue the live loop and the watchdog queue goes through :meth:`play` or :meth:`stop`,
     under one lock, so a turned cue never replaces a newer one. A gyroscope that stops reporting

@@ -580,6 +580,8 @@ function onMotion(e) {
   if (app.turning) followTurn();
 }
 
+const RATE_S = 0.1; // the gyroscope's present rate: its mean over this long (Python's gyro.RATE_S)
+
 /**
  * The beacon turned with the user (decision step 10, logic.js turnedDecision; docs/android.md).
  * A decision is played from its model run's end until the next one, 0.28-0.51 s after its frame's
@@ -593,10 +595,8 @@ function onMotion(e) {
  * gyroscope's present rate to the end of the play (the next decision). Judged only as it stands, a
  * walker's sway (2.5 deg at 0.9 Hz, which never confirms the gyroscope: its turns stay under
  * GYRO_CHECK.turn_dps) left held-out landscape frames 1.25 % confidently wrong, heard 0.2 s late;
- * carried, 0.24 % (docs/results.md, "A walker's sway"). Returns the decision as played (null once ended).
+ * carried, 0.23 % (docs/results.md, "A walker's sway"). Returns the decision as played (null once ended).
  */
-const RATE_S = 0.1; // the gyroscope's present rate: its mean over this long (Python's gyro.RATE_S)
-
 function followTurn() {
   const f = app.turning;
   const followed = gyroFollowed();
