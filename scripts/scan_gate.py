@@ -99,9 +99,8 @@ def scan_fold(fold: Path, source: str, ptl, neg, used: set[str], a) -> tuple[Pat
     if not rows:
         raise ValueError(f"{fold}: {source} has no unseen photo with a crossing")
     engine = Engine(bundle, threads=1)
-    psi = sway_yaw(a.amplitude, a.rate) if a.sway else scan_yaw(a.amplitude, a.rate)
-    lis, labels, rates = play(engine, (load_frame(ptl.image_path(r), r.flags) for r in rows), rows, psi, camera(a))
-    lis.save(path, scan_labels=labels, psi=psi, camera_rates=rates)
+    lis, labels, rates = play(engine, (load_frame(ptl.image_path(r), r.flags) for r in rows), rows, a.psi, camera(a))
+    lis.save(path, scan_labels=labels, psi=a.psi, camera_rates=rates)
     return path, bundle
 
 
@@ -196,7 +195,7 @@ def main(argv=None) -> int:
     if a.window and a.phone:
         ap.error("--window and --phone: one camera scans at a time")
     try:
-        (sway_yaw if a.sway else scan_yaw)(a.amplitude, a.rate)
+        a.psi = (sway_yaw if a.sway else scan_yaw)(a.amplitude, a.rate)   # the camera's yaw at each frame
     except ValueError as exc:
         ap.error(f"--amplitude {a.amplitude:g} / --rate {a.rate:g}: {exc}")
     if not 0 <= a.heard_after <= 1:

@@ -172,9 +172,9 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
     logic is told the gyroscope's turn between captures, once the picture's turn has confirmed the
     gyroscope's sign (:class:`GyroCheck`; ``follow_gyro=True``: from the start, as the app's
     opt-in), never after finding it the wrong way. Until then the decision plays as a stop once the
-    gyroscope's turn since its capture, carried on to the end of its play, passes half a strip. Without a gyroscope reporting, a
-    decision the turn read from the frames makes half a strip stale is a stop (checked when it is
-    decided, and when the next frame is read).
+    gyroscope's turn since its capture, carried on to the end of its play, passes half a strip.
+    Without a gyroscope reporting, a decision the turn read from the frames makes half a strip
+    stale is a stop (checked when it is decided, and when the next frame is read).
     """
     stop_loop = cached_loop(Cue(KIND_STOP), pipeline.beacon_cfg)
     follower = Follower(player, pipeline, gyro or YawIntegrator(), stop_loop, clock)

@@ -606,13 +606,12 @@ function followTurn() {
   }
   const t = now();
   const turn = app.yaw.between(f.captured, t) * (t - f.captured); // 0 before the capture
-  // not followed: the turn by the end of the play, at the rate of the last RATE_S
-  const carried = turn + app.yaw.between(t - RATE_S, t) * Math.max(0, f.until - t);
-  const played = followed ? turnedDecision(f.d, turn, f.fov) : staleDecision(f.d, carried, f.fov);
+  // not followed: judged by the turn at the end of the play, carried on at the rate of the last RATE_S
+  const judged = followed ? turn : turn + app.yaw.between(t - RATE_S, t) * Math.max(0, f.until - t);
+  const played = followed ? turnedDecision(f.d, turn, f.fov) : staleDecision(f.d, judged, f.fov);
   app.audio.render(cueFor(played));
   f.rendered = app.audio.cue;
-  record({ kind: followed ? 'turned' : 'stale', t, frame: f.id, turn_deg: followed ? turn : carried,
-    heading_deg: played.heading_deg });
+  record({ kind: followed ? 'turned' : 'stale', t, frame: f.id, turn_deg: judged, heading_deg: played.heading_deg });
   return played;
 }
 
