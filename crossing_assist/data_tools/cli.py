@@ -80,7 +80,8 @@ def _cmd_synth(args: argparse.Namespace) -> int:
                                args.supersample, command, not args.quiet)
         video, side = synth.synth_clip(cfg)
         print(f"wrote {video} ({video.stat().st_size / 1e6:.2f} MB, {int(round(args.seconds * args.fps))} frames) "
-              f"and {side}")
+              f", {side} (ground truth) and {synth.imu_path(video)} (the camera's motion: crossing-demo {video} "
+              f"--imu {synth.imu_path(video)})")
         return 0
     h, w = args.size or (168, 224)
     cfg = synth.SynthConfig(Path(args.out), args.frames, args.seed, w, h, args.fov, args.unknown_fraction,

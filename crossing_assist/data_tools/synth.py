@@ -251,8 +251,31 @@ def _passing_car(scene: Scene, t: float, seconds: float) -> tuple[Occluder, ...]
     return (Occluder(scene.near + scene.road_width * 0.72, b0, b0 + 4.3, 1.5, (0.7, 0.1, 0.1)),)
 
 
+IMU_HZ = 100.0   # the clip's motion-sensor log: samples a second, as a phone's gyroscope reports
+
+
+def imu_path(video: str | Path) -> Path:
+    """Where a clip's motion-sensor log lies: ``<clip>.imu.csv`` beside it."""
+    return Path(video).with_suffix(".imu.csv")
+
+
+def clip_imu_csv(seed: int, seconds: float, fov_deg: float, hz: float = IMU_HZ) -> str:
+    """The clip's camera motion as the motion-sensor log ``crossing-demo --imu`` replays
+    (crossing_assist.runtime.imu): ``t``, ``yaw_dps`` (+ right; the camera's yaw differentiated
+    over the sample interval) and ``roll_deg`` (+ clockwise, as ``geometry.level`` takes it)."""
+    scene = clip_scene(seed)
+    t = [k / hz for k in range(int(round(seconds * hz)) + 1)]
+    cams = [clip_pose(scene, ti, seconds, fov_deg)[0] for ti in t]
+    # each sample's rate covers the interval since the one before (the first's: the next's)
+    rates = [(b.yaw - a.yaw) * hz for a, b in zip(cams, cams[1:])]
+    rates = rates[:1] + rates
+    lines = ["t,yaw_dps,roll_deg"] + [f"{ti:.4f},{r:.4f},{c.roll:.4f}" for ti, r, c in zip(t, rates, cams)]
+    return "\n".join(lines) + "\n"
+
+
 def synth_clip(cfg: ClipConfig) -> tuple[Path, Path]:
-    """Render the clip to ``cfg.out_path`` (mp4v, atomic) and its JSON ground truth beside it."""
+    """Render the clip to ``cfg.out_path`` (mp4v, atomic), its JSON ground truth beside it and its
+    camera's motion-sensor log (:func:`imu_path`, :func:`clip_imu_csv`)."""
     _check_size(cfg.width, cfg.height, cfg.fov_deg)
     out = Path(cfg.out_path)
     if out.suffix.lower() != ".mp4":
@@ -301,4 +324,5 @@ def synth_clip(cfg: ClipConfig) -> tuple[Path, Path]:
     }
     side = out.with_suffix(".json")
     atomic_write_text(side, json.dumps(meta, indent=1) + "\n")
+    atomic_write_text(imu_path(out), clip_imu_csv(cfg.seed, cfg.seconds, cfg.fov_deg))
     return out, side

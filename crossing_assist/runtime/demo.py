@@ -4,6 +4,7 @@
     crossing-demo street.mp4 --bundle runs/x/bundle --out demo_out
     crossing-demo --camera 0 --live            # live: camera -> headphones (Ctrl-C to stop)
     crossing-demo street.mp4 --live            # play a video's beacon in real time
+    crossing-demo walk.mp4 --imu walk.imu.csv  # with the phone's gyroscope and tilt logged beside it
 
 Offline it writes ``beacon.wav`` (on the video's timeline), ``annotated.mp4``, ``trace.jsonl``
 (one decision a line) and, with ffmpeg, ``annotated_with_audio.mp4``; then prints a summary.
@@ -12,8 +13,10 @@ Offline it writes ``beacon.wav`` (on the video's timeline), ``annotated.mp4``, `
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -50,6 +53,9 @@ class DemoConfig:
     fov_deg: float | None = None
     visual_yaw: bool = True
     threads: int = 1
+    imu: Path | None = None
+    imu_offset: float = 0.0
+    follow_gyro: bool = False
 
 
 def parse_args(argv: list[str] | None) -> DemoConfig:
@@ -72,6 +78,14 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
     ap.add_argument("--no-visual-yaw", action="store_true",
                     help="do not follow the camera's turns read from the frames (without a gyroscope, the "
                          "direction then stays where it was while the phone turns)")
+    ap.add_argument("--imu", type=Path, default=None, metavar="CSV",
+                    help="a motion-sensor log recorded with the video: columns t (s), yaw_dps (+ right) and "
+                         "optionally roll_deg; its gyroscope's turn is followed once the picture confirms it, "
+                         "its roll levels the frames (docs/runtime.md, 'A recorded motion-sensor log')")
+    ap.add_argument("--imu-offset", type=float, default=0.0, metavar="S",
+                    help="the log's time t at the video's first frame (default 0)")
+    ap.add_argument("--follow-gyro", action="store_true",
+                    help="follow the log's gyroscope from the start, before the picture has confirmed its sign")
     ap.add_argument("--threads", type=int, default=1, metavar="N",
                     help=f"onnxruntime threads for the model, 0..{MAX_THREADS} (default 1, as a phone's app runs it; "
                          "0 = onnxruntime's default, all cores)")
@@ -88,6 +102,10 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
             check_fov(a.fov)
         except GeometryError as exc:
             raise DemoError(f"--fov: {exc}") from None
+    if a.imu is not None and a.camera is not None:
+        raise DemoError("--imu replays a log recorded with a video; give the VIDEO, not --camera")
+    if a.imu is None and (a.follow_gyro or a.imu_offset != 0.0):
+        raise DemoError("--follow-gyro and --imu-offset need --imu CSV (a motion-sensor log recorded with the video)")
     if a.camera is not None and not 0 <= a.camera <= MAX_CAMERA:
         raise DemoError(f"--camera {a.camera} invalid; valid: a camera index 0..{MAX_CAMERA} (0 = the first camera)")
     if not 0 < a.watchdog <= MAX_WATCHDOG_S:
@@ -116,17 +134,21 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
                       annotate=not a.no_video, progress=not a.quiet,
                       audio_device=int(dev) if dev is not None and dev.isdigit() else dev,
                       max_seconds=a.max_seconds, watchdog_s=a.watchdog, fov_deg=a.fov,
-                      visual_yaw=not a.no_visual_yaw, threads=a.threads)
+                      visual_yaw=not a.no_visual_yaw, threads=a.threads, imu=a.imu, imu_offset=a.imu_offset,
+                      follow_gyro=a.follow_gyro)
 
 
 def run_live_demo(cfg: DemoConfig) -> None:
     """Live: frames -> decisions -> headphones; trace.jsonl in the output folder."""
     from crossing_assist.runtime.audio import LiveAudio
     from crossing_assist.runtime.beacon import CuePlayer
+    from crossing_assist.runtime.gyro import YawIntegrator
+    from crossing_assist.runtime.imu import ImuLog
     from crossing_assist.runtime.live import LiveConfig, run_live
     from crossing_assist.runtime.pipeline import open_pipeline, trace_record
     from crossing_assist.runtime.sources import CameraSource, VideoSource
 
+    imu = ImuLog.load(cfg.imu, cfg.imu_offset) if cfg.imu is not None else None
     pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, visual_yaw=cfg.visual_yaw,
                              threads=cfg.threads)
     player = CuePlayer(pipeline.beacon_cfg)
@@ -135,24 +157,35 @@ def run_live_demo(cfg: DemoConfig) -> None:
     trace_path = cfg.out_dir / "trace.jsonl"
     with LiveAudio(player, device=cfg.audio_device), open(trace_path, "w", encoding="utf-8") as trace:
         print("live: playing the beacon; Ctrl-C to stop", file=sys.stderr)
-        decided = 0
+        decided = told = 0
 
         def on_step(i: int, step) -> None:
-            nonlocal decided
+            nonlocal decided, told
             decided += 1
+            told += step.yaw_source == "gyro"
             trace.write(json.dumps(trace_record(i, step)) + "\n")
 
+        gyro = YawIntegrator() if imu is not None else None
+        start = time.monotonic()
+        replay = imu.replay(gyro, start) if imu is not None else contextlib.nullcontext()
         try:
-            n = run_live(source, pipeline, player,
-                         LiveConfig(watchdog_s=cfg.watchdog_s, pace=cfg.camera is None,
-                                    frozen_check=cfg.camera is not None, max_seconds=cfg.max_seconds),
-                         on_step=on_step, video_time=cfg.camera is None)
+            with replay:
+                n = run_live(source, pipeline, player,
+                             LiveConfig(watchdog_s=cfg.watchdog_s, pace=cfg.camera is None,
+                                        frozen_check=cfg.camera is not None, max_seconds=cfg.max_seconds),
+                             on_step=on_step, video_time=cfg.camera is None, gyro=gyro,
+                             follow_gyro=cfg.follow_gyro, roll_at=imu.roll_at if imu is not None else None,
+                             start=start)
         except KeyboardInterrupt:
             n = -1
     dropped = n - decided if cfg.camera is None and n > decided else 0
     print(f"live run {'stopped' if n < 0 else 'ended'} after {decided} frames decided"
           + (f" of the video's first {n}; the other {dropped} came while the model ran and were dropped, "
              f"as a camera's are" if dropped else "") + f"; trace: {trace_path}")
+    if imu is not None:
+        print(f"gyroscope ({imu.path.name}): its turn told on {told} of {decided} decisions"
+              + ("" if told or cfg.follow_gyro else " (the picture's turn never confirmed it; --follow-gyro "
+                 "follows it unchecked)"))
 
 
 def run(cfg: DemoConfig) -> None:
@@ -165,7 +198,8 @@ def run(cfg: DemoConfig) -> None:
     summary = run_offline(OfflineConfig(video=cfg.video, bundle=cfg.bundle, out_dir=cfg.out_dir,
                                         annotate=cfg.annotate, progress=cfg.progress, fov_deg=cfg.fov_deg,
                                         watchdog_s=cfg.watchdog_s, visual_yaw=cfg.visual_yaw,
-                                        threads=cfg.threads))
+                                        threads=cfg.threads, imu=cfg.imu, imu_offset=cfg.imu_offset,
+                                        follow_gyro=cfg.follow_gyro))
     for warning in summary.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"crossing-demo: {cfg.video} with bundle {cfg.bundle}")

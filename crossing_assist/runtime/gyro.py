@@ -17,6 +17,7 @@ import math
 import threading
 from collections import deque
 from dataclasses import dataclass
+from typing import Sequence
 
 #: A sample's rate covers the time since the sample before, at most this long: a longer gap is a
 #: paused sensor, and a sensor whose last sample is older than this is not reporting.
@@ -24,6 +25,17 @@ MAX_SAMPLE_GAP_S = 0.2
 KEEP_S = 3.0   # samples kept: longer than any pair of frames the watchdog lets through
 #: The gyroscope's present rate is its mean over this long (the app's ``RATE_S``).
 RATE_S = 0.1
+
+
+def integrate(samples: Sequence[tuple[float, float]], t0: float, t1: float) -> float:
+    """Degrees turned over [t0, t1] by ``samples`` ((time, rate deg/s) in time order): each
+    sample's rate covers the time since the sample before, at most :data:`MAX_SAMPLE_GAP_S`."""
+    angle = 0.0
+    for (t_before, _), (t, rate) in zip(samples, samples[1:]):
+        overlap = min(t, t1) - max(t_before, t - MAX_SAMPLE_GAP_S, t0)
+        if overlap > 0:
+            angle += rate * overlap
+    return angle
 
 
 class YawIntegrator:
@@ -58,12 +70,7 @@ class YawIntegrator:
             return 0.0
         with self._lock:
             samples = list(self._samples)
-        angle = 0.0
-        for (t_before, _), (t, rate) in zip(samples, samples[1:]):
-            overlap = min(t, t1) - max(t_before, t - MAX_SAMPLE_GAP_S, t0)
-            if overlap > 0:
-                angle += rate * overlap
-        return angle
+        return integrate(samples, t0, t1)
 
     def between(self, t0: float, t1: float) -> float:
         """Mean turn rate (deg/s) over [t0, t1], as the app's ``between`` (0 when t1 <= t0)."""
@@ -111,3 +118,26 @@ class GyroCheck:
         """The picture vouches for the gyroscope: 'ok', with as large a share of the window
         confirming as ``contradicted`` is of it contradicting for 'wrong'."""
         return self.verdict == "ok" and self.turns.count(True) >= self.cfg.contradicted * len(self.turns)
+
+
+class GyroFollow:
+    """Whether the decision logic is told the gyroscope's turn with a frame (the live loop's and
+    the offline demo's rule, as the app's): once the picture's turn has confirmed the gyroscope's
+    sign (:class:`GyroCheck`), or from the start with ``follow=True`` (the app's opt-in); never
+    after the picture found it the wrong way. ``confirmed_at``: the frame time it was first
+    followed (None: not yet)."""
+
+    def __init__(self, follow: bool = False, cfg: GyroCheckConfig = GYRO_CHECK) -> None:
+        self.check = GyroCheck(cfg)
+        self.follow = follow
+        self.confirmed_at: float | None = None
+
+    def followed(self, t: float, gyro_dps: float, picture_dps: float | None) -> bool:
+        """A frame at ``t``: the gyroscope's turn rate since the frame before and the picture's
+        (None: no turn is read from the frames, so nothing is checked); whether to follow it."""
+        if picture_dps is not None:
+            self.check.add(gyro_dps, picture_dps)
+        ok = self.check.verdict != "wrong" and (self.follow or self.check.confirmed())
+        if ok and self.confirmed_at is None:
+            self.confirmed_at = t
+        return ok

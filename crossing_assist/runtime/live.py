@@ -26,7 +26,7 @@ import numpy as np
 
 from crossing_assist.runtime.beacon import KIND_STOP, Cue
 from crossing_assist.runtime.beacon import CuePlayer
-from crossing_assist.runtime.gyro import RATE_S, GyroCheck, YawIntegrator
+from crossing_assist.runtime.gyro import RATE_S, GyroFollow, YawIntegrator
 from crossing_assist.runtime.pipeline import Pipeline, Step, cached_loop
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
@@ -157,7 +157,8 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
              cfg: LiveConfig, *, clock: Callable[[], float] = time.monotonic,
              sleep: Callable[[float], None] = time.sleep,
              on_step: Callable[[int, Step], None] | None = None, video_time: bool = True,
-             gyro: YawIntegrator | None = None, follow_gyro: bool = False) -> int:
+             gyro: YawIntegrator | None = None, follow_gyro: bool = False,
+             roll_at: Callable[[float], float | None] | None = None, start: float | None = None) -> int:
     """Run until ``frames`` ends (or ``max_seconds``); returns the number of frames read from
     ``frames`` up to the last one processed. ``on_step`` gets each frame's index in ``frames``.
 
@@ -175,15 +176,20 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
     gyroscope's turn since its capture, carried on to the end of its play, passes half a strip.
     Without a gyroscope reporting, a decision the turn read from the frames makes half a strip
     stale is a stop (checked when it is decided, and when the next frame is read).
+
+    ``roll_at``: the camera's roll (degrees, as :func:`~crossing_assist.geometry.level` takes it)
+    at a frame's time ``t``, None where unknown; the frame is levelled by it. ``start``: the
+    ``clock`` time of a video's ``t = 0`` (default: now), so that a recorded IMU log replayed
+    onto the same clock (:meth:`~crossing_assist.runtime.imu.ImuLog.replay`) lines up with it.
     """
     stop_loop = cached_loop(Cue(KIND_STOP), pipeline.beacon_cfg)
     follower = Follower(player, pipeline, gyro or YawIntegrator(), stop_loop, clock)
     follower.stop()
     if gyro is not None:
         follower.start()
-    check = GyroCheck()
+    follow = GyroFollow(follow_gyro)
     dog = Watchdog(cfg.watchdog_s, follower.stop, clock=clock).start()
-    start = clock()
+    start = clock() if start is None else start
     prev: np.ndarray | None = None
     last_captured: float | None = None
     playing: Step | None = None   # no gyroscope: the last frame's decision, while it plays a direction
@@ -201,15 +207,14 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
                 continue  # a frozen camera repeats its last frame: not fresh, let the watchdog act
             prev = frame
             interval = 0.0 if last_captured is None else max(0.0, captured - last_captured)
-            seen = pipeline.read(frame, captured - start)
+            seen = pipeline.read(frame, captured - start, roll_deg=roll_at(t) if roll_at else None)
             reporting = gyro is not None and gyro.reporting(captured)
             followed = False
             if reporting:
                 # the gyroscope's turn since the frame before, checked against the picture's
                 gyro_dps = gyro.between(captured - interval, captured) if interval else 0.0
-                if pipeline.visual_yaw is not None:
-                    check.add(gyro_dps, seen.yaw_rate_dps)
-                followed = check.verdict != "wrong" and (follow_gyro or check.confirmed())
+                picture_dps = seen.yaw_rate_dps if pipeline.visual_yaw is not None else None
+                followed = follow.followed(captured - start, gyro_dps, picture_dps)
                 if followed:
                     seen = replace(seen, yaw_rate_dps=gyro_dps, yaw_source="gyro")
             cut = None      # the turn that stopped the playing decision now, if one did

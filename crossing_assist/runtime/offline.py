@@ -14,7 +14,7 @@ import subprocess
 import tempfile
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterable
 
@@ -28,7 +28,9 @@ from crossing_assist.runtime.audio import write_wav
 from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
 from crossing_assist.runtime.decide import REASON_UNCERTAIN
 from crossing_assist.runtime.engine import Engine
-from crossing_assist.runtime.pipeline import Pipeline, Step, open_pipeline, trace_record
+from crossing_assist.runtime.gyro import GyroFollow
+from crossing_assist.runtime.imu import ImuLog
+from crossing_assist.runtime.pipeline import Pipeline, Seen, Step, open_pipeline, trace_record
 from crossing_assist.runtime.truth import compare, load_truth, truth_line
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
 
@@ -54,6 +56,9 @@ class OfflineConfig:
     watchdog_s: float = DEFAULT_WATCHDOG_S   # seconds without a fresh frame before the stop (a video that dies)
     visual_yaw: bool = True          # follow the camera's turns read from the frames (runtime.visual_yaw)
     threads: int = 1                 # onnxruntime threads for the model (0: its default, all cores)
+    imu: Path | None = None          # a motion-sensor log recorded with the video (runtime.imu)
+    imu_offset: float = 0.0          # the log's time at the video's first frame
+    follow_gyro: bool = False        # tell the decision logic the log's turn from the start, unconfirmed
 
 
 @dataclass(frozen=True)
@@ -74,6 +79,7 @@ class Summary:
     thresholds: tuple[str, ...] = ()               # the gate thresholds the frames took, in words
     warnings: tuple[str, ...] = ()
     unsure_seeing: int = 0                         # unsure frames whose model's most probable action is a strip
+    gyro: str | None = None                        # what the IMU log did, in words (None: no log)
 
     def lines(self) -> list[str]:
         """Human-readable summary lines."""
@@ -105,6 +111,8 @@ class Summary:
                 out.insert(2, f"advice: the model was unsure where the crossing is on {100 * unsure:.0f}% of these "
                               "portrait frames; a phone held sideways (landscape) hears the beacon more often "
                               "(README, 'What the user hears')")
+        if self.gyro:
+            out.append(self.gyro)
         if self.failed:
             out.append(f"failed inferences: {self.failed}")
         if self.truth:
@@ -113,21 +121,55 @@ class Summary:
         return out
 
 
-def run_frames(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, *, sink, on_watchdog=None) -> int:
+def read_with_imu(pipeline: Pipeline, frame: np.ndarray, t: float, before: float | None, imu: ImuLog,
+                  follow: GyroFollow) -> Seen:
+    """:meth:`Pipeline.read` of a frame taken at ``t`` with a recorded log: levelled by its roll,
+    and told the log's turn since the frame before (at ``before``) where it reports and ``follow``
+    follows it (the live loop's rule: once the picture's turn has confirmed its sign)."""
+    seen = pipeline.read(frame, t, roll_deg=imu.roll_at(t))
+    if before is None or not imu.reporting(t):
+        return seen
+    gyro_dps = imu.between(before, t)
+    if follow.followed(t, gyro_dps, seen.yaw_rate_dps if pipeline.visual_yaw is not None else None):
+        seen = replace(seen, yaw_rate_dps=gyro_dps, yaw_source="gyro")
+    return seen
+
+
+def run_frames(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, *, sink, on_watchdog=None,
+               imu: ImuLog | None = None, follow: GyroFollow | None = None) -> int:
     """Drive ``pipeline`` over ``(t, frame)`` pairs, calling ``sink(i, t, frame, step)``; returns
     the number of frames. With ``on_watchdog``: where the frames stop for longer than the
     watchdog (a gap in a variable-frame-rate video), the pipeline is stepped without a frame at
     the watchdog's moment, as the live loop's watchdog does, and ``on_watchdog(step)`` (a stop)
-    is called, so the stop cue plays through the rest of the gap."""
+    is called, so the stop cue plays through the rest of the gap. With ``imu``: each frame is read
+    with the recorded log (:func:`read_with_imu`; ``follow``: its rule, default confirmed first)."""
     n, prev = 0, None
+    follow = follow or GyroFollow()
     for i, (t, frame) in enumerate(frames):
         if on_watchdog is not None and prev is not None:
             at = prev + pipeline.decider.cfg.watchdog_s * (1 + 1e-6)
             if t > at:
                 on_watchdog(pipeline.step(None, at))
-        sink(i, t, frame, pipeline.step(frame, t))
+        seen = pipeline.read(frame, t) if imu is None else read_with_imu(pipeline, frame, t, prev, imu, follow)
+        sink(i, t, frame, pipeline.decide(seen))
         n, prev = i + 1, t
     return n
+
+
+def gyro_line(imu: ImuLog, follow: GyroFollow, times: list[float], told: int) -> str:
+    """The summary's line on a recorded log: where it reported, and whether its turn was followed."""
+    n = max(len(times), 1)
+    head = (f"gyroscope ({imu.path.name}): reported on {100 * imu.coverage(times):.0f}% of frames; "
+            f"its turn told on {100 * told / n:.0f}%")
+    if follow.check.verdict == "wrong":
+        return (head + "; the picture's turn found it the wrong way round, so it was not followed from then on "
+                "(check the sign of yaw_dps, and --imu-offset)")
+    if follow.follow:
+        return head + " (--follow-gyro: followed from the start, unchecked)"
+    if follow.confirmed_at is not None:
+        return head + f", from {follow.confirmed_at:.1f} s, once the picture's turn had confirmed it"
+    return (head + "; the picture's turn never confirmed it (that takes clear turns, 15 deg/s, in both), so the "
+            "turn read from the frames was used (--follow-gyro follows it unchecked)")
 
 
 def _mux(video: Path, wav: Path, out: Path) -> Path | None:
@@ -164,6 +206,8 @@ class _Recorder:
         self.failed = 0
         self.unsure_seeing = 0
         self.headings: list[float | None] = []
+        self.times: list[float] = []
+        self.sources: Counter = Counter()   # where each frame's turn came from (Step.yaw_source)
         self.fovs: set[float] = set()
         self.frame_size: tuple[int, int] | None = None
         self.writer = None
@@ -185,6 +229,8 @@ class _Recorder:
         self.player.set_loop(step.loop)
         d = step.decision
         self.headings.append(d.heading_deg)
+        self.times.append(t)
+        self.sources[step.yaw_source] += 1
         self.gates[d.gate] += 1
         self.reasons[d.reason] += 1
         self.failed += not step.prediction.ok
@@ -259,9 +305,11 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
 
     from crossing_assist.runtime.sources import SourceError, VideoSource
 
+    imu = ImuLog.load(cfg.imu, cfg.imu_offset) if cfg.imu is not None else None
     pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, beacon=cfg.beacon,
                              engine=engine, visual_yaw=cfg.visual_yaw, threads=cfg.threads)
     engine = pipeline.engine
+    follow = GyroFollow(cfg.follow_gyro)
     source = VideoSource(cfg.video, max_width=cfg.max_width)
     rec = _Recorder(cfg, engine, source.fps)
     t0 = time.perf_counter()
@@ -272,7 +320,7 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
             bar.update(1)
 
         try:
-            n = run_frames(source, pipeline, sink=sink, on_watchdog=rec.watchdog)
+            n = run_frames(source, pipeline, sink=sink, on_watchdog=rec.watchdog, imu=imu, follow=follow)
         except BaseException:
             rec.abort()
             raise
@@ -301,4 +349,5 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
                    reasons=dict(rec.reasons), failed=rec.failed, outputs={k: str(v) for k, v in outputs.items()},
                    truth=compare(truth, rec.headings) if truth else None, frame_size=rec.frame_size,
                    fov_deg=tuple(sorted(rec.fovs)), view_rows=view, thresholds=thresholds, warnings=tuple(warnings),
-                   unsure_seeing=rec.unsure_seeing)
+                   unsure_seeing=rec.unsure_seeing,
+                   gyro=gyro_line(imu, follow, rec.times, rec.sources["gyro"]) if imu is not None else None)
