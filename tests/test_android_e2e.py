@@ -1181,8 +1181,40 @@ def test_a_gyroscope_turning_the_wrong_way_is_found_out_and_left(wrong_gyro: dic
 @pytest.fixture(scope="module")
 def confirmed_gyro(tmp_path_factory) -> dict:
     """The panning camera with the app's own settings (turns read from the picture), and a
-    gyroscope that reads the same turn right."""
-    return {"result": _panning_run(tmp_path_factory.mktemp("android_e2e_gyro_ok"), "--motion", "30", bars=True)}
+    gyroscope that reads the same turn right; a field recording made all along (?record=1)."""
+    return {"result": _panning_run(tmp_path_factory.mktemp("android_e2e_gyro_ok"), "--motion", "30", "--record", "1",
+                                   bars=True)}
+
+
+def test_a_field_recording_replays_in_crossing_demo_with_its_motion_log(confirmed_gyro: dict, tmp_path) -> None:
+    """?record=1: when guidance ends the helper view offers the camera's video and the motion log
+    side by side (NAME.webm, NAME.imu.csv). crossing-demo --imu reads both: the log holds the
+    gyroscope's 30 deg/s turn right on the recording's clock, and Python's own check of the
+    recorded video's turn confirms its sign, so the app's sign and timing reach Python intact."""
+    from crossing_assist.runtime.imu import ImuLog
+    from crossing_assist.runtime.offline import OfflineConfig, run_offline
+    from crossing_assist.runtime.sources import VideoSource
+
+    rec = confirmed_gyro["result"]["recording"]
+    assert not rec["hidden"] and rec["extension"] == "webm", rec
+    names = [link["download"] for link in rec["links"]]
+    assert len(names) == 2 and names[0].endswith(".webm") and names[1] == names[0][:-5] + ".imu.csv", names
+    assert all(link["href"] == "blob:" for link in rec["links"])
+    video = tmp_path / names[0]
+    video.write_bytes(base64.b64decode(rec["video_b64"]))
+    (tmp_path / names[1]).write_text(rec["csv"])
+    log = ImuLog.load(tmp_path / names[1])
+    assert rec["samples"] == len(log.t) > 100
+    assert np.median(log.yaw_dps) == pytest.approx(30.0, abs=0.01)
+    assert -0.5 < log.t[0] < 1.0 and rec["seconds"] - 1.0 < log.t[-1] <= rec["seconds"]
+    frames = [f for _, f in VideoSource(video)]
+    assert len(frames) >= 3 * rec["seconds"] and frames[0].shape[:2] == (160, 120)
+    bundle = toy_bundle.make_toy_bundle(tmp_path / "bundle", toy_bundle.APP_TOY, geometry=APP_GEOMETRY)
+    summary = run_offline(OfflineConfig(video=video, bundle=bundle, out_dir=tmp_path / "demo", annotate=False,
+                                        progress=False, imu=tmp_path / names[1]))
+    assert summary.gyro is not None and "once the picture's turn had confirmed it" in summary.gyro, summary.gyro
+    covered = int(re.search(r"reported on (\d+)%", summary.gyro).group(1))
+    assert covered >= 90, summary.gyro
 
 
 def test_a_gyroscope_the_picture_confirms_is_followed_by_default(confirmed_gyro: dict) -> None:

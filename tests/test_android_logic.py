@@ -148,6 +148,29 @@ def test_js_gyroscope_integrator_and_check_match_python() -> None:
     assert out["flip"][-1][0] == "wrong" and any(c for _, c in out["same"])
 
 
+def test_the_app_s_field_recording_log_is_what_crossing_demo_imu_reads(tmp_path) -> None:
+    """record.js writes the motion log the app records (?record=1) in runtime/imu.py's format:
+    Python reads back each kept sample's time, rate and roll (an unknown roll: none), the rows a
+    gyroscope's integrator would drop (not after the one before, not a number) left out."""
+    from crossing_assist.runtime.imu import ImuLog
+
+    rows = [[0.0, 12.5, None], [0.01, -3.25, 4.5], [0.01, 99.0, 1.0], [0.02, float("nan"), 2.0],
+            [0.03, 40.0, -12.0], [0.5, 1.0, None], [0.51, 2.0, 3.0]]
+    js_rows = json.dumps(rows)   # NaN is JavaScript's too
+    out = json.loads(run_node(f"""
+        import {{ imuCsv, videoType }} from '{js_module("record.js")}';
+        console.log(JSON.stringify({{ csv: imuCsv({js_rows}),
+          type: videoType((t) => t === 'video/webm'), none: videoType(() => false) }}));
+    """))
+    assert out["type"] == "video/webm" and out["none"] == ""
+    (tmp_path / "walk.imu.csv").write_text(out["csv"])
+    log = ImuLog.load(tmp_path / "walk.imu.csv")
+    assert log.t == (0.0, 0.01, 0.03, 0.5, 0.51) and log.yaw_dps == (12.5, -3.25, 40.0, 1.0, 2.0)
+    assert log.roll_at(0.01) == 4.5 and log.roll_at(0.02) == pytest.approx(4.5 + 0.5 * (-12.0 - 4.5))
+    assert log.roll_at(0.0) is None and log.roll_at(0.505) is None and log.roll_at(0.51) == 3.0
+    assert log.turn(0.0, 0.03) == pytest.approx(-3.25 * 0.01 + 40.0 * 0.02)
+
+
 def _random_scenario(rng: np.random.Generator, cfg: DecisionConfig, n: int) -> dict:
     """Random frames, ticks, failures, irregular times and yaw; expected decisions from Python."""
     decider = Decider(cfg)

@@ -36,6 +36,8 @@
 // 0.6 s after the last reading, then reports level again), (--tilt 1: the phone tilted down until
 // a "not sure" stop says to raise it), (--visual-yaw 0|1: the page loaded with ?visualyaw=0|1),
 // (--gyro DPS: loaded with ?gyro=1, a gyroscope reading a steady turn of DPS deg/s, + right),
+// (--record 1: loaded with ?record=1; after the double tap, the field recording the helper view
+// offers: its motion log, its video as base64 and the download links),
 // collect, double tap.
 // Landscape "full" phases dispatch no deviceorientation event at all: no tilt sensor.
 // The driver asserts nothing; it exits non-zero only when it could not run.
@@ -72,6 +74,7 @@ function parseArgs(argv) {
     else if (k === '--visual-yaw') args.visualYaw = v;
     else if (k === '--gyro') args.gyro = Number(v); // ?gyro=1 and a steady gyroscope at this rate (deg/s, + right)
     else if (k === '--motion') args.motion = Number(v); // the same gyroscope, the app's own settings
+    else if (k === '--record') args.record = v === '1';
     else throw new Error(`unknown argument ${k}`);
   }
   if (!args.clip || !args.out) throw new Error('usage: e2e_driver.mjs --clip clip.y4m --out result.json [--run-s S] [--www DIR]');
@@ -550,7 +553,8 @@ async function shortPhases(page, server, args, result) {
   await page.addInitScript(() => localStorage.setItem('crossing-assist-settings',
     JSON.stringify({ tutorialDone: true, hapticDirections: true })));
   await page.goto(`${server.url}?test=1${args.sidewaysAfter ? `&sideways_after_s=${args.sidewaysAfter}` : ''}`
-    + `${args.visualYaw !== undefined ? `&visualyaw=${args.visualYaw}` : ''}${args.gyro !== undefined ? '&gyro=1' : ''}`);
+    + `${args.visualYaw !== undefined ? `&visualyaw=${args.visualYaw}` : ''}${args.gyro !== undefined ? '&gyro=1' : ''}`
+    + `${args.record ? '&record=1' : ''}`);
   result.page_url = page.url();
   result.stored_settings = await page.evaluate(() => localStorage.getItem('crossing-assist-settings'));
   const base = args.level ? LEVEL_PORTRAIT : null;
@@ -572,6 +576,20 @@ async function shortPhases(page, server, args, result) {
   await control(page).dblclick();
   await waitFor(page, () => window.crossingAssist.mode === 'ready', null, 10000, 'the end of guidance');
   result.states.ended_double = await page.evaluate(screenState);
+  if (args.record) {
+    await waitFor(page, () => window.crossingAssist.recording, null, 20000, 'the field recording');
+    result.recording = await page.evaluate(async () => {
+      const rec = window.crossingAssist.recording;
+      const bytes = new Uint8Array(await rec.video.arrayBuffer());
+      let bin = '';
+      for (let i = 0; i < bytes.length; i += 0x8000) bin += String.fromCharCode(...bytes.subarray(i, i + 0x8000));
+      const links = [...document.querySelectorAll('#recording a')].map((a) => ({ download: a.download, text: a.textContent,
+        href: a.href.slice(0, 5) }));
+      return { csv: rec.csv, type: rec.type, extension: rec.extension, samples: rec.samples, seconds: rec.seconds,
+        video_b64: btoa(bin), links, text: document.getElementById('recording').textContent,
+        hidden: document.getElementById('recording').hidden };
+    });
+  }
 }
 
 async function main() {

@@ -16,10 +16,11 @@ The log is a CSV file with a header naming its columns, in any order; others are
   minus the rate about the device's y axis (up the screen), in degrees;
 - ``roll_deg`` (optional): the camera's roll, degrees, + = the phone turned clockwise as its user
   sees it (the scene then leans counter-clockwise in the frame), as the app reads it from the tilt
-  sensor.
+  sensor; an empty cell where no roll was known (the phone pointed down, no tilt sensor).
 
 ``crossing-data synth --video`` writes one beside each clip (``<clip>.imu.csv``, the camera's own
-motion at 100 Hz); the embedded sample clip has one.
+motion at 100 Hz); the embedded sample clip has one. The phone app records one with its video
+(``?record=1``, android_demo/www/js/record.js).
 """
 
 from __future__ import annotations
@@ -87,7 +88,7 @@ class ImuLog:
                         raise ImuError(f"IMU log {path} line {line}: yaw_dps {rate:g} is beyond a gyroscope's "
                                        f"+-{MAX_RATE_DPS:g} deg/s; is it in another unit?")
                     if has_roll:
-                        r = _number(row, "roll_deg", path, line)
+                        r = _number(row, "roll_deg", path, line, empty=True)
                         if abs(r) > MAX_ROLL_DEG:
                             raise ImuError(f"IMU log {path} line {line}: roll_deg {r:g} invalid; valid: "
                                            f"-{MAX_ROLL_DEG:g}..{MAX_ROLL_DEG:g} degrees")
@@ -125,14 +126,14 @@ class ImuLog:
 
     def roll_at(self, t: float) -> float | None:
         """The camera's roll at ``t``, interpolated between the two samples around it; None
-        without a roll column or where the log does not report."""
+        without a roll column, where the log does not report, or where no roll was known."""
         if self.roll_deg is None or not self.reporting(t):
             return None
         i = bisect.bisect_right(self.t, t) - 1
-        if i + 1 >= len(self.t) or self.t[i + 1] - self.t[i] > MAX_SAMPLE_GAP_S:
-            return self.roll_deg[i]
-        w = (t - self.t[i]) / (self.t[i + 1] - self.t[i])
-        return self.roll_deg[i] + w * (self.roll_deg[i + 1] - self.roll_deg[i])
+        r = self.roll_deg[i]
+        if i + 1 < len(self.t) and self.t[i + 1] - self.t[i] <= MAX_SAMPLE_GAP_S and math.isfinite(self.roll_deg[i + 1]):
+            r += (t - self.t[i]) / (self.t[i + 1] - self.t[i]) * (self.roll_deg[i + 1] - r)
+        return r if math.isfinite(r) else None
 
     def coverage(self, times: list[float]) -> float:
         """Share of ``times`` (frame times) at which the log reports."""
@@ -174,8 +175,11 @@ class Replay:
         self.close()
 
 
-def _number(row: dict, name: str, path: Path, line: int) -> float:
+def _number(row: dict, name: str, path: Path, line: int, empty: bool = False) -> float:
+    """The cell ``name`` of ``row`` as a finite number; ``empty``: an empty cell is NaN (unknown)."""
     raw = row.get(name)
+    if empty and (raw is None or not raw.strip()):
+        return math.nan
     try:
         v = float(raw)  # type: ignore[arg-type]
     except (TypeError, ValueError):

@@ -58,6 +58,8 @@
 // folder; ?gyro=1 turns on the gyroscope and the tilt sensor, ?tilt=0 turns the tilt sensor off
 // (?tilt=1 on), ?visualyaw=0 turns off following turns from the camera picture (?visualyaw=1 on),
 // for this visit only (never saved); ?threads=N sets the WASM threads;
+// ?record=1 records the camera's video and the motion sensors' log while guidance runs, offered as
+// downloads in the helper view when it ends (record.js; for crossing-demo VIDEO --imu LOG.csv);
 // ?tutorial_speed=K plays the tutorial K times faster; ?sideways_after_s=S gives the hold-it-sideways
 // advice after S s instead of 5.
 
@@ -71,6 +73,7 @@ import { argmax, configFromBundle, cueFor, Decider, KIND_STOP, observationFromOu
 import { fetchBundle, openBest } from './model.js';
 import { loadSettings, saveSettings, urlOverrides } from './settings.js';
 import { Speaker, SpeechPolicy } from './speech.js';
+import { FieldRecorder } from './record.js';
 import { playTutorial } from './tutorial.js';
 import { replayVectors } from './vectors.js';
 import { HelperView } from './view.js';
@@ -85,6 +88,7 @@ export const LONG_PRESS_MS = 700;
 const STOP_CUE = { kind: KIND_STOP };
 const params = new URLSearchParams(location.search);
 const TEST = params.get('test') === '1';
+const RECORD = params.get('record') === '1'; // a researcher's field recording (record.js)
 const TUTORIAL_SPEED = Math.max(1, Number(params.get('tutorial_speed')) || 1);
 const SIDEWAYS_AFTER_S = Number(params.get('sideways_after_s')) || undefined; // tests: a shorter wait
 const OVERRIDES = urlOverrides(params); // ?gyro=1, ?tilt=0|1, ?visualyaw=0|1: this visit only
@@ -576,6 +580,7 @@ function onOrientation(e) {
 function onMotion(e) {
   const rate = yawRateFromRotation(e.rotationRate, screen.orientation?.angle ?? 0);
   app.yaw?.add(rate, appTime(e.timeStamp)); // the clock of the frames' capture times
+  app.recorder?.motion(appTime(e.timeStamp), rate, app.tilt?.rollDeg(appTime(e.timeStamp)) ?? null);
   app.turnRate = rate;
   if (app.turning) followTurn();
 }
@@ -746,6 +751,7 @@ async function start({ tutorial = !app.settings.tutorialDone } = {}) {
     app.mode = 'running';
     clearError(); // a successful start clears what an earlier failure left on screen
     record({ kind: 'start', t: now() });
+    if (RECORD) startRecording();
     app.audio.render(STOP_CUE); // nothing known yet: scan
     app.watchdog = new Watchdog(WATCHDOG_S, now());
     app.tiltSilence = sensorOn('tilt') ? new TiltSilence(now()) : null;
@@ -759,6 +765,27 @@ async function start({ tutorial = !app.settings.tutorialDone } = {}) {
     fail(err);
   } finally {
     $('control').disabled = false;
+  }
+}
+
+/** ?record=1: record the camera's video and the motion log from now until guidance ends. */
+function startRecording() {
+  try {
+    app.recorder = new FieldRecorder(app.stream, now);
+    record({ kind: 'recording', t: now() });
+  } catch (err) {
+    app.recorder = null;
+    showError(`Not recording: ${err.message}`);
+  }
+}
+
+/** The recording, once its video is complete: offered in the helper view (app.recording for tests). */
+async function offerRecording(saving) {
+  try {
+    app.recording = await saving;
+    view.recording(app.recording, `walk-${new Date().toISOString().slice(0, 19).replace(/[-:]/g, '').replace('T', '-')}`);
+  } catch (err) {
+    showError(`The recording could not be saved: ${err.message}`);
   }
 }
 
@@ -776,6 +803,8 @@ async function stop({ quiet = false } = {}) {
   $('notice').hidden = true;
   $('notice').textContent = '';
   app.grabber?.close();
+  const saving = app.recorder?.stop(); // before the tracks end: the recorder keeps what it has
+  app.recorder = null;
   app.stream?.getTracks().forEach((t) => t.stop());
   app.stream = null;
   await app.loop;
@@ -788,6 +817,7 @@ async function stop({ quiet = false } = {}) {
   app.paused = false;
   app.last = null;
   view.clear();
+  if (saving) await offerRecording(saving);
   setControl('Start', 'Tap to start guidance');
   app.mode = 'ready';
   if (!quiet || wasRunning) {

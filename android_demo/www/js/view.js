@@ -108,6 +108,28 @@ export class HelperView {
     for (const id of ['decision', 'heading', 'beacon', 'uncertainty']) this.el(id).textContent = '–';
   }
 
+  /**
+   * Offer a field recording (record.js) as two downloads, `NAME.webm` (or .mp4) and `NAME.imu.csv`:
+   * the names crossing-demo's --imu expects side by side. A new one replaces the last.
+   */
+  recording(rec, name) {
+    const p = this.el('recording');
+    (this.recordingUrls || []).forEach((u) => URL.revokeObjectURL(u));
+    const link = (blob, file, text) => {
+      const a = p.ownerDocument.createElement('a');
+      a.href = URL.createObjectURL(blob);
+      a.download = file;
+      a.textContent = text;
+      return a;
+    };
+    const video = link(rec.video, `${name}.${rec.extension}`, `the video (${name}.${rec.extension})`);
+    const log = link(new Blob([rec.csv], { type: 'text/csv' }), `${name}.imu.csv`, `the motion log (${name}.imu.csv)`);
+    this.recordingUrls = [video.href, log.href];
+    p.replaceChildren(`Recorded ${rec.seconds.toFixed(1)} s, ${rec.samples} gyroscope samples. Download `, video, ' and ',
+      log, rec.samples ? '.' : ' (empty: no gyroscope reported).');
+    p.hidden = false;
+  }
+
   offline(text) {
     this.el('offline').textContent = text;
   }
