@@ -1,5 +1,6 @@
 """Runtime test helpers: the toy bundles (built by :mod:`crossing_assist.testing.toy_bundle`,
-the one toy builder), bright-bar frames and clips, and the shared ``toy_bundle`` fixture.
+the one toy builder), bright-bar frames and clips, the shared ``toy_bundle`` fixture, and
+``needs_audio`` (skips a test without the system PortAudio).
 
 The toy finds the brightest vertical strip: a bright bar on a dark frame -> that strip's bin with
 high confidence; a frame with no bar (flat, or noise) -> near-uniform, high-entropy probabilities.
@@ -13,9 +14,21 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from crossing_assist.geometry import Geometry
 from crossing_assist.testing.toy_bundle import RUNTIME_TOY, make_toy_bundle, toy_meta, toy_model_bytes  # noqa: F401
+
+def _sounddevice_ok() -> bool:
+    try:
+        import sounddevice  # noqa: F401
+    except (ImportError, OSError):
+        return False
+    return True
+
+
+#: Skips a test that plays through sounddevice where the system PortAudio (libportaudio2) is missing.
+needs_audio = pytest.mark.skipif(not _sounddevice_ok(), reason="PortAudio (libportaudio2) is not installed")
 
 LANDSCAPE_FOV, PORTRAIT_FOV = 80.0, 50.0
 TOY2 = dataclasses.replace(RUNTIME_TOY, geometry=Geometry(fit="stretch", camera_fov_deg=(LANDSCAPE_FOV, PORTRAIT_FOV),

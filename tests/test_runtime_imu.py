@@ -10,6 +10,7 @@ import time
 import cv2
 import numpy as np
 import pytest
+from runtime_toy import needs_audio
 
 from crossing_assist.data_tools.augment import roll as roll_image
 from crossing_assist.data_tools.synth import ClipConfig, clip_pose, clip_scene, imu_path, synth_clip
@@ -184,15 +185,8 @@ def test_a_replayed_log_reaches_the_live_gyroscope_at_its_own_times(tmp_path):
     assert not gyro.reporting(start + 1.0)   # stopped: nothing after the log's end
 
 
-def _sounddevice_ok() -> bool:
-    try:
-        import sounddevice  # noqa: F401
-    except (ImportError, OSError):
-        return False
-    return True
 
-
-@pytest.mark.skipif(not _sounddevice_ok(), reason="PortAudio (libportaudio2) is not installed")
+@needs_audio
 def test_the_live_demo_follows_a_replayed_log(tmp_path):
     (tmp_path / ".asoundrc").write_text("pcm.!default { type null }\nctl.!default { type hw; card 0 }\n")
     env = {"HOME": str(tmp_path), "PATH": "/usr/bin:/bin"}

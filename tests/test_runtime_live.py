@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 import pytest
-from runtime_toy import bar_frame, toy_bundle  # noqa: F401  (fixture)
+from runtime_toy import bar_frame, needs_audio, toy_bundle  # noqa: F401  (fixture)
 
 from crossing_assist.runtime.beacon import KIND_STOP, BeaconConfig, Cue, CuePlayer, render_cue
 from crossing_assist.runtime.engine import Engine, Prediction
@@ -159,15 +159,8 @@ PLAY = textwrap.dedent("""
 """)
 
 
-def _sounddevice_ok() -> bool:
-    try:
-        import sounddevice  # noqa: F401
-    except (ImportError, OSError):
-        return False
-    return True
 
-
-@pytest.mark.skipif(not _sounddevice_ok(), reason="PortAudio (libportaudio2) is not installed")
+@needs_audio
 def test_live_audio_through_an_alsa_file_pcm_plays_exactly_the_cue(tmp_path):
     sr = 16000
     raw = tmp_path / "played.raw"
@@ -191,7 +184,7 @@ def test_live_audio_through_an_alsa_file_pcm_plays_exactly_the_cue(tmp_path):
     assert er / (el + er) == pytest.approx(np.sin(0.4 * np.pi) ** 2, abs=0.01)  # pan 0.6, constant power
 
 
-@pytest.mark.skipif(not _sounddevice_ok(), reason="PortAudio (libportaudio2) is not installed")
+@needs_audio
 def test_no_audio_device_is_one_clear_line(tmp_path, toy_bundle):  # noqa: F811
     (tmp_path / ".asoundrc").write_text("pcm.!default { type hw; card 99 }\nctl.!default { type hw; card 99 }\n")
     from runtime_toy import write_clip
@@ -270,7 +263,7 @@ REOPEN = textwrap.dedent("""
 """)
 
 
-@pytest.mark.skipif(not _sounddevice_ok(), reason="PortAudio (libportaudio2) is not installed")
+@needs_audio
 def test_an_interrupted_audio_stream_is_said_and_reopened(tmp_path):
     """Headphones pulled or a Bluetooth link dropped: the callbacks stop; the watch says so on
     stderr and opens the stream again, and the player's cue plays on."""
