@@ -17,7 +17,7 @@ from crossing_assist.data_tools.synth import ClipConfig, clip_pose, clip_scene, 
 from crossing_assist.runtime import demo
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE, DEFAULT_CLIP
 from crossing_assist.runtime.gyro import MAX_SAMPLE_GAP_S, YawIntegrator
-from crossing_assist.runtime.imu import ImuError, ImuLog
+from crossing_assist.runtime.imu import ImuError, ImuLog, align, picture_turns
 from crossing_assist.runtime.offline import OfflineConfig, run_offline
 from crossing_assist.runtime.sources import VideoSource
 
@@ -199,3 +199,46 @@ def test_the_live_demo_follows_a_replayed_log(tmp_path):
     told = sum(r["yaw_source"] == "gyro" for r in trace)
     assert len(trace) >= 5 and told >= len(trace) - 1   # the first frame has no turn before it
     assert f"its turn told on {told} of {len(trace)} decisions" in proc.stdout
+
+
+def test_many_turns_at_once_are_the_turns_one_by_one(tmp_path):
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.choice([0.01, 0.35], 500, p=[0.95, 0.05]))   # gaps longer than a sensor's
+    log = ImuLog.load(write_log(tmp_path / "g.csv", t, rng.normal(0, 30, 500)))
+    t0 = rng.uniform(-1, t[-1] + 1, 300)
+    t1 = t0 + rng.uniform(0, 0.4, 300)
+    np.testing.assert_allclose(log.turns(t0, t1), [log.turn(a, b) for a, b in zip(t0, t1)], atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def clip_turns():
+    return picture_turns(VideoSource(DEFAULT_CLIP), lambda frame: 67.0)
+
+
+@pytest.mark.parametrize("shift", [0.7, -1.23])
+def test_a_log_s_offset_is_found_from_the_turns_read_from_the_video(tmp_path, clip_turns, shift):
+    log = ImuLog.load(CLIP_IMU)
+    moved = write_log(tmp_path / "moved.csv", [v + shift for v in log.t], log.yaw_dps)   # started `shift` s earlier
+    found = align(ImuLog.load(moved), *clip_turns)
+    assert found.offset == pytest.approx(shift, abs=0.02) and found.corr > 0.9 and found.frames > 100
+
+
+def test_a_log_that_cannot_be_aligned_is_refused_in_one_line(tmp_path, clip_turns):
+    log = ImuLog.load(CLIP_IMU)
+    reversed_ = ImuLog.load(write_log(tmp_path / "rev.csv", log.t, [-v for v in log.yaw_dps]))
+    with pytest.raises(ImuError, match="run opposite to it: is yaw_dps's sign the other way"):
+        align(reversed_, *clip_turns)
+    t0, t1, rates = clip_turns
+    with pytest.raises(ImuError, match="too few turns"):   # a still camera: nothing to line up
+        align(log, t0, t1, np.zeros_like(rates))
+
+
+def test_the_demo_finds_the_offset_itself(tmp_path, capsys):
+    log = ImuLog.load(CLIP_IMU)
+    moved = write_log(tmp_path / "moved.csv", [v + 0.7 for v in log.t], log.yaw_dps)
+    assert demo.main([str(DEFAULT_CLIP), "--imu", str(moved), "--imu-offset", "auto", "--no-video", "--quiet",
+                      "--out", str(tmp_path / "o")]) == 0
+    assert "aligned with the video at --imu-offset +0.70 s" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as bad:
+        demo.main(["--imu-offset", "soon", "--imu", str(moved)])
+    assert bad.value.code == 2 and "'soon' is neither seconds nor auto" in capsys.readouterr().err

@@ -5,6 +5,7 @@
     crossing-demo --camera 0 --live            # live: camera -> headphones (Ctrl-C to stop)
     crossing-demo street.mp4 --live            # play a video's beacon in real time
     crossing-demo walk.mp4 --imu walk.imu.csv  # with the phone's gyroscope and tilt logged beside it
+    crossing-demo walk.mp4 --imu log.csv --imu-offset auto   # ... a log started apart from the video
 
 Offline it writes ``beacon.wav`` (on the video's timeline), ``annotated.mp4``, ``trace.jsonl``
 (one decision a line) and, with ffmpeg, ``annotated_with_audio.mp4``; then prints a summary.
@@ -15,6 +16,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import sys
 import time
 from dataclasses import dataclass
@@ -54,8 +56,21 @@ class DemoConfig:
     visual_yaw: bool = True
     threads: int = 1
     imu: Path | None = None
-    imu_offset: float = 0.0
+    imu_offset: float | None = 0.0     # None: found from the video (--imu-offset auto)
     follow_gyro: bool = False
+
+
+def _offset(text: str) -> float | None:
+    """``--imu-offset``: seconds, or ``auto`` (None)."""
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"{text!r} is neither seconds nor auto")
+    return v
 
 
 def parse_args(argv: list[str] | None) -> DemoConfig:
@@ -82,8 +97,9 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
                     help="a motion-sensor log recorded with the video: columns t (s), yaw_dps (+ right) and "
                          "optionally roll_deg; its gyroscope's turn is followed once the picture confirms it, "
                          "its roll levels the frames (docs/runtime.md, 'A recorded motion-sensor log')")
-    ap.add_argument("--imu-offset", type=float, default=0.0, metavar="S",
-                    help="the log's time t at the video's first frame (default 0)")
+    ap.add_argument("--imu-offset", type=_offset, default=0.0, metavar="S|auto",
+                    help="the log's time t at the video's first frame (default 0); auto: found by lining the "
+                         "log's turns up with the turns read from the video's frames")
     ap.add_argument("--follow-gyro", action="store_true",
                     help="follow the log's gyroscope from the start, before the picture has confirmed its sign")
     ap.add_argument("--threads", type=int, default=1, metavar="N",
@@ -104,7 +120,7 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
             raise DemoError(f"--fov: {exc}") from None
     if a.imu is not None and a.camera is not None:
         raise DemoError("--imu replays a log recorded with a video; give the VIDEO, not --camera")
-    if a.imu is None and (a.follow_gyro or a.imu_offset != 0.0):
+    if a.imu is None and (a.follow_gyro or a.imu_offset != 0.0):   # auto (None) too
         raise DemoError("--follow-gyro and --imu-offset need --imu CSV (a motion-sensor log recorded with the video)")
     if a.camera is not None and not 0 <= a.camera <= MAX_CAMERA:
         raise DemoError(f"--camera {a.camera} invalid; valid: a camera index 0..{MAX_CAMERA} (0 = the first camera)")
@@ -145,12 +161,17 @@ def run_live_demo(cfg: DemoConfig) -> None:
     from crossing_assist.runtime.gyro import YawIntegrator
     from crossing_assist.runtime.imu import ImuLog
     from crossing_assist.runtime.live import LiveConfig, run_live
+    from crossing_assist.runtime.offline import open_imu
     from crossing_assist.runtime.pipeline import open_pipeline, trace_record
     from crossing_assist.runtime.sources import CameraSource, VideoSource
 
-    imu = ImuLog.load(cfg.imu, cfg.imu_offset) if cfg.imu is not None else None
+    if cfg.imu is not None and cfg.imu_offset is not None:
+        ImuLog.load(cfg.imu, cfg.imu_offset)   # a bad log is refused before the model is loaded
     pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, visual_yaw=cfg.visual_yaw,
                              threads=cfg.threads)
+    imu, alignment = open_imu(cfg.imu, cfg.imu_offset, cfg.video, pipeline.engine) if cfg.imu else (None, None)
+    if alignment is not None:
+        print(f"gyroscope ({imu.path.name}): {alignment.describe()}", file=sys.stderr)
     player = CuePlayer(pipeline.beacon_cfg)
     source = CameraSource(cfg.camera) if cfg.camera is not None else VideoSource(cfg.video)
     cfg.out_dir.mkdir(parents=True, exist_ok=True)

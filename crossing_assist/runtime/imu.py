@@ -10,7 +10,7 @@ and a rolled video is used as it is.
 The log is a CSV file with a header naming its columns, in any order; others are ignored:
 
 - ``t``: seconds, increasing; the video's first frame is at ``t = offset`` (``--imu-offset``, 0 by
-  default);
+  default; ``--imu-offset auto`` finds it: :func:`align`);
 - ``yaw_dps``: the turn rate about the world's vertical, degrees per second, + = turning right
   (the camera's view pans right). From a phone's raw gyroscope held upright in portrait, this is
   minus the rate about the device's y axis (up the screen), in degrees;
@@ -30,16 +30,25 @@ import csv
 import math
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable
+
+import numpy as np
 
 from crossing_assist.errors import UserError
 from crossing_assist.runtime.gyro import MAX_SAMPLE_GAP_S, YawIntegrator, integrate
+from crossing_assist.runtime.visual_yaw import VisualYaw
 
 MAX_RATE_DPS = 2000.0   # a phone gyroscope's full scale: a larger rate is a unit mix-up (rad/s read as deg/s is smaller)
 MAX_ROLL_DEG = 180.0
 MAX_ROWS = 10_000_000
+ALIGN_SEARCH_S = 5.0    # offsets tried either way by --imu-offset auto
+ALIGN_STEP_S = 0.01
+ALIGN_MIN_TURNS = 10    # frames the picture must read a turn on
+ALIGN_MIN_SD_DPS = 3.0  # ... varying this much: a steady view tells no offset
+ALIGN_MIN_CORR = 0.6    # the best offset's correlation with the picture's turn, at least
 
 
 class ImuError(UserError):
@@ -135,6 +144,30 @@ class ImuLog:
             r += (t - self.t[i]) / (self.t[i + 1] - self.t[i]) * (self.roll_deg[i + 1] - r)
         return r if math.isfinite(r) else None
 
+    @cached_property
+    def _angle(self) -> tuple[np.ndarray, np.ndarray]:
+        """The angle turned since the first sample as a piecewise-linear function of time
+        (breakpoints, values), by :func:`~crossing_assist.runtime.gyro.integrate`'s rule."""
+        t = np.asarray(self.t)
+        cover = np.minimum(np.diff(t), MAX_SAMPLE_GAP_S)
+        angle = np.concatenate([[0.0], np.cumsum(np.asarray(self.yaw_dps[1:]) * cover)])
+        xs = np.empty(2 * len(t) - 1)
+        ys = np.empty_like(xs)
+        xs[0], ys[0] = t[0], 0.0
+        xs[1::2], ys[1::2] = t[1:] - cover, angle[:-1]   # each sample's stretch starts flat ...
+        xs[2::2], ys[2::2] = t[1:], angle[1:]             # ... and ends at its own time
+        return xs, ys
+
+    def turns(self, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
+        """:meth:`turn` over many intervals at once (arrays of their starts and ends)."""
+        xs, ys = self._angle
+        return np.interp(t1, xs, ys) - np.interp(t0, xs, ys)
+
+    def shifted(self, offset: float) -> "ImuLog":
+        """The log with ``offset`` seconds more taken off its times (its ``t = offset`` is the
+        video's first frame)."""
+        return replace(self, t=tuple(v - offset for v in self.t))
+
     def coverage(self, times: list[float]) -> float:
         """Share of ``times`` (frame times) at which the log reports."""
         return sum(self.reporting(t) for t in times) / len(times) if times else 0.0
@@ -187,3 +220,68 @@ def _number(row: dict, name: str, path: Path, line: int, empty: bool = False) ->
     if not math.isfinite(v):
         raise ImuError(f"IMU log {path} line {line}: {name} {raw!r} is not a finite number")
     return v
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """The log's time at the video's first frame that best lines its gyroscope up with the turn
+    read from the video's frames, and how well: the correlation of the two turn rates over
+    ``frames`` frames on which the picture read a turn."""
+
+    offset: float
+    corr: float
+    frames: int
+
+    def describe(self) -> str:
+        return (f"aligned with the video at --imu-offset {self.offset:+.2f} s (correlation {self.corr:.2f} with the "
+                f"picture's turn over {self.frames} frames)")
+
+
+def picture_turns(frames: Iterable[tuple[float, np.ndarray]], fov_of: Callable[[np.ndarray], float | None],
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The turn read from each pair of consecutive frames (:class:`VisualYaw`): the earlier
+    frame's time, the later one's and the rate (deg/s; 0 where it cannot tell)."""
+    vy, t_prev, rows = VisualYaw(), None, []
+    for t, frame in frames:
+        rate = vy.update(frame, t, fov_of(frame))
+        if t_prev is not None:
+            rows.append((t_prev, t, rate))
+        t_prev = t
+    a = np.asarray(rows, dtype=float).reshape(-1, 3)
+    return a[:, 0], a[:, 1], a[:, 2]
+
+
+def align(log: ImuLog, t0: np.ndarray, t1: np.ndarray, picture_dps: np.ndarray, *,
+          search_s: float = ALIGN_SEARCH_S, step_s: float = ALIGN_STEP_S) -> Alignment:
+    """The offset (within ``search_s`` either way) at which the log's turn rate over each frame
+    pair [t0, t1] (the video's time) correlates best with the picture's, ``picture_dps``
+    (:func:`picture_turns`); only pairs on which the picture read a turn count. Raises
+    :class:`ImuError` where the video shows too few turns to tell, or no offset matches."""
+    known = picture_dps != 0
+    t0, t1, pic = t0[known], t1[known], picture_dps[known]
+    if len(pic) < ALIGN_MIN_TURNS or pic.std() < ALIGN_MIN_SD_DPS:
+        raise ImuError(f"IMU log {log.path}: the video shows too few turns to align the log with it ({len(pic)} frames "
+                       f"read a turn); turn the phone now and then while filming, or give --imu-offset SECONDS")
+    best = Alignment(0.0, -math.inf, len(pic))
+    worst = math.inf
+    for o in np.arange(-search_s, search_s + step_s / 2, step_s):
+        g = log.turns(t0 + o, t1 + o) / (t1 - t0)
+        c = float(np.corrcoef(g, pic)[0, 1]) if g.std() > 0 else 0.0
+        if c > best.corr:
+            best = Alignment(round(float(o), 6), c, len(pic))
+        worst = min(worst, c)
+    if best.corr < ALIGN_MIN_CORR:
+        why = (" and run opposite to it: is yaw_dps's sign the other way?" if -worst >= ALIGN_MIN_CORR
+               else "")
+        raise ImuError(f"IMU log {log.path}: its turns do not match the picture's at any offset within "
+                       f"+-{search_s:g} s (best correlation {best.corr:.2f} at {best.offset:+.2f} s){why}; "
+                       "give --imu-offset SECONDS")
+    return best
+
+
+def aligned(log: ImuLog, frames: Iterable[tuple[float, np.ndarray]],
+            fov_of: Callable[[np.ndarray], float | None]) -> tuple[ImuLog, Alignment]:
+    """``log`` shifted to the offset :func:`align` finds against the turns read from ``frames``
+    (the video's, ``fov_of`` giving each one's FOV), and that alignment."""
+    found = align(log, *picture_turns(frames, fov_of))
+    return log.shifted(found.offset), found

@@ -29,7 +29,7 @@ from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
 from crossing_assist.runtime.decide import REASON_UNCERTAIN
 from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.gyro import GyroFollow
-from crossing_assist.runtime.imu import ImuLog
+from crossing_assist.runtime.imu import Alignment, ImuLog, aligned
 from crossing_assist.runtime.pipeline import Pipeline, Seen, Step, open_pipeline, trace_record
 from crossing_assist.runtime.truth import compare, load_truth, truth_line
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
@@ -57,7 +57,7 @@ class OfflineConfig:
     visual_yaw: bool = True          # follow the camera's turns read from the frames (runtime.visual_yaw)
     threads: int = 1                 # onnxruntime threads for the model (0: its default, all cores)
     imu: Path | None = None          # a motion-sensor log recorded with the video (runtime.imu)
-    imu_offset: float = 0.0          # the log's time at the video's first frame
+    imu_offset: float | None = 0.0   # the log's time at the video's first frame; None: found (imu.align)
     follow_gyro: bool = False        # tell the decision logic the log's turn from the start, unconfirmed
 
 
@@ -156,11 +156,22 @@ def run_frames(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, *
     return n
 
 
-def gyro_line(imu: ImuLog, follow: GyroFollow, times: list[float], told: int) -> str:
+def open_imu(path: Path, offset: float | None, video: Path, engine: Engine) -> tuple[ImuLog, Alignment | None]:
+    """The log at ``path`` on ``video``'s timeline: ``offset`` its time at the first frame, or
+    None to find it from the turn read from the video's frames (:func:`~crossing_assist.runtime.imu.aligned`)."""
+    from crossing_assist.runtime.sources import VideoSource
+
+    log = ImuLog.load(path, offset or 0.0)
+    if offset is not None:
+        return log, None
+    return aligned(log, VideoSource(video, max_width=320), engine.frame_fov)
+
+
+def gyro_line(imu: ImuLog, follow: GyroFollow, times: list[float], told: int, alignment: Alignment | None = None) -> str:
     """The summary's line on a recorded log: where it reported, and whether its turn was followed."""
     n = max(len(times), 1)
-    head = (f"gyroscope ({imu.path.name}): reported on {100 * imu.coverage(times):.0f}% of frames; "
-            f"its turn told on {100 * told / n:.0f}%")
+    head = (f"gyroscope ({imu.path.name}): {alignment.describe() + '; ' if alignment else ''}"
+            f"reported on {100 * imu.coverage(times):.0f}% of frames; its turn told on {100 * told / n:.0f}%")
     if follow.check.verdict == "wrong":
         return (head + "; the picture's turn found it the wrong way round, so it was not followed from then on "
                 "(check the sign of yaw_dps, and --imu-offset)")
@@ -305,10 +316,12 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
 
     from crossing_assist.runtime.sources import SourceError, VideoSource
 
-    imu = ImuLog.load(cfg.imu, cfg.imu_offset) if cfg.imu is not None else None
+    if cfg.imu is not None and cfg.imu_offset is not None:
+        ImuLog.load(cfg.imu, cfg.imu_offset)   # a bad log is refused before the model is loaded
     pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, beacon=cfg.beacon,
                              engine=engine, visual_yaw=cfg.visual_yaw, threads=cfg.threads)
     engine = pipeline.engine
+    imu, alignment = open_imu(cfg.imu, cfg.imu_offset, cfg.video, engine) if cfg.imu is not None else (None, None)
     follow = GyroFollow(cfg.follow_gyro)
     source = VideoSource(cfg.video, max_width=cfg.max_width)
     rec = _Recorder(cfg, engine, source.fps)
@@ -350,4 +363,4 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
                    truth=compare(truth, rec.headings) if truth else None, frame_size=rec.frame_size,
                    fov_deg=tuple(sorted(rec.fovs)), view_rows=view, thresholds=thresholds, warnings=tuple(warnings),
                    unsure_seeing=rec.unsure_seeing,
-                   gyro=gyro_line(imu, follow, rec.times, rec.sources["gyro"]) if imu is not None else None)
+                   gyro=gyro_line(imu, follow, rec.times, rec.sources["gyro"], alignment) if imu is not None else None)
