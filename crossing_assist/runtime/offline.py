@@ -156,12 +156,11 @@ def run_frames(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, *
     return n
 
 
-def open_imu(path: Path, offset: float | None, video: Path, engine: Engine) -> tuple[ImuLog, Alignment | None]:
-    """The log at ``path`` on ``video``'s timeline: ``offset`` its time at the first frame, or
-    None to find it from the turn read from the video's frames (:func:`~crossing_assist.runtime.imu.aligned`)."""
+def line_up(log: ImuLog, offset: float | None, video: Path, engine: Engine) -> tuple[ImuLog, Alignment | None]:
+    """``log`` (loaded at ``offset``) as it is, or with ``offset`` None lined up with ``video`` by
+    the turn read from its frames (:func:`~crossing_assist.runtime.imu.aligned`), and how."""
     from crossing_assist.runtime.sources import VideoSource
 
-    log = ImuLog.load(path, offset or 0.0)
     if offset is not None:
         return log, None
     return aligned(log, VideoSource(video, max_width=320), engine.frame_fov)
@@ -316,12 +315,11 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
 
     from crossing_assist.runtime.sources import SourceError, VideoSource
 
-    if cfg.imu is not None and cfg.imu_offset is not None:
-        ImuLog.load(cfg.imu, cfg.imu_offset)   # a bad log is refused before the model is loaded
+    log = ImuLog.load(cfg.imu, cfg.imu_offset or 0.0) if cfg.imu is not None else None   # refused before the model
     pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, beacon=cfg.beacon,
                              engine=engine, visual_yaw=cfg.visual_yaw, threads=cfg.threads)
     engine = pipeline.engine
-    imu, alignment = open_imu(cfg.imu, cfg.imu_offset, cfg.video, engine) if cfg.imu is not None else (None, None)
+    imu, alignment = line_up(log, cfg.imu_offset, cfg.video, engine) if log is not None else (None, None)
     follow = GyroFollow(cfg.follow_gyro)
     source = VideoSource(cfg.video, max_width=cfg.max_width)
     rec = _Recorder(cfg, engine, source.fps)
