@@ -242,3 +242,52 @@ def test_the_demo_finds_the_offset_itself(tmp_path, capsys):
     with pytest.raises(SystemExit) as bad:
         demo.main(["--imu-offset", "soon", "--imu", str(moved)])
     assert bad.value.code == 2 and "'soon' is neither seconds nor auto" in capsys.readouterr().err
+
+
+def _labelled_clip(tmp_path, shift_strips=0):
+    """The sample clip's frames cut at 2 fps by crossing-data frames, labelled from its ground truth
+    (each label moved ``shift_strips`` strips, clipped to 1..12), as a dataset."""
+    from crossing_assist.actions import UNKNOWN, parse_label
+    from crossing_assist.data_tools.frames import FramesConfig, extract_frames
+    from crossing_assist.data_tools.manifest import Row, write_manifest
+
+    out = tmp_path / "frames"
+    results, _ = extract_frames(FramesConfig((DEFAULT_CLIP,), out, fps=2.0, progress=False))
+    truth = json.loads(DEFAULT_CLIP.with_suffix(".json").read_text())
+    rows = []
+    for image, t in results[0].frames:
+        k = int(round(t * truth["fps"]))
+        label = parse_label(truth["label"][k])
+        if label != UNKNOWN:
+            label = min(12, max(1, label + shift_strips))
+        rows.append(Row(image, label, truth["far_x"][k] if not shift_strips else None, f"vid:{results[0].name}", "test"))
+    write_manifest(out, rows)
+    return out
+
+
+def test_the_demo_judges_what_the_user_heard_on_a_video_s_labelled_frames(tmp_path, without_log):
+    labels = _labelled_clip(tmp_path)
+    summary = run_offline(OfflineConfig(video=DEFAULT_CLIP, bundle=DEFAULT_BUNDLE, out_dir=tmp_path / "o",
+                                        annotate=False, progress=False, labels=labels))
+    got = summary.labels
+    assert got["unmatched"] == 0 and got["frames_with_crossing"] + got["frames_without_crossing"] == 32
+    # the decisions are the plain run's, judged at 2 fps: as often on as the sidecar's truth says
+    assert got["beacon_on"] == pytest.approx(without_log[0].truth["guided_when_visible"], abs=0.12)
+    assert got["confidently_wrong"] == 0 and got["silence_no_crossing"] >= 0.9
+    assert got["heading_error"]["n"] > 5 and got["heading_error"]["median"] < 3
+    assert any(line.startswith("vs labels: beacon on") for line in summary.lines())
+    # labels four strips off: every frame heard with the beacon on is confidently wrong
+    wrong = run_offline(OfflineConfig(video=DEFAULT_CLIP, bundle=DEFAULT_BUNDLE, out_dir=tmp_path / "w",
+                                      annotate=False, progress=False, labels=_labelled_clip(tmp_path / "x", 4))).labels
+    assert wrong["beacon_on"] == got["beacon_on"] and wrong["confidently_wrong"] >= 0.8 * wrong["beacon_on"] > 0
+
+
+def test_labels_of_another_video_are_refused_in_one_line(tmp_path, capsys):
+    labels = _labelled_clip(tmp_path)
+    other = tmp_path / "walk.mp4"
+    other.write_bytes(DEFAULT_CLIP.read_bytes())
+    assert demo.main([str(other), "--labels", str(labels), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no labelled frame of walk.mp4 (rows with source vid:walk" in err[0]
+    assert "vid:sample_clip" in err[0]
+    assert demo.main([str(DEFAULT_CLIP), "--labels", str(labels), "--live"]) == 2

@@ -6,6 +6,7 @@
     crossing-demo street.mp4 --live            # play a video's beacon in real time
     crossing-demo walk.mp4 --imu walk.imu.csv  # with the phone's gyroscope and tilt logged beside it
     crossing-demo walk.mp4 --imu log.csv --imu-offset auto   # ... a log started apart from the video
+    crossing-demo walk.mp4 --labels walk_labelled  # judged on its labelled frames (crossing-data frames + votes)
 
 Offline it writes ``beacon.wav`` (on the video's timeline), ``annotated.mp4``, ``trace.jsonl``
 (one decision a line) and, with ffmpeg, ``annotated_with_audio.mp4``; then prints a summary.
@@ -58,6 +59,7 @@ class DemoConfig:
     imu: Path | None = None
     imu_offset: float | None = 0.0     # None: found from the video (--imu-offset auto)
     follow_gyro: bool = False
+    labels: Path | None = None
 
 
 def _offset(text: str) -> float | None:
@@ -102,6 +104,9 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
                          "log's turns up with the turns read from the video's frames")
     ap.add_argument("--follow-gyro", action="store_true",
                     help="follow the log's gyroscope from the start, before the picture has confirmed its sign")
+    ap.add_argument("--labels", type=Path, default=None, metavar="DIR",
+                    help="a dataset of this video's frames, labelled (crossing-data frames VIDEO, then votes): the "
+                         "summary judges what the user heard on them (beacon on, confidently wrong, silence)")
     ap.add_argument("--threads", type=int, default=1, metavar="N",
                     help=f"onnxruntime threads for the model, 0..{MAX_THREADS} (default 1, as a phone's app runs it; "
                          "0 = onnxruntime's default, all cores)")
@@ -122,6 +127,8 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
         raise DemoError("--imu replays a log recorded with a video; give the VIDEO, not --camera")
     if a.imu is None and (a.follow_gyro or a.imu_offset != 0.0):   # auto (None) too
         raise DemoError("--follow-gyro and --imu-offset need --imu CSV (a motion-sensor log recorded with the video)")
+    if a.labels is not None and a.live:
+        raise DemoError("--labels judges the offline run; leave out --live")
     if a.camera is not None and not 0 <= a.camera <= MAX_CAMERA:
         raise DemoError(f"--camera {a.camera} invalid; valid: a camera index 0..{MAX_CAMERA} (0 = the first camera)")
     if not 0 < a.watchdog <= MAX_WATCHDOG_S:
@@ -151,7 +158,7 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
                       audio_device=int(dev) if dev is not None and dev.isdigit() else dev,
                       max_seconds=a.max_seconds, watchdog_s=a.watchdog, fov_deg=a.fov,
                       visual_yaw=not a.no_visual_yaw, threads=a.threads, imu=a.imu, imu_offset=a.imu_offset,
-                      follow_gyro=a.follow_gyro)
+                      follow_gyro=a.follow_gyro, labels=a.labels)
 
 
 def run_live_demo(cfg: DemoConfig) -> None:
@@ -219,7 +226,7 @@ def run(cfg: DemoConfig) -> None:
                                         annotate=cfg.annotate, progress=cfg.progress, fov_deg=cfg.fov_deg,
                                         watchdog_s=cfg.watchdog_s, visual_yaw=cfg.visual_yaw,
                                         threads=cfg.threads, imu=cfg.imu, imu_offset=cfg.imu_offset,
-                                        follow_gyro=cfg.follow_gyro))
+                                        follow_gyro=cfg.follow_gyro, labels=cfg.labels))
     for warning in summary.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"crossing-demo: {cfg.video} with bundle {cfg.bundle}")

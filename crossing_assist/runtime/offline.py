@@ -31,7 +31,7 @@ from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.gyro import GyroFollow
 from crossing_assist.runtime.imu import Alignment, ImuLog, aligned
 from crossing_assist.runtime.pipeline import Pipeline, Seen, Step, open_pipeline, trace_record
-from crossing_assist.runtime.truth import compare, load_truth, truth_line
+from crossing_assist.runtime.truth import compare, judge_labels, labels_line, load_labels, load_truth, truth_line
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
 
 
@@ -59,6 +59,7 @@ class OfflineConfig:
     imu: Path | None = None          # a motion-sensor log recorded with the video (runtime.imu)
     imu_offset: float | None = 0.0   # the log's time at the video's first frame; None: found (imu.align)
     follow_gyro: bool = False        # tell the decision logic the log's turn from the start, unconfirmed
+    labels: Path | None = None       # a dataset of this video's labelled frames (truth.load_labels)
 
 
 @dataclass(frozen=True)
@@ -80,6 +81,7 @@ class Summary:
     warnings: tuple[str, ...] = ()
     unsure_seeing: int = 0                         # unsure frames whose model's most probable action is a strip
     gyro: str | None = None                        # what the IMU log did, in words (None: no log)
+    labels: dict | None = None                     # the decisions judged on labelled frames (truth.judge_labels)
 
     def lines(self) -> list[str]:
         """Human-readable summary lines."""
@@ -117,6 +119,8 @@ class Summary:
             out.append(f"failed inferences: {self.failed}")
         if self.truth:
             out.append(truth_line(self.truth))
+        if self.labels:
+            out.append(labels_line(self.labels))
         out += [f"{k}: {v}" for k, v in self.outputs.items()]
         return out
 
@@ -217,6 +221,7 @@ class _Recorder:
         self.unsure_seeing = 0
         self.headings: list[float | None] = []
         self.times: list[float] = []
+        self.frame_fovs: list[float | None] = []   # the FOV each frame's heading was read with
         self.sources: Counter = Counter()   # where each frame's turn came from (Step.yaw_source)
         self.fovs: set[float] = set()
         self.frame_size: tuple[int, int] | None = None
@@ -240,6 +245,7 @@ class _Recorder:
         d = step.decision
         self.headings.append(d.heading_deg)
         self.times.append(t)
+        self.frame_fovs.append(step.prediction.fov_deg)
         self.sources[step.yaw_source] += 1
         self.gates[d.gate] += 1
         self.reasons[d.reason] += 1
@@ -316,6 +322,7 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     from crossing_assist.runtime.sources import SourceError, VideoSource
 
     log = ImuLog.load(cfg.imu, cfg.imu_offset or 0.0) if cfg.imu is not None else None   # refused before the model
+    labelled = load_labels(cfg.labels, cfg.video) if cfg.labels is not None else None
     pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, beacon=cfg.beacon,
                              engine=engine, visual_yaw=cfg.visual_yaw, threads=cfg.threads)
     engine = pipeline.engine
@@ -361,4 +368,5 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
                    truth=compare(truth, rec.headings) if truth else None, frame_size=rec.frame_size,
                    fov_deg=tuple(sorted(rec.fovs)), view_rows=view, thresholds=thresholds, warnings=tuple(warnings),
                    unsure_seeing=rec.unsure_seeing,
+                   labels=judge_labels(labelled, rec.times, rec.headings, rec.frame_fovs) if labelled else None,
                    gyro=gyro_line(imu, follow, rec.times, rec.sources["gyro"], alignment) if imu is not None else None)
