@@ -304,3 +304,28 @@ def test_a_slow_loop_gets_the_newest_camera_frame_stamped_when_it_arrived(monkey
         assert abs(t - (cam.start + (i + 1) * cam.period)) < 0.1    # stamped on arrival (a read stamp
         assert got - t < 0.1                                         # lagged 0.08 s more each frame)
     assert cam.released
+
+
+def test_the_offline_demo_draws_its_timeline_where_matplotlib_is_installed(tmp_path, toy_bundle, monkeypatch):  # noqa: F811
+    pytest.importorskip("matplotlib")
+    summary, _, _, trace = run(tmp_path, toy_bundle, np.linspace(0.1, 0.9, 40), "tl")
+    png = cv2.imread(summary.outputs["timeline"])
+    assert png is not None and png.shape[0] > 300 and png.shape[1] > 600
+    import crossing_assist.plotting as plotting
+
+    def missing():
+        raise ImportError("no matplotlib")
+
+    monkeypatch.setattr(plotting, "pyplot", missing)
+    summary, _, _, _ = run(tmp_path, toy_bundle, np.linspace(0.1, 0.9, 40), "tl2")
+    assert summary.outputs["timeline"].startswith("skipped (matplotlib is not installed")
+    assert not (tmp_path / "tl2" / "timeline.png").exists()
+
+
+def test_timeline_spans_cover_each_run_of_stops_until_the_next_frame():
+    from crossing_assist.runtime.timeline import _spans
+
+    ts = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5]
+    assert _spans(ts, [True, True, False, False, True, True], 0.6) == [(0.0, 0.2, 0), (0.4, 0.6, 4)]
+    assert _spans(ts, [False, True, False, True, False, False], 0.6) == [(0.1, 0.2, 1), (0.3, 0.4, 3)]
+    assert _spans(ts, [False] * 6, 0.6) == []

@@ -12,23 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from ..actions import N_BINS, get_space
-from ..fileio import atomic_path
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _save(fig, path: Path) -> Path:
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100)
-    _plt().close(fig)
-    return path
+from ..plotting import pyplot as _plt
+from ..plotting import save_figure as _save
 
 
 def plot_training(out: str | Path) -> Path:

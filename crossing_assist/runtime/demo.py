@@ -60,6 +60,7 @@ class DemoConfig:
     imu_offset: float | None = 0.0     # None: found from the video (--imu-offset auto)
     follow_gyro: bool = False
     labels: Path | None = None
+    plot: bool = True
 
 
 def _offset(text: str) -> float | None:
@@ -84,6 +85,7 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default: ./{DEFAULT_OUT})")
     ap.add_argument("--live", action="store_true", help="play the beacon on the audio device in real time")
     ap.add_argument("--no-video", action="store_true", help="skip annotated.mp4 (faster)")
+    ap.add_argument("--no-plot", action="store_true", help="skip timeline.png (made where matplotlib is installed)")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     ap.add_argument("--audio-device", default=None, help="sounddevice output device (index or name)")
     ap.add_argument("--max-seconds", type=float, default=None, help="stop a live run after this long")
@@ -158,7 +160,7 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
                       audio_device=int(dev) if dev is not None and dev.isdigit() else dev,
                       max_seconds=a.max_seconds, watchdog_s=a.watchdog, fov_deg=a.fov,
                       visual_yaw=not a.no_visual_yaw, threads=a.threads, imu=a.imu, imu_offset=a.imu_offset,
-                      follow_gyro=a.follow_gyro, labels=a.labels)
+                      follow_gyro=a.follow_gyro, labels=a.labels, plot=not a.no_plot)
 
 
 def run_live_demo(cfg: DemoConfig) -> None:
@@ -226,7 +228,7 @@ def run(cfg: DemoConfig) -> None:
                                         annotate=cfg.annotate, progress=cfg.progress, fov_deg=cfg.fov_deg,
                                         watchdog_s=cfg.watchdog_s, visual_yaw=cfg.visual_yaw,
                                         threads=cfg.threads, imu=cfg.imu, imu_offset=cfg.imu_offset,
-                                        follow_gyro=cfg.follow_gyro, labels=cfg.labels))
+                                        follow_gyro=cfg.follow_gyro, labels=cfg.labels, plot=cfg.plot))
     for warning in summary.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"crossing-demo: {cfg.video} with bundle {cfg.bundle}")

@@ -1,4 +1,5 @@
-"""Offline demo: a video in, ``beacon.wav`` + ``annotated.mp4`` + ``trace.jsonl`` out.
+"""Offline demo: a video in, ``beacon.wav`` + ``annotated.mp4`` + ``trace.jsonl`` (+ ``timeline.png``,
+with matplotlib) out.
 
 The WAV follows the video's timeline exactly: the cue of the decision made on frame ``i``
 (at ``t_i = i / fps``) plays from sample ``round(t_i sr)`` to ``round(t_{i+1} sr)``.
@@ -21,6 +22,7 @@ from typing import Iterable
 import cv2
 import numpy as np
 
+from crossing_assist.actions import UNKNOWN, bin_center_x, x_to_heading
 from crossing_assist.fileio import sweep_orphans, tmp_tag
 from crossing_assist.geometry import GeometryError, orientation
 from crossing_assist.runtime.annotate import annotate
@@ -31,7 +33,9 @@ from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.gyro import GyroFollow
 from crossing_assist.runtime.imu import Alignment, ImuLog, aligned
 from crossing_assist.runtime.pipeline import Pipeline, Seen, Step, open_pipeline, trace_record
-from crossing_assist.runtime.truth import compare, judge_labels, labels_line, load_labels, load_truth, truth_line
+from crossing_assist.runtime.timeline import plot_timeline
+from crossing_assist.runtime.truth import (LabelledFrame, compare, judge_labels, labels_line, load_labels, load_truth,
+                                          truth_line)
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S
 
 
@@ -60,6 +64,7 @@ class OfflineConfig:
     imu_offset: float | None = 0.0   # the log's time at the video's first frame; None: found (imu.align)
     follow_gyro: bool = False        # tell the decision logic the log's turn from the start, unconfirmed
     labels: Path | None = None       # a dataset of this video's labelled frames (truth.load_labels)
+    plot: bool = True                # timeline.png (runtime.timeline), where matplotlib is installed
 
 
 @dataclass(frozen=True)
@@ -315,6 +320,29 @@ class _Recorder:
         return outputs
 
 
+def _timeline(rec: _Recorder, trace: Path, truth: dict | None, labelled: list[LabelledFrame] | None,
+              video: Path) -> Path | None:
+    """``timeline.png`` beside the trace, with the goal's heading where it is known: the labelled
+    frames' (their far point, else their strip's centre, at the FOV of the frame at their time),
+    else the synthetic clip's ground truth."""
+    records = [json.loads(line) for line in trace.read_text(encoding="utf-8").splitlines()]
+    goal: list[tuple[float, float | None]] = []
+    if labelled:
+        ts = np.asarray(rec.times)
+        for f in labelled:
+            fov = rec.frame_fovs[int(np.argmin(np.abs(ts - f.t)))] if len(ts) else None
+            if f.label == UNKNOWN:
+                goal.append((f.t, None))
+            elif fov is not None:
+                goal.append((f.t, x_to_heading(f.far_x if f.far_x is not None else bin_center_x(f.label), fov)))
+    elif truth:
+        visible = truth.get("far_x") or truth["label"]
+        goal = [(t, a if v is not None and str(v) != "unknown" else None)
+                for t, a, v in zip(rec.times, truth["goal_azimuth_deg"], visible)]
+    return plot_timeline(records, trace.with_name("timeline.png"), truth=goal,
+                         truth_label="goal (labelled)" if labelled else "goal (truth)", title=f"crossing-demo: {video.name}")
+
+
 def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     """Run the whole demo on ``cfg.video``; writes the outputs into ``cfg.out_dir``."""
     from tqdm import tqdm
@@ -357,6 +385,9 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
                         "the trace and beacon.wav end with a stop")
     outputs = rec.finish(n, end_s)
     truth = load_truth(cfg.video)
+    if cfg.plot:
+        outputs["timeline"] = _timeline(rec, outputs["trace"], truth, labelled, cfg.video) or \
+            "skipped (matplotlib is not installed: pip install matplotlib)"
     view, thresholds = None, ()
     if rec.frame_size and len(rec.fovs) == 1:
         view = pipeline.engine.bundle.rows_seen(rec.frame_size[1], rec.frame_size[0], next(iter(rec.fovs)))
