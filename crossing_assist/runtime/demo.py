@@ -168,16 +168,16 @@ def run_live_demo(cfg: DemoConfig) -> None:
     from crossing_assist.runtime.audio import LiveAudio
     from crossing_assist.runtime.beacon import CuePlayer
     from crossing_assist.runtime.gyro import YawIntegrator
-    from crossing_assist.runtime.imu import ImuLog
+    from crossing_assist.runtime.imu import ImuLog, line_up
     from crossing_assist.runtime.live import LiveConfig, run_live
-    from crossing_assist.runtime.offline import line_up
     from crossing_assist.runtime.pipeline import open_pipeline, trace_record
     from crossing_assist.runtime.sources import CameraSource, VideoSource
 
     log = ImuLog.load(cfg.imu, cfg.imu_offset or 0.0) if cfg.imu is not None else None   # refused before the model
     pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, visual_yaw=cfg.visual_yaw,
                              threads=cfg.threads)
-    imu, alignment = line_up(log, cfg.imu_offset, cfg.video, pipeline.engine) if log is not None else (None, None)
+    imu, alignment = (line_up(log, cfg.imu_offset, cfg.video, pipeline.engine.frame_fov) if log is not None
+                      else (None, None))
     if alignment is not None:
         print(f"gyroscope ({imu.path.name}): {alignment.describe()}", file=sys.stderr)
     player = CuePlayer(pipeline.beacon_cfg)

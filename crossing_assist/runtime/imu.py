@@ -279,9 +279,14 @@ def align(log: ImuLog, t0: np.ndarray, t1: np.ndarray, picture_dps: np.ndarray, 
     return best
 
 
-def aligned(log: ImuLog, frames: Iterable[tuple[float, np.ndarray]],
-            fov_of: Callable[[np.ndarray], float | None]) -> tuple[ImuLog, Alignment]:
-    """``log`` shifted to the offset :func:`align` finds against the turns read from ``frames``
-    (the video's, ``fov_of`` giving each one's FOV), and that alignment."""
-    found = align(log, *picture_turns(frames, fov_of))
+def line_up(log: ImuLog, offset: float | None, video: str | Path,
+            fov_of: Callable[[np.ndarray], float | None]) -> tuple[ImuLog, Alignment | None]:
+    """``log`` (loaded at ``offset``) as it is; or with ``offset`` None, shifted to the offset
+    :func:`align` finds against the turns read from ``video``'s frames (``fov_of`` giving each
+    one's FOV: ``Engine.frame_fov``), and that alignment."""
+    from crossing_assist.runtime.sources import VideoSource
+
+    if offset is not None:
+        return log, None
+    found = align(log, *picture_turns(VideoSource(video, max_width=320), fov_of))
     return log.shifted(found.offset), found

@@ -31,7 +31,7 @@ from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
 from crossing_assist.runtime.decide import REASON_UNCERTAIN
 from crossing_assist.runtime.engine import Engine
 from crossing_assist.runtime.gyro import GyroFollow
-from crossing_assist.runtime.imu import Alignment, ImuLog, aligned
+from crossing_assist.runtime.imu import Alignment, ImuLog, line_up
 from crossing_assist.runtime.pipeline import Pipeline, Seen, Step, open_pipeline, trace_record
 from crossing_assist.runtime.timeline import plot_timeline
 from crossing_assist.runtime.truth import (LabelledFrame, compare, judge_labels, labels_line, load_labels, load_truth,
@@ -163,16 +163,6 @@ def run_frames(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, *
         sink(i, t, frame, pipeline.decide(seen))
         n, prev = i + 1, t
     return n
-
-
-def line_up(log: ImuLog, offset: float | None, video: Path, engine: Engine) -> tuple[ImuLog, Alignment | None]:
-    """``log`` (loaded at ``offset``) as it is, or with ``offset`` None lined up with ``video`` by
-    the turn read from its frames (:func:`~crossing_assist.runtime.imu.aligned`), and how."""
-    from crossing_assist.runtime.sources import VideoSource
-
-    if offset is not None:
-        return log, None
-    return aligned(log, VideoSource(video, max_width=320), engine.frame_fov)
 
 
 def gyro_line(imu: ImuLog, follow: GyroFollow, times: list[float], told: int, alignment: Alignment | None = None) -> str:
@@ -354,7 +344,7 @@ def run_offline(cfg: OfflineConfig, engine: Engine | None = None) -> Summary:
     pipeline = open_pipeline(cfg.bundle, fov_deg=cfg.fov_deg, watchdog_s=cfg.watchdog_s, beacon=cfg.beacon,
                              engine=engine, visual_yaw=cfg.visual_yaw, threads=cfg.threads)
     engine = pipeline.engine
-    imu, alignment = line_up(log, cfg.imu_offset, cfg.video, engine) if log is not None else (None, None)
+    imu, alignment = line_up(log, cfg.imu_offset, cfg.video, engine.frame_fov) if log is not None else (None, None)
     follow = GyroFollow(cfg.follow_gyro)
     source = VideoSource(cfg.video, max_width=cfg.max_width)
     rec = _Recorder(cfg, engine, source.fps)
