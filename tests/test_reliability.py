@@ -406,7 +406,7 @@ def test_offline_demo_sweeps_what_a_killed_run_left(tmp_path, toy_bundle):  # no
     for name in (f".trace.tmp{dead}-abc.jsonl", f".annotated.tmp{dead}.mp4"):
         (out / name).write_text("partial")
     clip = _avi(tmp_path / "c.avi", [0.5] * 5)
-    run_offline(OfflineConfig(video=clip, bundle=toy_bundle, out_dir=out, annotate=False, progress=False))
+    run_offline(OfflineConfig(video=clip, bundle=toy_bundle, out_dir=out, annotate=False, progress=False, plot=False))
     assert sorted(p.name for p in out.iterdir()) == ["beacon.wav", "trace.jsonl"]
 
 
