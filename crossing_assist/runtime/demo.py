@@ -63,7 +63,7 @@ class DemoConfig:
     plot: bool = True
 
 
-def _offset(text: str) -> float | None:
+def offset_arg(text: str) -> float | None:
     """``--imu-offset``: seconds, or ``auto`` (None)."""
     if text.strip().lower() == "auto":
         return None
@@ -101,7 +101,7 @@ def parse_args(argv: list[str] | None) -> DemoConfig:
                     help="a motion-sensor log recorded with the video: columns t (s), yaw_dps (+ right) and "
                          "optionally roll_deg; its gyroscope's turn is followed once the picture confirms it, "
                          "its roll levels the frames (docs/runtime.md, 'A recorded motion-sensor log')")
-    ap.add_argument("--imu-offset", type=_offset, default=0.0, metavar="S|auto",
+    ap.add_argument("--imu-offset", type=offset_arg, default=0.0, metavar="S|auto",
                     help="the log's time t at the video's first frame (default 0); auto: found by lining the "
                          "log's turns up with the turns read from the video's frames")
     ap.add_argument("--follow-gyro", action="store_true",
