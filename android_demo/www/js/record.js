@@ -13,6 +13,13 @@
 /** The log's header: crossing_assist/runtime/imu.py's column names. */
 export const IMU_HEADER = 't,yaw_dps,roll_deg';
 
+/** The longest recording (s): its video is kept in the phone's memory until it is downloaded
+ * (about 20 MB a minute at a browser's default bit rate), so a walk left recording stops here. */
+export const MAX_RECORD_S = 15 * 60;
+
+/** How long stop() waits for the recorder's last chunk (ms): ending guidance never hangs on it. */
+export const STOP_WAIT_MS = 2000;
+
 /** Video types tried in order: WebM (Chromium, Firefox), then MP4 (Safari). */
 export const VIDEO_TYPES = ['video/webm;codecs=vp8', 'video/webm', 'video/mp4'];
 
@@ -44,20 +51,29 @@ export function videoType(isSupported = (t) => globalThis.MediaRecorder?.isTypeS
 /**
  * One recording: `new FieldRecorder(stream, clock)` starts it; `motion(t, yawDps, rollDeg)` adds a
  * gyroscope sample at `t` on `clock`'s time (s); `stop()` resolves to { video: Blob, type,
- * extension, csv, samples, seconds }. Throws at once where the browser cannot record video.
+ * extension, csv, samples, seconds, capped }. At `maxSeconds` it stops by itself (`capped`: the
+ * video and the log end there). Throws at once where the browser cannot record video.
  */
 export class FieldRecorder {
-  constructor(stream, clock) {
+  constructor(stream, clock, { maxSeconds = MAX_RECORD_S } = {}) {
     if (typeof globalThis.MediaRecorder !== 'function') throw new Error('This browser cannot record video.');
     this.clock = clock;
     const type = videoType();
     this.recorder = new MediaRecorder(stream, type ? { mimeType: type } : undefined);
     this.chunks = [];
     this.rows = [];
+    this.capped = false;
     this.t0 = clock(); // replaced by the recorder's own start, when it comes
     this.recorder.addEventListener('start', () => { this.t0 = clock(); });
     this.recorder.addEventListener('dataavailable', (e) => { if (e.data?.size) this.chunks.push(e.data); });
+    // its last chunk comes before 'stop', however it was stopped (here at the cap, or by stop())
+    this.stopped = new Promise((resolve) => this.recorder.addEventListener('stop', resolve, { once: true }));
     this.recorder.start(1000); // a chunk a second: a recording cut short still holds what came before
+    this.cap = setTimeout(() => {
+      this.capped = true;
+      this.seconds = this.clock() - this.t0;
+      this.recorder.stop();
+    }, maxSeconds * 1000);
   }
 
   motion(t, yawDps, rollDeg) {
@@ -65,19 +81,15 @@ export class FieldRecorder {
   }
 
   stop() {
-    const seconds = this.clock() - this.t0;
-    return new Promise((resolve) => {
-      const done = () => {
-        const type = this.recorder.mimeType || this.chunks[0]?.type || 'video/webm';
-        const csv = imuCsv(this.rows);
-        resolve({ video: new Blob(this.chunks, { type }), type, extension: type.includes('mp4') ? 'mp4' : 'webm',
-          csv, samples: csv.split('\n').length - 2, seconds }); // the rows kept: not the header, not the last newline
-      };
-      if (this.recorder.state === 'inactive') done();
-      else {
-        this.recorder.addEventListener('stop', done, { once: true });
-        this.recorder.stop();
-      }
+    clearTimeout(this.cap);
+    const seconds = this.seconds ?? this.clock() - this.t0;
+    if (this.recorder.state !== 'inactive') this.recorder.stop();
+    const late = new Promise((resolve) => { setTimeout(resolve, STOP_WAIT_MS); });
+    return Promise.race([this.stopped, late]).then(() => {
+      const type = this.recorder.mimeType || this.chunks[0]?.type || 'video/webm';
+      const csv = imuCsv(this.rows);
+      return { video: new Blob(this.chunks, { type }), type, extension: type.includes('mp4') ? 'mp4' : 'webm',
+        csv, samples: csv.split('\n').length - 2, seconds, capped: this.capped }; // rows: not the header nor the last newline
     });
   }
 }

@@ -125,8 +125,8 @@ export class HelperView {
     const video = link(rec.video, `${name}.${rec.extension}`, `the video (${name}.${rec.extension})`);
     const log = link(new Blob([rec.csv], { type: 'text/csv' }), `${name}.imu.csv`, `the motion log (${name}.imu.csv)`);
     this.recordingUrls = [video.href, log.href];
-    p.replaceChildren(`Recorded ${rec.seconds.toFixed(1)} s, ${rec.samples} gyroscope samples. Download `, video, ' and ',
-      log, rec.samples ? '.' : ' (empty: no gyroscope reported).');
+    p.replaceChildren(`Recorded ${rec.seconds.toFixed(1)} s${rec.capped ? ' (the longest a recording can be: it stopped there)' : ''}, `
+      + `${rec.samples} gyroscope samples. Download `, video, ' and ', log, rec.samples ? '.' : ' (empty: no gyroscope reported).');
     p.hidden = false;
   }
 
