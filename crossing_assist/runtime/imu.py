@@ -41,7 +41,8 @@ from crossing_assist.errors import UserError
 from crossing_assist.runtime.gyro import MAX_SAMPLE_GAP_S, YawIntegrator, integrate
 from crossing_assist.runtime.visual_yaw import VisualYaw
 
-MAX_RATE_DPS = 2000.0   # a phone gyroscope's full scale: a larger rate is a unit mix-up (rad/s read as deg/s is smaller)
+MAX_RATE_DPS = 2000.0   # a phone gyroscope's full scale: a larger rate is in another unit (rad/s given as deg/s
+                        # is smaller and passes; the picture's check then never confirms it, and the summary says so)
 MAX_ROLL_DEG = 180.0
 MAX_ROWS = 10_000_000
 ALIGN_SEARCH_S = 5.0    # offsets tried either way by --imu-offset auto
