@@ -3,6 +3,8 @@ reads its samples, written by the clip generator, followed only once the picture
 levelling rolled frames, bad logs refused in one line."""
 
 import json
+import math
+import re
 import subprocess
 import sys
 import time
@@ -291,3 +293,16 @@ def test_labels_of_another_video_are_refused_in_one_line(tmp_path, capsys):
     assert len(err) == 1 and "no labelled frame of walk.mp4 (rows with source vid:walk" in err[0]
     assert "vid:sample_clip" in err[0]
     assert demo.main([str(DEFAULT_CLIP), "--labels", str(labels), "--live"]) == 2
+
+
+def test_a_log_in_radians_per_second_is_named(tmp_path, without_log):
+    """The picture's turn and a deg/s log agree in size (0.999 on the sample clip, 2026-12-07); a
+    log in rad/s reads 57 times too slow, never confirms, and the summary says why."""
+    log = ImuLog.load(CLIP_IMU)
+    rad = write_log(tmp_path / "rad.csv", log.t, [math.radians(v) for v in log.yaw_dps])
+    summary, trace = _offline(tmp_path, "rad", imu=rad)
+    m = re.search(r"the picture turns ([\d.]+) times as fast as the log says \(a log in rad/s", summary.gyro)
+    assert m and 50 < float(m.group(1)) < 65, summary.gyro
+    assert all(r["yaw_source"] == "camera" for r in trace)
+    plain, _ = _offline(tmp_path, "deg", imu=CLIP_IMU)
+    assert "times as fast" not in plain.gyro

@@ -125,19 +125,31 @@ class GyroFollow:
     the offline demo's rule, as the app's): once the picture's turn has confirmed the gyroscope's
     sign (:class:`GyroCheck`), or from the start with ``follow=True`` (the app's opt-in); never
     after the picture found it the wrong way. ``confirmed_at``: the frame time it was first
-    followed (None: not yet)."""
+    followed (None: not yet). :meth:`scale` compares the two rates' sizes."""
 
     def __init__(self, follow: bool = False, cfg: GyroCheckConfig = GYRO_CHECK) -> None:
         self.check = GyroCheck(cfg)
         self.follow = follow
         self.confirmed_at: float | None = None
+        self._sums = [0.0, 0.0, 0]   # sum gyro * picture, sum gyro^2, frames: where the picture read a turn
 
     def followed(self, t: float, gyro_dps: float, picture_dps: float | None) -> bool:
         """A frame at ``t``: the gyroscope's turn rate since the frame before and the picture's
         (None: no turn is read from the frames, so nothing is checked); whether to follow it."""
         if picture_dps is not None:
             self.check.add(gyro_dps, picture_dps)
+            if picture_dps != 0 and math.isfinite(gyro_dps) and math.isfinite(picture_dps):
+                self._sums[0] += gyro_dps * picture_dps
+                self._sums[1] += gyro_dps * gyro_dps
+                self._sums[2] += 1
         ok = self.check.verdict != "wrong" and (self.follow or self.check.confirmed())
         if ok and self.confirmed_at is None:
             self.confirmed_at = t
         return ok
+
+    def scale(self, least: int = 10) -> float | None:
+        """How many times the gyroscope's rate the picture's turn is, by least squares over the
+        frames on which the picture read a turn (None: fewer than ``least`` such frames, or a
+        gyroscope reading no turn). About 1 for a gyroscope in deg/s; 57 for one in rad/s."""
+        gp, gg, n = self._sums
+        return gp / gg if n >= least and gg > 1e-9 else None

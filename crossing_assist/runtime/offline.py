@@ -165,11 +165,19 @@ def run_frames(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, *
     return n
 
 
+RATE_SCALE_OFF = 3.0   # the picture's turn this many times the log's (or a third of it): the log's unit is wrong
+
+
 def gyro_line(imu: ImuLog, follow: GyroFollow, times: list[float], told: int, alignment: Alignment | None = None) -> str:
     """The summary's line on a recorded log: where it reported, and whether its turn was followed."""
     n = max(len(times), 1)
     head = (f"gyroscope ({imu.path.name}): {alignment.describe() + '; ' if alignment else ''}"
             f"reported on {100 * imu.coverage(times):.0f}% of frames; its turn told on {100 * told / n:.0f}%")
+    scale = follow.scale()
+    if scale is not None and not 1 / RATE_SCALE_OFF <= abs(scale) <= RATE_SCALE_OFF:
+        head += (f"; the picture turns {abs(scale):.3g} times as fast as the log says"
+                 + (" (a log in rad/s reads 57 times too slow: give yaw_dps in degrees)" if 30 <= abs(scale) <= 100
+                    else " (is yaw_dps in deg/s?)"))
     if follow.check.verdict == "wrong":
         return (head + "; the picture's turn found it the wrong way round, so it was not followed from then on "
                 "(check the sign of yaw_dps, and --imu-offset)")
