@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import threading
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 #: A sample's rate covers the time since the sample before, at most this long: a longer gap is a
@@ -132,6 +132,19 @@ class GyroFollow:
         self.follow = follow
         self.confirmed_at: float | None = None
         self._sums = [0.0, 0.0, 0]   # sum gyro * picture, sum gyro^2, frames: where the picture read a turn
+
+    def tell(self, seen, gyro, since: float | None, at: float):
+        """``seen`` (:class:`~crossing_assist.runtime.pipeline.Seen`, its turn read from the frames
+        or not) as the decision logic is told it while ``gyro`` (a :class:`YawIntegrator`, or a
+        recorded :class:`~crossing_assist.runtime.imu.ImuLog`) reports at ``at``, its frame's
+        capture on the gyroscope's clock: the gyroscope's turn rate since ``since`` (None: the first
+        frame, no turn) is checked against the picture's and, where followed, told instead
+        (``yaw_source`` ``"gyro"``). The caller checks that it reports."""
+        gyro_dps = gyro.between(since, at) if since is not None else 0.0
+        picture_dps = seen.yaw_rate_dps if seen.yaw_source == "camera" else None
+        if self.followed(seen.t, gyro_dps, picture_dps):
+            return replace(seen, yaw_rate_dps=gyro_dps, yaw_source="gyro")
+        return seen
 
     def followed(self, t: float, gyro_dps: float, picture_dps: float | None) -> bool:
         """A frame at ``t``: the gyroscope's turn rate since the frame before and the picture's

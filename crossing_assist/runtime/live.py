@@ -28,7 +28,7 @@ from crossing_assist.runtime.beacon import KIND_STOP, Cue
 from crossing_assist.runtime.beacon import CuePlayer
 from crossing_assist.runtime.gyro import RATE_S, GyroFollow, YawIntegrator
 from crossing_assist.runtime.pipeline import Pipeline, Step, cached_loop
-from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
+from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Ticker, Watchdog
 
 
 #: How often the decision playing is turned again with the gyroscope between decisions (s).
@@ -101,21 +101,14 @@ class Follower:
         self.clock, self.period_s = clock, period_s
         self._lock = threading.Lock()
         self._playing: tuple[Step, float, float, bool] | None = None   # the step, its capture, its play's end, followed
-        self._ended = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._ticker = Ticker(period_s, self.tick, "crossing-follow")
 
     def start(self) -> "Follower":
-        def loop() -> None:
-            while not self._ended.wait(self.period_s):
-                self.tick()
-        self._thread = threading.Thread(target=loop, name="crossing-follow", daemon=True)
-        self._thread.start()
+        self._ticker.start()
         return self
 
     def close(self) -> None:
-        self._ended.set()
-        if self._thread is not None:
-            self._thread.join(timeout=1.0)
+        self._ticker.stop()
 
     def play(self, step: Step, captured: float | None = None, followed: bool = False, until: float = 0.0) -> Step:
         """Queue ``step``'s cue; with ``captured`` (a fresh direction, the gyroscope reporting),
@@ -209,14 +202,9 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
             interval = 0.0 if last_captured is None else max(0.0, captured - last_captured)
             seen = pipeline.read(frame, captured - start, roll_deg=roll_at(t) if roll_at else None)
             reporting = gyro is not None and gyro.reporting(captured)
-            followed = False
-            if reporting:
-                # the gyroscope's turn since the frame before, checked against the picture's
-                gyro_dps = gyro.between(captured - interval, captured) if interval else 0.0
-                picture_dps = seen.yaw_rate_dps if pipeline.visual_yaw is not None else None
-                followed = follow.followed(captured - start, gyro_dps, picture_dps)
-                if followed:
-                    seen = replace(seen, yaw_rate_dps=gyro_dps, yaw_source="gyro")
+            if reporting:   # the gyroscope's turn since the frame before, checked against the picture's
+                seen = follow.tell(seen, gyro, captured - interval if interval else None, captured)
+            followed = seen.yaw_source == "gyro"
             cut = None      # the turn that stopped the playing decision now, if one did
             if playing is not None and not reporting:
                 # no gyroscope: the turn read since the playing decision's frame, carried on through

@@ -15,7 +15,7 @@ import subprocess
 import tempfile
 import time
 from collections import Counter
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable
 
@@ -136,12 +136,7 @@ def read_with_imu(pipeline: Pipeline, frame: np.ndarray, t: float, before: float
     and told the log's turn since the frame before (at ``before``) where it reports and ``follow``
     follows it (the live loop's rule: once the picture's turn has confirmed its sign)."""
     seen = pipeline.read(frame, t, roll_deg=imu.roll_at(t))
-    if before is None or not imu.reporting(t):
-        return seen
-    gyro_dps = imu.between(before, t)
-    if follow.followed(t, gyro_dps, seen.yaw_rate_dps if pipeline.visual_yaw is not None else None):
-        seen = replace(seen, yaw_rate_dps=gyro_dps, yaw_source="gyro")
-    return seen
+    return follow.tell(seen, imu, before, t) if imu.reporting(t) else seen
 
 
 def run_frames(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, *, sink, on_watchdog=None,

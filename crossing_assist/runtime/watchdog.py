@@ -14,6 +14,30 @@ from typing import Callable
 DEFAULT_WATCHDOG_S = 0.5   # the longest time without a fresh decision before the beacon stops
 
 
+class Ticker:
+    """``fn()`` every ``period_s`` on a daemon thread named ``name``, from :meth:`start` until
+    :meth:`stop` (the watchdog's poll, the live loop's gyroscope follower)."""
+
+    def __init__(self, period_s: float, fn: Callable[[], None], name: str) -> None:
+        self.period_s, self.fn, self.name = period_s, fn, name
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> "Ticker":
+        def loop() -> None:
+            while not self._stop.wait(self.period_s):
+                self.fn()
+        self._thread = threading.Thread(target=loop, name=self.name, daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=1.0)
+            self._thread = None
+
+
 class Watchdog:
     """Calls ``on_stale()`` once each time ``clock() - last_beat > period_s`` becomes true."""
 
@@ -28,8 +52,7 @@ class Watchdog:
         self._last = clock()
         self.stale = False
         self.fired = 0
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._ticker = Ticker(self.poll_s, self.poll, "crossing-watchdog")
 
     def beat(self, t: float | None = None) -> None:
         """A fresh decision (made from a frame captured at clock time ``t``; default now)."""
@@ -52,16 +75,9 @@ class Watchdog:
 
     def start(self) -> "Watchdog":
         """Poll in a daemon thread until :meth:`stop`."""
-        def loop() -> None:
-            while not self._stop.wait(self.poll_s):
-                self.poll()
-        self._thread = threading.Thread(target=loop, name="crossing-watchdog", daemon=True)
-        self._thread.start()
+        self._ticker.start()
         return self
 
     def stop(self) -> None:
         """Stop the polling thread."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=1.0)
-            self._thread = None
+        self._ticker.stop()

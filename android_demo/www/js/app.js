@@ -579,8 +579,9 @@ function onOrientation(e) {
 
 function onMotion(e) {
   const rate = yawRateFromRotation(e.rotationRate, screen.orientation?.angle ?? 0);
-  app.yaw?.add(rate, appTime(e.timeStamp)); // the clock of the frames' capture times
-  app.recorder?.motion(appTime(e.timeStamp), rate, app.tilt?.rollDeg(appTime(e.timeStamp)) ?? null);
+  const t = appTime(e.timeStamp); // the clock of the frames' capture times
+  app.yaw?.add(rate, t);
+  app.recorder?.motion(t, rate, app.tilt?.rollDeg(t) ?? null);
   app.turnRate = rate;
   if (app.turning) followTurn();
 }
