@@ -102,8 +102,8 @@ def test_js_defaults_are_the_python_defaults() -> None:
 
 def test_js_gyroscope_integrator_and_check_match_python() -> None:
     """The Python runtime's gyroscope (runtime/gyro.py) is the app's: the same turns between two
-    times over irregular samples with gaps, the same reporting, the same verdicts of the picture's
-    check over random pairs of turn rates."""
+    times over irregular samples with gaps, the same reporting, the same verdicts and
+    confirmations of the picture's check over random pairs of turn rates and a walker's sway."""
     from crossing_assist.runtime.gyro import GYRO_CHECK, GyroCheck, YawIntegrator
 
     rng = np.random.default_rng(11)
@@ -118,6 +118,10 @@ def test_js_gyroscope_integrator_and_check_match_python() -> None:
     same = [[g, math.copysign(c, g) if i % 5 else c] for i, (g, c) in enumerate(pairs)]
     flip = [[g, -c if i > 50 else c] for i, (g, c) in enumerate(same)]
     pairs = same
+    # a walker's sway read by the picture with noise, misreads and frames read as no turn
+    rates = np.diff(2.5 * np.sin(2 * np.pi * 0.9 * np.arange(81) / 10)) * 10
+    sway = [[float(r), float(0.0 if i % 9 == 4 else -200.0 if i % 13 == 7 else 1.03 * r + rng.normal(0, 1))]
+            for i, r in enumerate(rates)]
     out = json.loads(run_node(f"""
         import {{ GyroCheck, YawIntegrator }} from '{js_module("live.js")}';
         const samples = {json.dumps(samples)}, queries = {json.dumps(queries)};
@@ -132,7 +136,7 @@ def test_js_gyroscope_integrator_and_check_match_python() -> None:
         }});
         const verdicts = (pairs) => {{ const g = new GyroCheck(); return pairs.map(([a, b]) => [g.add(a, b), g.confirmed()]); }};
         console.log(JSON.stringify({{ between, reporting, same: verdicts({json.dumps(pairs)}),
-                                      flip: verdicts({json.dumps(flip)}) }}));
+                                      flip: verdicts({json.dumps(flip)}), sway: verdicts({json.dumps(sway)}) }}));
     """))
     y, between, reporting = YawIntegrator(), [], []
     for i, (t, r) in enumerate(samples):
@@ -142,10 +146,11 @@ def test_js_gyroscope_integrator_and_check_match_python() -> None:
         reporting.append(y.reporting(t + t1 % 0.3))
     np.testing.assert_allclose(out["between"], between, rtol=1e-9, atol=1e-9)
     assert out["reporting"] == reporting and 0 < sum(reporting) < len(reporting)
-    for key, seq in (("same", pairs), ("flip", flip)):
+    for key, seq in (("same", pairs), ("flip", flip), ("sway", sway)):
         g = GyroCheck(GYRO_CHECK)
         assert out[key] == [[g.add(a, b), g.confirmed()] for a, b in seq], key
     assert out["flip"][-1][0] == "wrong" and any(c for _, c in out["same"])
+    assert out["sway"][-1] == ["unchecked", True]   # confirmed by the sway alone
 
 
 def test_the_app_s_field_recording_log_is_what_crossing_demo_imu_reads(tmp_path) -> None:

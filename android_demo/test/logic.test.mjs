@@ -850,10 +850,35 @@ test('a gyroscope is confirmed by the picture only by clear agreement', () => {
   assert.ok(!check(turns(GYRO_CHECK.least - 1, 28, 30)).confirmed()); // too few turns seen by both
   assert.ok(!check(turns(40, 2, 30)).confirmed()); // blind to yaw: never counted
   assert.ok(!check(turns(GYRO_CHECK.least, -30, 30)).confirmed()); // the wrong way
+  assert.ok(!check(turns(40, 2, 20)).confirmed()); // the picture's turns ten times the gyroscope's: not its size
   // ok (not condemned) but one turn in three against the picture: not vouched for
-  const mixed = check(Array.from({ length: 30 }, (_, i) => (i % 3 === 0 ? [25, -40] : [25, 25])));
+  const mixed = check(Array.from({ length: 30 }, (_, i) => (i % 3 === 0 ? [25, -25] : [25, 25])));
   assert.equal(mixed.verdict, 'ok');
   assert.ok(!mixed.confirmed());
+  // a gyroscope reading another axis, whose turns pass 15 deg/s as the picture's do now and then,
+  // with the sign agreeing on 10 of 12: sign votes alone vouched for it, the sizes do not
+  const axis = check(Array.from({ length: 12 }, (_, i) => (i % 6 === 0 ? [30, -16] : [i % 2 ? 32 : -31, i % 2 ? 15 : -15.5])));
+  assert.equal(axis.verdict, 'ok');
+  assert.ok(!axis.confirmed());
+});
+
+test('a walker\'s sway confirms a gyroscope the picture reads alike, never one read the wrong way', () => {
+  // 2.5 deg either side at 0.9 Hz, read 10 times a second: never a clear turn (its fastest 14 deg/s)
+  const sway = Array.from({ length: 60 }, (_, i) => 2.5 * 10 * (Math.sin(2 * Math.PI * 0.9 * (i + 1) / 10) - Math.sin(2 * Math.PI * 0.9 * i / 10)));
+  assert.ok(Math.max(...sway.map(Math.abs)) < GYRO_CHECK.turn_dps);
+  const first = (pairs) => {
+    const g = new GyroCheck();
+    const k = pairs.findIndex(([gyro, cam]) => { g.add(gyro, cam); return g.confirmed(); });
+    return [k, g.verdict];
+  };
+  // the picture 3 % larger, now and then no turn read (0) or a stripe period off (-200 deg/s)
+  const read = (r, i) => (i % 9 === 4 ? 0 : i % 13 === 7 ? -200 : 1.03 * r);
+  const [k, verdict] = first(sway.map((r, i) => [r, read(r, i)]));
+  assert.ok(k >= GYRO_CHECK.sway_window - 1 && k < 40, `confirmed at frame ${k}`);
+  assert.equal(verdict, 'unchecked'); // by the sway, not by clear turns
+  assert.deepEqual(first(sway.map((r, i) => [-r, read(r, i)])), [-1, 'unchecked']); // reversed: never, nor condemned
+  assert.equal(first(sway.map((r, i) => [r * Math.PI / 180, read(r, i)]))[0], -1); // rad/s: never
+  assert.equal(first(sway.map((r, i) => [2 * r, read(r, i)]))[0], -1); // twice too large: never
 });
 
 test('a decision heard with only the size of the turn known plays as decided up to half a strip, then as a stop', () => {

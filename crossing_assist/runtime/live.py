@@ -150,7 +150,7 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
              cfg: LiveConfig, *, clock: Callable[[], float] = time.monotonic,
              sleep: Callable[[float], None] = time.sleep,
              on_step: Callable[[int, Step], None] | None = None, video_time: bool = True,
-             gyro: YawIntegrator | None = None, follow_gyro: bool = False,
+             gyro: YawIntegrator | None = None, follow_gyro: bool | GyroFollow = False,
              roll_at: Callable[[float], float | None] | None = None, start: float | None = None) -> int:
     """Run until ``frames`` ends (or ``max_seconds``); returns the number of frames read from
     ``frames`` up to the last one processed. ``on_step`` gets each frame's index in ``frames``.
@@ -165,7 +165,8 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
     with the user by the gyroscope's turn since its capture (:class:`Follower`), and the decision
     logic is told the gyroscope's turn between captures, once the picture's turn has confirmed the
     gyroscope's sign (:class:`GyroCheck`; ``follow_gyro=True``: from the start, as the app's
-    opt-in), never after finding it the wrong way. Until then the decision plays as a stop once the
+    opt-in; a :class:`GyroFollow`: its rule, which then tells when it was confirmed), never after
+    finding it the wrong way. Until then the decision plays as a stop once the
     gyroscope's turn since its capture, carried on to the end of its play, passes half a strip.
     Without a gyroscope reporting, a decision the turn read from the frames makes half a strip
     stale is a stop (checked when it is decided, and when the next frame is read).
@@ -180,7 +181,7 @@ def run_live(frames: Iterable[tuple[float, np.ndarray]], pipeline: Pipeline, pla
     follower.stop()
     if gyro is not None:
         follower.start()
-    follow = GyroFollow(follow_gyro)
+    follow = follow_gyro if isinstance(follow_gyro, GyroFollow) else GyroFollow(follow_gyro)
     dog = Watchdog(cfg.watchdog_s, follower.stop, clock=clock).start()
     start = clock() if start is None else start
     prev: np.ndarray | None = None

@@ -344,8 +344,12 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
     // the picture's whether or not it is followed: by default the picture confirms it first
     const gyro = app.yaw.between(captured - dt, captured);
     const before = app.gyroCheck.verdict;
+    const wasConfirmed = app.gyroCheck.confirmed();
     const verdict = picture ? app.gyroCheck.add(gyro, cameraTurn) : before;
-    if (verdict !== before) record({ kind: 'gyro_check', t: captured, verdict, turns: app.gyroCheck.turns.slice() });
+    const confirmed = app.gyroCheck.confirmed();
+    if (verdict !== before || confirmed !== wasConfirmed) {
+      record({ kind: 'gyro_check', t: captured, verdict, confirmed, turns: app.gyroCheck.turns.slice(), sway: app.gyroCheck.sway.slice() });
+    }
     if (yawSource === 'gyro' && verdict === 'wrong') {
       notice(captured, GYRO_WRONG_TEXT); // found out by the picture: not followed for the rest of this guidance
       yawSource = 'camera';

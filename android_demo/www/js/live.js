@@ -142,48 +142,80 @@ export class YawIntegrator {
  * axes and yawRateFromRotation's reading of the screen angle, which a browser or a phone may
  * break; a gyroscope that reads turns the wrong way moves the beacon away from the crossing as
  * the user turns toward it. So while both are on, every frame's turn from the gyroscope is
- * compared with the turn read from the picture (visualyaw.js). Only frames where both read a
- * clear turn (|rate| >= `turn_dps`) count: the same way confirms, the other way contradicts.
- * A turn in the picture alone proves nothing (a bus crossing a still phone's view, or a bar
- * moving in the test clip, reads as a turn), nor does a turn of the gyroscope alone (a blank
- * wall). Of the last `window` counted frames, once at least `least` were seen, `contradicted`
- * or more contradicting makes the verdict 'wrong' for good (this guidance): the gyroscope is no
- * longer followed. A gyroscope blind to turns (another axis) is not found out: it leaves the
- * beacon where the goal was, as no yaw input does, rather than sending it the wrong way.
+ * compared with the turn read from the picture (visualyaw.js).
+ * Clear turns (a user scanning): only frames where both read |rate| >= `turn_dps` are voted on:
+ * the same way confirms, the other way contradicts. A turn in the picture alone proves nothing (a
+ * bus crossing a still phone's view, or a bar moving in the test clip, reads as a turn), nor does
+ * a turn of the gyroscope alone (a blank wall). Of the last `window` voted frames, once at least
+ * `least` were seen, `contradicted` or more contradicting makes the verdict 'wrong' for good (this
+ * guidance): the gyroscope is no longer followed.
+ * A walker's sway (its fastest turn ~14 deg/s) never reads that clear, so a walk begun facing the
+ * crossing would never confirm the gyroscope. The sway confirms it too (never condemns it) once the
+ * last `sway_window` frames on which either read a turn of `sway_dps` or more (the picture reading
+ * one, both under `sway_max_dps`) agree in size: the cosine of the two rate series at least
+ * `agree_cos`, the picture's turn within `agree_scale` times the gyroscope's either way (least
+ * squares). Clear turns must agree in size too: sign votes alone confirmed a gyroscope reading
+ * another axis. Python's runtime/gyro.py has the same rule and says why; tests/test_android_logic.py
+ * checks they agree.
  */
 export const GYRO_WRONG_TEXT = 'The gyroscope reads turns the wrong way: turns are followed from the camera picture.';
-export const GYRO_CHECK = Object.freeze({ turn_dps: 15, window: 12, least: 8, contradicted: 0.75 });
+export const GYRO_CHECK = Object.freeze({
+  turn_dps: 15, window: 12, least: 8, contradicted: 0.75, sway_dps: 5, sway_max_dps: 30, sway_window: 16, agree_cos: 0.85, agree_scale: 1.5,
+});
+
+/** (gyroscope, picture) turn-rate pairs agreeing in size: cosine and least-squares scale (GYRO_CHECK). */
+function agree(pairs, c) {
+  let gp = 0;
+  let gg = 0;
+  let pp = 0;
+  for (const [g, p] of pairs) {
+    gp += g * p;
+    gg += g * g;
+    pp += p * p;
+  }
+  return gp >= c.agree_cos * Math.sqrt(gg * pp) && gg / c.agree_scale <= gp && gp <= gg * c.agree_scale;
+}
 
 export class GyroCheck {
   constructor(cfg = GYRO_CHECK) {
     this.cfg = cfg;
-    this.turns = []; // the last counted frames: true = confirmed
+    this.turns = []; // the last clear turns voted on: [gyroscope, picture] rates
+    this.sway = []; // the last frames of a sway's turns, alike
     this.verdict = 'unchecked'; // 'unchecked' | 'ok' | 'wrong'
   }
 
   /** One frame's turn rates (deg/s, + right): the gyroscope's and the picture's; returns the verdict. */
   add(gyroDps, cameraDps) {
     const c = this.cfg;
-    if (this.verdict === 'wrong' || !(Math.abs(cameraDps) >= c.turn_dps && Math.abs(gyroDps) >= c.turn_dps)) {
-      return this.verdict; // NaN fails the comparisons too
+    if (this.verdict === 'wrong' || !(Number.isFinite(gyroDps) && Number.isFinite(cameraDps))) return this.verdict;
+    if (cameraDps !== 0 && Math.max(Math.abs(gyroDps), Math.abs(cameraDps)) >= c.sway_dps
+        && Math.abs(gyroDps) < c.sway_max_dps && Math.abs(cameraDps) < c.sway_max_dps) {
+      this.sway.push([gyroDps, cameraDps]);
+      if (this.sway.length > c.sway_window) this.sway.shift();
     }
-    this.turns.push(gyroDps * cameraDps > 0);
+    if (!(Math.abs(cameraDps) >= c.turn_dps && Math.abs(gyroDps) >= c.turn_dps)) return this.verdict;
+    this.turns.push([gyroDps, cameraDps]);
     if (this.turns.length > c.window) this.turns.shift();
-    if (this.turns.length >= c.least) {
-      const bad = this.turns.filter((ok) => !ok).length / this.turns.length;
-      this.verdict = bad >= c.contradicted ? 'wrong' : 'ok';
-    }
+    if (this.turns.length >= c.least) this.verdict = this.against() >= c.contradicted * this.turns.length ? 'wrong' : 'ok';
     return this.verdict;
   }
 
+  against() {
+    return this.turns.filter(([g, p]) => g * p < 0).length;
+  }
+
   /**
-   * The picture vouches for the gyroscope: at least `least` counted frames, and as large a share
-   * of the last `window` confirming as `contradicted` is of them contradicting for 'wrong'. Then
-   * the app follows the gyroscope even when it was not turned on (app.js gyroFollowed).
+   * The picture vouches for the gyroscope: 'ok', with as large a share of the clear turns agreeing
+   * as `contradicted` is of them contradicting for 'wrong', agreeing in size too; or, not found
+   * 'wrong', a full window of a sway's turns agreeing in size. Then the app follows the gyroscope
+   * even when it was not turned on (app.js gyroFollowed).
    */
   confirmed() {
-    // 'ok' is only given once `least` frames were counted, and the window never shrinks
-    return this.verdict === 'ok' && this.turns.filter(Boolean).length >= this.cfg.contradicted * this.turns.length;
+    const c = this.cfg;
+    if (this.verdict === 'wrong') return false;
+    const clear = this.verdict === 'ok' && this.turns.length - this.against() >= c.contradicted * this.turns.length
+      && agree(this.turns, c);
+    return clear || (this.sway.length >= c.sway_window && agree(this.sway, c));
   }
 }
 
