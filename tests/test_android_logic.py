@@ -119,9 +119,14 @@ def test_js_gyroscope_integrator_and_check_match_python() -> None:
     flip = [[g, -c if i > 50 else c] for i, (g, c) in enumerate(same)]
     pairs = same
     # a walker's sway read by the picture with noise, misreads and frames read as no turn
-    rates = np.diff(2.5 * np.sin(2 * np.pi * 0.9 * np.arange(81) / 10)) * 10
-    sway = [[float(r), float(0.0 if i % 9 == 4 else -200.0 if i % 13 == 7 else 1.03 * r + rng.normal(0, 1))]
-            for i, r in enumerate(rates)]
+    # (stamped 0.12 s late against the gyroscope: the lags' windows find it), with the gyroscope's
+    # turn over each frame's interval moved back by each of sway_lags_s
+    yaw = lambda s: 2.5 * np.sin(2 * np.pi * 0.9 * s)  # noqa: E731
+    t = np.arange(81) / 10
+    rates, late = np.diff(yaw(t)) * 10, np.diff(yaw(t - 0.12)) * 10
+    back = [np.diff(yaw(t - lag)) * 10 for lag in GYRO_CHECK.sway_lags_s[1:]]
+    sway = [[float(r), float(0.0 if i % 9 == 4 else -200.0 if i % 13 == 7 else 1.03 * late[i] + rng.normal(0, 1)),
+             [float(b[i]) for b in back]] for i, r in enumerate(rates)]
     out = json.loads(run_node(f"""
         import {{ GyroCheck, YawIntegrator }} from '{js_module("live.js")}';
         const samples = {json.dumps(samples)}, queries = {json.dumps(queries)};
@@ -134,7 +139,7 @@ def test_js_gyroscope_integrator_and_check_match_python() -> None:
           between.push(y.between(Math.max(t0, t - 2.5), t + t1 % 0.3));
           reporting.push(y.reporting(t + t1 % 0.3));
         }});
-        const verdicts = (pairs) => {{ const g = new GyroCheck(); return pairs.map(([a, b]) => [g.add(a, b), g.confirmed()]); }};
+        const verdicts = (pairs) => {{ const g = new GyroCheck(); return pairs.map(([a, b, l]) => [g.add(a, b, l), g.confirmed()]); }};
         console.log(JSON.stringify({{ between, reporting, same: verdicts({json.dumps(pairs)}),
                                       flip: verdicts({json.dumps(flip)}), sway: verdicts({json.dumps(sway)}) }}));
     """))
@@ -148,7 +153,7 @@ def test_js_gyroscope_integrator_and_check_match_python() -> None:
     assert out["reporting"] == reporting and 0 < sum(reporting) < len(reporting)
     for key, seq in (("same", pairs), ("flip", flip), ("sway", sway)):
         g = GyroCheck(GYRO_CHECK)
-        assert out[key] == [[g.add(a, b), g.confirmed()] for a, b in seq], key
+        assert out[key] == [[g.add(*pair), g.confirmed()] for pair in seq], key
     assert out["flip"][-1][0] == "wrong" and any(c for _, c in out["same"])
     assert out["sway"][-1] == ["unchecked", True]   # confirmed by the sway alone
 

@@ -74,6 +74,27 @@ def test_a_sway_never_confirms_a_gyroscope_that_does_not_read_the_picture_s_turn
     assert first_confirmed(gyro, picture(true))[0] is None
 
 
+@pytest.mark.parametrize("late_s", [0.0, 0.1, 0.15, 0.25])
+def test_a_sway_confirms_frames_stamped_late_against_the_gyroscope(late_s):
+    """Frames stamped up to a quarter of a second late (a browser giving no capture time): the
+    gyroscope's turn over the frame's interval moved back by each of ``sway_lags_s`` finds the
+    sway; at no lag alone, 0.15 s late already never confirms (cosine ~0.66)."""
+    t = np.arange(201) / FPS
+    yaw = lambda s: 2.5 * np.sin(2 * np.pi * 0.9 * s)  # noqa: E731
+    pic = picture(np.diff(yaw(t - late_s)) * FPS)   # the picture's turn happened late_s before its stamp
+
+    def gyro_over(lag):   # the gyroscope's mean rate over each frame interval moved back by lag
+        return np.diff(yaw(t - lag)) * FPS
+
+    g0, lagged = gyro_over(0.0), np.stack([gyro_over(lag) for lag in GYRO_CHECK.sway_lags_s[1:]], axis=1)
+    check = GyroCheck()
+    k = next((k for k in range(len(pic)) if check.add(float(g0[k]), float(pic[k]), lagged[k].tolist()) and check.confirmed()),
+             None)
+    assert k is not None and k / FPS < 5.0, k
+    at_no_lag = first_confirmed(g0, pic)[0]
+    assert (at_no_lag is not None) == (late_s <= 0.1), at_no_lag
+
+
 def test_a_gyroscope_found_the_wrong_way_by_clear_turns_is_not_confirmed_by_a_sway_after():
     check = GyroCheck()
     for _ in range(GYRO_CHECK.least):

@@ -879,6 +879,17 @@ test('a walker\'s sway confirms a gyroscope the picture reads alike, never one r
   assert.deepEqual(first(sway.map((r, i) => [-r, read(r, i)])), [-1, 'unchecked']); // reversed: never, nor condemned
   assert.equal(first(sway.map((r, i) => [r * Math.PI / 180, read(r, i)]))[0], -1); // rad/s: never
   assert.equal(first(sway.map((r, i) => [2 * r, read(r, i)]))[0], -1); // twice too large: never
+  // frames stamped 0.15 s late against the gyroscope: the sway's phase 49 deg off at no lag, found
+  // by the gyroscope's turn moved back by the lags (sway_lags_s); once confirmed it stays so
+  const yaw = (t) => 2.5 * Math.sin(2 * Math.PI * 0.9 * t);
+  const rate = (i, back) => (yaw((i + 1) / 10 - back) - yaw(i / 10 - back)) * 10;
+  const late = Array.from({ length: 80 }, (_, i) => [rate(i, 0), read(rate(i, 0.15), i),
+    GYRO_CHECK.sway_lags_s.slice(1).map((lag) => rate(i, lag))]);
+  assert.equal(first(late.map(([g, p]) => [g, p]))[0], -1);
+  const g = new GyroCheck();
+  const kLate = late.findIndex(([gyro, cam, lagged]) => { g.add(gyro, cam, lagged); return g.confirmed(); });
+  assert.ok(kLate >= GYRO_CHECK.sway_window - 1 && kLate < 50, `confirmed at frame ${kLate}`);
+  assert.ok(late.slice(kLate + 1).every(([gyro, cam, lagged]) => { g.add(gyro, cam, lagged); return g.confirmed(); }));
 });
 
 test('a decision heard with only the size of the turn known plays as decided up to half a strip, then as a stop', () => {

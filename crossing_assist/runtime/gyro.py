@@ -93,6 +93,10 @@ class GyroCheckConfig:
     left out only where the picture read no turn (0: it cannot tell) or either reads
     ``sway_max_dps`` or more: no sway turns that fast, and the picture's rare misreads (a zebra's
     stripes under a walker's feet matched a period off: -200 deg/s for one frame) would swamp it.
+    The sway is a 0.9 Hz swing, so a frame stamped 0.1 s late against the gyroscope already turns
+    the two series' cosine to 0.84 (a phone's browser without a capture time stamps its frames
+    when shown): the sway is compared with the gyroscope's turn over the frame's interval moved
+    back by each of ``sway_lags_s`` too (a window each), and one agreeing confirms.
 
     **Agreeing in size**: the cosine of the two rate series at least ``agree_cos``, and the
     picture's turn ``agree_scale`` times the gyroscope's or less either way (least squares). A
@@ -109,6 +113,7 @@ class GyroCheckConfig:
     sway_dps: float = 5.0
     sway_max_dps: float = 30.0
     sway_window: int = 16
+    sway_lags_s: tuple[float, ...] = (0.0, 0.1, 0.2)
     agree_cos: float = 0.85
     agree_scale: float = 1.5
 
@@ -126,17 +131,24 @@ class GyroCheck:
     def __init__(self, cfg: GyroCheckConfig = GYRO_CHECK) -> None:
         self.cfg = cfg
         self.turns: deque[tuple[float, float]] = deque(maxlen=cfg.window)   # clear turns: (gyroscope, picture)
-        self.sway: deque[tuple[float, float]] = deque(maxlen=cfg.sway_window)   # a sway's turns, alike
+        # a sway's turns, alike: one window for each of sway_lags_s
+        self.sway = [deque(maxlen=cfg.sway_window) for _ in cfg.sway_lags_s]
+        self.swayed = False   # a window of the sway has agreed: confirmed until found 'wrong'
         self.verdict = "unchecked"                           # 'unchecked' | 'ok' | 'wrong'
 
-    def add(self, gyro_dps: float, camera_dps: float) -> str:
-        """One frame's turn rates (deg/s, + right), the gyroscope's and the picture's; the verdict."""
+    def add(self, gyro_dps: float, camera_dps: float, lagged: Sequence[float] = ()) -> str:
+        """One frame's turn rates (deg/s, + right), the gyroscope's and the picture's; the verdict.
+        ``lagged``: the gyroscope's mean rate over the frame's interval moved back by each of
+        ``sway_lags_s`` after the first (:meth:`YawIntegrator.between`); without it the sway is
+        compared at no lag only."""
         c = self.cfg
         if self.verdict == "wrong" or not (math.isfinite(gyro_dps) and math.isfinite(camera_dps)):
             return self.verdict
-        if camera_dps != 0 and max(abs(gyro_dps), abs(camera_dps)) >= c.sway_dps \
-                and abs(gyro_dps) < c.sway_max_dps and abs(camera_dps) < c.sway_max_dps:
-            self.sway.append((gyro_dps, camera_dps))
+        for window, g in zip(self.sway, (gyro_dps, *lagged)):
+            if camera_dps != 0 and max(abs(g), abs(camera_dps)) >= c.sway_dps \
+                    and abs(g) < c.sway_max_dps and abs(camera_dps) < c.sway_max_dps:
+                window.append((g, camera_dps))   # NaN fails the comparisons
+                self.swayed = self.swayed or (len(window) >= c.sway_window and self.agree(window))
         if not (abs(gyro_dps) >= c.turn_dps and abs(camera_dps) >= c.turn_dps):
             return self.verdict
         self.turns.append((gyro_dps, camera_dps))
@@ -150,13 +162,15 @@ class GyroCheck:
     def confirmed(self) -> bool:
         """The picture vouches for the gyroscope: 'ok', with as large a share of the clear turns
         agreeing as ``contradicted`` is of them contradicting for 'wrong', agreeing in size too;
-        or, not found 'wrong', a full window of a sway's turns agreeing in size."""
+        or, not found 'wrong', once a full window of a sway's turns agreed in size at one of the lags
+        (it stays so: the windows slide with every step, and a gyroscope followed now and then
+        would switch the beacon's rule back and forth)."""
         c = self.cfg
         if self.verdict == "wrong":
             return False
         clear = (self.verdict == "ok" and len(self.turns) - self._against() >= c.contradicted * len(self.turns)
                  and self.agree(self.turns))
-        return clear or (len(self.sway) >= c.sway_window and self.agree(self.sway))
+        return clear or self.swayed
 
     def agree(self, pairs) -> bool:
         """(gyroscope, picture) turn rates agreeing in size: cosine and least-squares scale."""
@@ -189,15 +203,18 @@ class GyroFollow:
         (``yaw_source`` ``"gyro"``). The caller checks that it reports."""
         gyro_dps = gyro.between(since, at) if since is not None else 0.0
         picture_dps = seen.yaw_rate_dps if seen.yaw_source == "camera" else None
-        if self.followed(seen.t, gyro_dps, picture_dps):
+        lagged = [gyro.between(since - lag, at - lag) for lag in self.check.cfg.sway_lags_s[1:]] \
+            if since is not None and picture_dps is not None else []
+        if self.followed(seen.t, gyro_dps, picture_dps, lagged):
             return replace(seen, yaw_rate_dps=gyro_dps, yaw_source="gyro")
         return seen
 
-    def followed(self, t: float, gyro_dps: float, picture_dps: float | None) -> bool:
+    def followed(self, t: float, gyro_dps: float, picture_dps: float | None, lagged: Sequence[float] = ()) -> bool:
         """A frame at ``t``: the gyroscope's turn rate since the frame before and the picture's
-        (None: no turn is read from the frames, so nothing is checked); whether to follow it."""
+        (None: no turn is read from the frames, so nothing is checked), ``lagged`` as
+        :meth:`GyroCheck.add` takes it; whether to follow it."""
         if picture_dps is not None:
-            self.check.add(gyro_dps, picture_dps)
+            self.check.add(gyro_dps, picture_dps, lagged)
             if picture_dps != 0 and math.isfinite(gyro_dps) and math.isfinite(picture_dps):
                 self._sums[0] += gyro_dps * picture_dps
                 self._sums[1] += gyro_dps * gyro_dps

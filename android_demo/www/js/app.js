@@ -67,7 +67,7 @@ import { BeaconAudio } from './audio.js';
 import { CameraError, FrameGrabber, openCamera } from './camera.js';
 import { cameraFov, defaultFovText, FovError, frameView, gateKind, gateThreshold, orientation, PAD_RGB, rolledTooFar, zoomedFov } from './geometry.js';
 import { Haptics } from './haptics.js';
-import { GYRO_WRONG_TEXT, GyroCheck, isFresh, NO_TILT_TEXT, sameFrame, SidewaysHint, TiltSilence, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator,
+import { GYRO_CHECK, GYRO_WRONG_TEXT, GyroCheck, isFresh, NO_TILT_TEXT, sameFrame, SidewaysHint, TiltSilence, TiltWatch, Watchdog, WATCHDOG_S, YawIntegrator,
   yawRateFromRotation } from './live.js';
 import { argmax, configFromBundle, cueFor, Decider, KIND_STOP, observationFromOutputs, REASON_UNCERTAIN, staleDecision, turnedDecision } from './logic.js';
 import { fetchBundle, openBest } from './model.js';
@@ -345,10 +345,11 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
     const gyro = app.yaw.between(captured - dt, captured);
     const before = app.gyroCheck.verdict;
     const wasConfirmed = app.gyroCheck.confirmed();
-    const verdict = picture ? app.gyroCheck.add(gyro, cameraTurn) : before;
+    const lagged = GYRO_CHECK.sway_lags_s.slice(1).map((lag) => app.yaw.between(captured - dt - lag, captured - lag));
+    const verdict = picture ? app.gyroCheck.add(gyro, cameraTurn, lagged) : before;
     const confirmed = app.gyroCheck.confirmed();
     if (verdict !== before || confirmed !== wasConfirmed) {
-      record({ kind: 'gyro_check', t: captured, verdict, confirmed, turns: app.gyroCheck.turns.slice(), sway: app.gyroCheck.sway.slice() });
+      record({ kind: 'gyro_check', t: captured, verdict, confirmed, turns: app.gyroCheck.turns.slice(), sway: app.gyroCheck.sway.map((w) => w.slice()) });
     }
     if (yawSource === 'gyro' && verdict === 'wrong') {
       notice(captured, GYRO_WRONG_TEXT); // found out by the picture: not followed for the rest of this guidance

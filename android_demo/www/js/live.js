@@ -154,13 +154,16 @@ export class YawIntegrator {
  * last `sway_window` frames on which either read a turn of `sway_dps` or more (the picture reading
  * one, both under `sway_max_dps`) agree in size: the cosine of the two rate series at least
  * `agree_cos`, the picture's turn within `agree_scale` times the gyroscope's either way (least
- * squares). Clear turns must agree in size too: sign votes alone confirmed a gyroscope reading
- * another axis. Python's runtime/gyro.py has the same rule and says why; tests/test_android_logic.py
+ * squares). The sway is compared with the gyroscope's turn over the frame's interval moved back by
+ * each of `sway_lags_s` too (a window each; one agreeing confirms): a frame stamped 0.1 s late (a
+ * browser without a capture time) already turns a 0.9 Hz sway's cosine to 0.84. Clear turns must
+ * agree in size too: sign votes alone confirmed a gyroscope reading another axis. Python's runtime/gyro.py has the same rule and says why; tests/test_android_logic.py
  * checks they agree.
  */
 export const GYRO_WRONG_TEXT = 'The gyroscope reads turns the wrong way: turns are followed from the camera picture.';
 export const GYRO_CHECK = Object.freeze({
-  turn_dps: 15, window: 12, least: 8, contradicted: 0.75, sway_dps: 5, sway_max_dps: 30, sway_window: 16, agree_cos: 0.85, agree_scale: 1.5,
+  turn_dps: 15, window: 12, least: 8, contradicted: 0.75, sway_dps: 5, sway_max_dps: 30, sway_window: 16,
+  sway_lags_s: Object.freeze([0, 0.1, 0.2]), agree_cos: 0.85, agree_scale: 1.5,
 });
 
 /** (gyroscope, picture) turn-rate pairs agreeing in size: cosine and least-squares scale (GYRO_CHECK). */
@@ -180,19 +183,27 @@ export class GyroCheck {
   constructor(cfg = GYRO_CHECK) {
     this.cfg = cfg;
     this.turns = []; // the last clear turns voted on: [gyroscope, picture] rates
-    this.sway = []; // the last frames of a sway's turns, alike
+    this.sway = cfg.sway_lags_s.map(() => []); // the last frames of a sway's turns, alike: a window a lag
+    this.swayed = false; // a window of the sway has agreed: confirmed until found 'wrong'
     this.verdict = 'unchecked'; // 'unchecked' | 'ok' | 'wrong'
   }
 
-  /** One frame's turn rates (deg/s, + right): the gyroscope's and the picture's; returns the verdict. */
-  add(gyroDps, cameraDps) {
+  /**
+   * One frame's turn rates (deg/s, + right): the gyroscope's and the picture's; returns the verdict.
+   * `lagged`: the gyroscope's mean rate over the frame's interval moved back by each of
+   * `sway_lags_s` after the first (YawIntegrator.between); without it the sway is compared at no lag only.
+   */
+  add(gyroDps, cameraDps, lagged = []) {
     const c = this.cfg;
     if (this.verdict === 'wrong' || !(Number.isFinite(gyroDps) && Number.isFinite(cameraDps))) return this.verdict;
-    if (cameraDps !== 0 && Math.max(Math.abs(gyroDps), Math.abs(cameraDps)) >= c.sway_dps
-        && Math.abs(gyroDps) < c.sway_max_dps && Math.abs(cameraDps) < c.sway_max_dps) {
-      this.sway.push([gyroDps, cameraDps]);
-      if (this.sway.length > c.sway_window) this.sway.shift();
-    }
+    [gyroDps, ...lagged].slice(0, this.sway.length).forEach((g, k) => {
+      if (cameraDps !== 0 && Math.max(Math.abs(g), Math.abs(cameraDps)) >= c.sway_dps
+          && Math.abs(g) < c.sway_max_dps && Math.abs(cameraDps) < c.sway_max_dps) { // NaN fails the comparisons
+        this.sway[k].push([g, cameraDps]);
+        if (this.sway[k].length > c.sway_window) this.sway[k].shift();
+        this.swayed ||= this.sway[k].length >= c.sway_window && agree(this.sway[k], c);
+      }
+    });
     if (!(Math.abs(cameraDps) >= c.turn_dps && Math.abs(gyroDps) >= c.turn_dps)) return this.verdict;
     this.turns.push([gyroDps, cameraDps]);
     if (this.turns.length > c.window) this.turns.shift();
@@ -207,7 +218,8 @@ export class GyroCheck {
   /**
    * The picture vouches for the gyroscope: 'ok', with as large a share of the clear turns agreeing
    * as `contradicted` is of them contradicting for 'wrong', agreeing in size too; or, not found
-   * 'wrong', a full window of a sway's turns agreeing in size. Then the app follows the gyroscope
+   * 'wrong', once a full window of a sway's turns agreed in size at one of the lags (it stays so: the
+ * windows slide with every step, and a gyroscope followed now and then would switch the rule). Then the app follows the gyroscope
    * even when it was not turned on (app.js gyroFollowed).
    */
   confirmed() {
@@ -215,7 +227,7 @@ export class GyroCheck {
     if (this.verdict === 'wrong') return false;
     const clear = this.verdict === 'ok' && this.turns.length - this.against() >= c.contradicted * this.turns.length
       && agree(this.turns, c);
-    return clear || (this.sway.length >= c.sway_window && agree(this.sway, c));
+    return clear || this.swayed;
   }
 }
 
