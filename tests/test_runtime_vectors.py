@@ -199,7 +199,7 @@ def test_stale_cases_play_as_decided_within_half_a_strip_and_stop_beyond(stored)
 
 def test_cli_writes_the_file(tmp_path, capsys):
     assert main(["--out", str(tmp_path / "v.json")]) == 0
-    assert json.loads((tmp_path / "v.json").read_text())["version"] == VERSION == 17
+    assert json.loads((tmp_path / "v.json").read_text())["version"] == VERSION == 18
     assert "decision steps" in capsys.readouterr().out
 
 

@@ -88,6 +88,29 @@ def test_no_turn_is_read_where_there_is_none():
     assert vy.shift_between(vy.thumbnail(scene), vy.thumbnail(_texture(48, 64, seed=5))) is None
 
 
+def test_stripes_matched_a_period_off_are_no_turn(monkeypatch):
+    """A zebra's stripes fill the view (a walker on the crossing): moved 2 thumbnail pixels, they
+    match as well 5 the other way, a stripe period (7) off. That is no turn, never a guess: the
+    synthetic walks read -130 to -200 deg/s for single such frames, and the belief jumped two
+    strips. A textured scene moved alike is still read."""
+    xs, ys = np.arange(40), np.arange(14)[:, None]
+    stripes = 128 + 60 * np.sign(np.sin(2 * np.pi * (xs + 0.5) / 7))[None, :] + 0 * ys
+    wobble = np.round(6 * np.sin(ys * 2.3 + xs[None, :24] * 1.7))   # what else changed between them
+    prev, cur = np.round(stripes[:, 8:32]), np.round(stripes[:, 10:34] + wobble)
+    assert vy.shift_between(prev, cur) is None
+    monkeypatch.setattr(vy, "AMBIGUOUS", 0.0)                        # the check off
+    assert vy.shift_between(prev, cur) == pytest.approx(-5.08, abs=0.01)   # a period off: read the other way
+    monkeypatch.undo()
+    # frames: a striped view moved 10 px (2 thumbnail pixels) cannot tell; a textured one reads it
+    w, y = 320, np.arange(120)[:, None]
+    bars = np.where(np.sin(2 * np.pi * (np.arange(w + 40) + 2.5) / 35) > 0, 200.0, 60.0)[None, :] + 0 * y
+    grey = lambda a: np.repeat(np.clip(a, 0, 255)[..., None], 3, axis=2).astype(np.uint8)  # noqa: E731
+    moved = grey(bars[:, 20:20 + w] + 20 * np.sin(y * 0.46 + np.arange(w)[None, :] * 0.34))
+    assert vy.shift_between(vy.thumbnail(grey(bars[:, 10:10 + w])), vy.thumbnail(moved)) is None
+    plain = _texture(120, w + 40, seed=3)
+    assert vy.shift_between(vy.thumbnail(plain[:, 10:10 + w]), vy.thumbnail(plain[:, 20:20 + w])) == pytest.approx(2.0, abs=0.2)
+
+
 @pytest.mark.parametrize("cover", [(0.3, 0.5), (0.5, 0.6), (0.8, 0.7)])
 def test_a_bus_passing_a_still_camera_is_no_turn(cover):
     """A textured block (a bus: `cover` of the frame's width and height, from the bottom) crossing

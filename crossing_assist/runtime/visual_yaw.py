@@ -16,7 +16,12 @@ consecutive frames is the horizontal shift that best lines up their thumbnails:
 3. the shift is trusted only when the scene has texture (sd >= :data:`MIN_TEXTURE` in the middle
    compared and in the old thumbnail), the best score is clearly a match (<= :data:`MAX_MATCH` of
    the median score of all shifts: two unrelated pictures score alike at every shift), the best
-   ``dx`` is inside the range searched, and **no part of the picture moves otherwise**: the middle
+   ``dx`` is inside the range searched, **no other shift matches nearly as well** (another local
+   minimum of the scores, each ``dx``'s best over ``dy``, 2 pixels or more away and within
+   :data:`AMBIGUOUS` times the best: a repeating pattern, such as a zebra's stripes under a
+   walker's feet, matches a period off as well as in place: on synthetic walks that read
+   -130 to -200 deg/s for single frames, and the belief jumped two strips), and **no part of the
+   picture moves otherwise**: the middle
    is cut into a :data:`TILES` x :data:`TILES` grid, and a tile with texture whose own best shift
    scores under 1 / :data:`TILE_VETO` of its best within a pixel of the chosen ``dx`` vetoes it
    (a camera's turn moves the whole picture; a bus or a person passing a still camera moves part
@@ -46,6 +51,7 @@ MAX_MATCH = 0.5        # the best shift must score at most this fraction of the 
 MIN_SHIFT = 0.05       # a shift under this (thumbnail pixels) is a still camera (its picture's own asymmetry)
 TILES = 3              # the middle is cut into TILES x TILES tiles, each able to veto a shift
 TILE_VETO = 2.0        # ... when its score near the shift is over this many times its own best
+AMBIGUOUS = 1.25       # another local minimum of the shifts' scores within this many times the best: cannot tell
 MAX_TURN_DPS = 360.0   # a turn faster than this between two frames is not believed (a swap, a cut)
 
 
@@ -105,8 +111,8 @@ def shift_between(prev: np.ndarray, cur: np.ndarray) -> float | None:
     """Horizontal shift in thumbnail pixels such that ``cur[x] ~ prev[x + shift]`` (+: the picture
     moved left, the camera turned right; 0 under :data:`MIN_SHIFT`); None when the pair cannot
     tell (thumbnails of different sizes, too little texture in the middle of ``cur`` or in
-    ``prev``, no shift clearly a match, the best at an end of the range searched, a tile of the
-    middle vetoing it)."""
+    ``prev``, no shift clearly a match, the best at an end of the range searched, another shift
+    matching nearly as well, a tile of the middle vetoing it)."""
     if prev.shape != cur.shape:
         return None
     _, _, tpl = _middle(cur)
@@ -118,6 +124,10 @@ def shift_between(prev: np.ndarray, cur: np.ndarray) -> float | None:
     best = scores[iy, ix]
     if not best <= MAX_MATCH * float(np.median(scores)) or not 0 < ix < scores.shape[1] - 1:
         return None
+    prof = scores.min(axis=0)                           # each dx's best over dy
+    for k in range(1, len(prof) - 1):
+        if abs(k - ix) >= 2 and prof[k] < prof[k - 1] and prof[k] <= prof[k + 1] and prof[k] <= AMBIGUOUS * best:
+            return None                                 # a repeating pattern: matched a period off as well
     ry, rx = _tiles(*tpl.shape)
     for i, rows in enumerate(np.split(tpl, ry[1:], axis=0)):
         for j, part in enumerate(np.split(rows, rx[1:], axis=1)):

@@ -125,6 +125,12 @@ the view the canvas shows at the training scale (a landscape camera set or zoome
 more than its height (``top`` < 0: rows of ``pad_rgb`` above and below, ``geometry.take_rows``),
 where they were its height (it filled the canvas magnified); a frame within ``height // 50`` rows of
 that view keeps its height.
+
+Version 18: ``visual_yaw`` gains the constant ``ambiguous`` and the shift case
+``stripes_a_period_off``: vertical stripes 7 px apart moved 2 px, with a wobble, match 5 px the
+other way as well (a zebra's stripes under a walker's feet), and another local minimum of the
+scores within ``AMBIGUOUS`` times the best is no turn (null), where it read -5.08 px. The other
+vectors are unchanged.
 """
 
 from __future__ import annotations
@@ -153,7 +159,7 @@ from crossing_assist.runtime import visual_yaw as vy
 from crossing_assist.runtime.watchdog import DEFAULT_WATCHDOG_S, Watchdog
 
 FPS = 30.0
-VERSION = 17
+VERSION = 18
 
 def _probs_for(space_n: int, action: int, conf: float) -> np.ndarray:
     p = np.full(space_n, (1.0 - conf) / (space_n - 1))
@@ -510,6 +516,10 @@ def _visual_yaw_vectors(rng: np.random.Generator) -> dict:
     edges_only[:, 6:18] = 120.0      # textured sides, a flat middle: the template cannot tell
     bus = base[:, 8:32].copy()
     bus[5:, 2:22] = base[5:, 15:35]  # a still camera; its lower two thirds (a bus) moved 5 px
+    # version 18: stripes 7 px apart moved 2 px: 5 px the other way matches as well (no draws)
+    xs, ys = np.arange(40), np.arange(14)[:, None]
+    stripes = 128 + 60 * np.sign(np.sin(2 * np.pi * (xs + 0.5) / 7))[None, :] + 0 * ys
+    wobble = np.round(6 * np.sin(ys * 2.3 + xs[None, :24] * 1.7))
     shifts = []
     for name, prev, cur in (
             ("right_3", base[:, 8:32], base[:, 11:35]), ("left_5", base[:, 8:32], base[:, 3:27]),
@@ -517,7 +527,8 @@ def _visual_yaw_vectors(rng: np.random.Generator) -> dict:
             ("down_1_right_2", base[1:13, 8:32], base[2:14, 10:34]),
             ("still", base[:, 8:32], base[:, 8:32] + 0.5), ("flat", np.full((14, 24), 90.0), np.full((14, 24), 91.0)),
             ("flat_middle", edges_only, edges_only), ("part_moved", base[:, 8:32], bus),
-            ("new_scene", base[:, 8:32], np.round(_texture(rng, 14, 24))), ("sizes_differ", base[:, 8:32], base[:, 8:30])):
+            ("new_scene", base[:, 8:32], np.round(_texture(rng, 14, 24))), ("sizes_differ", base[:, 8:32], base[:, 8:30]),
+            ("stripes_a_period_off", np.round(stripes[:, 8:32]), np.round(stripes[:, 10:34] + wobble))):
         s = vy.shift_between(prev, cur)
         shifts.append({"name": name, "prev": prev.tolist(), "cur": cur.tolist(), "shift": s})
     scene = np.stack([_texture(rng, 24, 90)] * 3, axis=2)
@@ -532,7 +543,7 @@ def _visual_yaw_vectors(rng: np.random.Generator) -> dict:
         seq.append({"t": t, "fov_deg": fov, "frame": None if frame is None else rgb(frame),
                     "yaw_rate_dps": yaw.update(frame, t, fov)})
     return {"thumb_width": vy.THUMB_WIDTH, "dy": vy.DY, "min_texture": vy.MIN_TEXTURE, "max_match": vy.MAX_MATCH,
-            "min_shift": vy.MIN_SHIFT, "tiles": vy.TILES, "tile_veto": vy.TILE_VETO,
+            "min_shift": vy.MIN_SHIFT, "tiles": vy.TILES, "tile_veto": vy.TILE_VETO, "ambiguous": vy.AMBIGUOUS,
             "max_turn_dps": vy.MAX_TURN_DPS, "thumbnails": thumbs, "shifts": shifts,
             "sequence": {"width": width, "steps": seq}}
 

@@ -1,6 +1,6 @@
 // The camera's turn between two frames, read from the frames themselves (no gyroscope): a port
 // of crossing_assist/runtime/visual_yaw.py, pinned by the shared test vectors (`visual_yaw`,
-// version 12). A turn about the vertical axis slides the whole picture sideways, so:
+// version 12; the ambiguity check, version 18). A turn about the vertical axis slides the whole picture sideways, so:
 //
 // 1. each frame becomes a grey (mean of R, G, B) area-mean thumbnail THUMB_WIDTH wide, its
 //    height from the frame's aspect (whole-number sums, one division: the Python values);
@@ -11,7 +11,9 @@
 //    neighbours' scores;
 // 3. the shift is trusted only with texture (population sd >= MIN_TEXTURE in the middle compared
 //    and in the old thumbnail), a best score <= MAX_MATCH of the median score of all shifts, the
-//    best dx inside the range searched and no tile vetoing it (the middle cut into a TILES x
+//    best dx inside the range searched, no other local minimum of the scores (each dx's best over
+//    dy) 2 px or more away within AMBIGUOUS times the best (a repeating pattern, a zebra's stripes,
+//    matched a period off as well) and no tile vetoing it (the middle cut into a TILES x
 //    TILES grid; a tile with texture whose own best scores under 1 / TILE_VETO of its best within
 //    a pixel of the chosen dx: part of the picture moved otherwise, a bus passing a still camera),
 //    else the pair cannot tell (null): a blank wall, a passing bus, a brightness jump gives no
@@ -30,6 +32,7 @@ export const MAX_MATCH = 0.5; // the best shift must score at most this fraction
 export const MIN_SHIFT = 0.05; // a shift under this (thumbnail pixels) is a still camera
 export const TILES = 3; // the middle is cut into TILES x TILES tiles, each able to veto a shift
 export const TILE_VETO = 2.0; // ... when its score near the shift is over this many times its own best
+export const AMBIGUOUS = 1.25; // another local minimum of the shifts' scores within this many times the best: cannot tell
 export const MAX_TURN_DPS = 360.0; // a faster turn between two frames is not believed (a swap, a cut)
 
 const DEG = Math.PI / 180; // CPython's math.radians / math.degrees factors
@@ -173,7 +176,7 @@ export function shiftScores(prev, cur) {
  * Horizontal shift in thumbnail pixels such that cur[x] ~ prev[x + shift] (+: the picture moved
  * left, the camera turned right; 0 under MIN_SHIFT); null when the pair cannot tell (different
  * sizes, too little texture, no shift clearly a match, the best at an end of the range searched,
- * a tile of the middle vetoing it).
+ * another shift matching nearly as well, a tile of the middle vetoing it).
  * `scratch` ({scores, sorted, tiles, tplc, colsum}: Float64Arrays, grown here): VisualYaw's, so that nothing is allocated.
  */
 export function shiftBetween(prev, cur, scratch = {}) {
@@ -200,6 +203,15 @@ export function shiftBetween(prev, cur, scratch = {}) {
   const ix = k % cols;
   const best = s[k];
   if (!(best <= MAX_MATCH * sorted[(n - 1) / 2]) || !(ix > 0 && ix < cols - 1)) return null;
+  const prof = (col) => { // the column's best over dy
+    let v = s[col];
+    for (let r = 1; r < rows; r += 1) v = Math.min(v, s[r * cols + col]);
+    return v;
+  };
+  for (let q = 1; q < cols - 1; q += 1) {
+    const v = prof(q);
+    if (Math.abs(q - ix) >= 2 && v < prof(q - 1) && v <= prof(q + 1) && v <= AMBIGUOUS * best) return null; // a repeating pattern
+  }
   const tt = TILES * TILES;
   for (let i = 0; i < TILES; i += 1) {
     for (let j = 0; j < TILES; j += 1) {
