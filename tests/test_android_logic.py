@@ -139,7 +139,7 @@ def test_js_gyroscope_integrator_and_check_match_python() -> None:
           between.push(y.between(Math.max(t0, t - 2.5), t + t1 % 0.3));
           reporting.push(y.reporting(t + t1 % 0.3));
         }});
-        const verdicts = (pairs) => {{ const g = new GyroCheck(); return pairs.map(([a, b, l]) => [g.add(a, b, l), g.confirmed()]); }};
+        const verdicts = (pairs) => {{ const g = new GyroCheck(); return pairs.map(([a, b, l]) => [g.add(a, b, l), g.confirmation()]); }};
         console.log(JSON.stringify({{ between, reporting, same: verdicts({json.dumps(pairs)}),
                                       flip: verdicts({json.dumps(flip)}), sway: verdicts({json.dumps(sway)}) }}));
     """))
@@ -153,9 +153,9 @@ def test_js_gyroscope_integrator_and_check_match_python() -> None:
     assert out["reporting"] == reporting and 0 < sum(reporting) < len(reporting)
     for key, seq in (("same", pairs), ("flip", flip), ("sway", sway)):
         g = GyroCheck(GYRO_CHECK)
-        assert out[key] == [[g.add(*pair), g.confirmed()] for pair in seq], key
+        assert out[key] == [[g.add(*pair), g.confirmation()] for pair in seq], key
     assert out["flip"][-1][0] == "wrong" and any(c for _, c in out["same"])
-    assert out["sway"][-1] == ["unchecked", True]   # confirmed by the sway alone
+    assert out["sway"][-1] == ["unchecked", "sway"]   # confirmed by the sway alone
 
 
 def test_the_app_s_field_recording_log_is_what_crossing_demo_imu_reads(tmp_path) -> None:

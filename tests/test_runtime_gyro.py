@@ -50,7 +50,7 @@ def test_a_walker_s_sway_confirms_a_gyroscope_the_picture_reads_alike():
     assert np.abs(gyro).max() < GYRO_CHECK.turn_dps   # never a clear turn: the rule before never confirmed it
     k, check = first_confirmed(gyro, picture(gyro))
     assert k is not None and k / FPS < 4.0, k
-    assert check.verdict == "unchecked"   # confirmed by the sway, not 'ok' by clear turns
+    assert check.verdict == "unchecked" and check.confirmation() == "sway"   # not 'ok' by clear turns
     # the picture's misreads are left out, not counted against it: a gyroscope this good is confirmed
     # however many stripes are misread
     assert first_confirmed(gyro, picture(gyro, misreads=0.2))[0] is not None
@@ -136,7 +136,7 @@ def test_a_walk_begun_facing_the_crossing_follows_its_logged_gyroscope_once_its_
     assert "gyro" in sources, summary.gyro
     first = sources.index("gyro")
     assert 1.0 < first / src.fps < 5.0 and set(sources[first:]) == {"gyro"}
-    assert "once the picture's turn had confirmed it" in summary.gyro
+    assert "once the picture's turn had confirmed it by the walker's sway" in summary.gyro
     strict = lambda follow=False: GyroFollow(follow, replace(GYRO_CHECK, sway_window=10 ** 9))  # noqa: E731
     monkeypatch.setattr(offline, "GyroFollow", strict)
     summary, trace = play("clear_only")

@@ -122,7 +122,7 @@ def test_the_offline_demo_tells_the_logged_turn_once_the_picture_confirms_it(tmp
     for r in gyro[:20]:   # the decision logic is told the log's own turn between the two frames
         i = r["frame"]
         assert r["yaw_rate_dps"] == pytest.approx(log.between((i - 1) / fps, i / fps), abs=1e-6)
-    assert "once the picture's turn had confirmed it" in summary.gyro and "reported on 100%" in summary.gyro
+    assert "once the picture's turn had confirmed it by clear turns" in summary.gyro and "reported on 100%" in summary.gyro
     assert any(line == summary.gyro for line in summary.lines())
     # guided as often, and no worse than the frames' own turn (2.3 deg p90 without, 1.5 with, 2026-12-07)
     plain = without_log[0].truth

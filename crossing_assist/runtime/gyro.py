@@ -160,17 +160,22 @@ class GyroCheck:
         return sum(g * p < 0 for g, p in self.turns)
 
     def confirmed(self) -> bool:
-        """The picture vouches for the gyroscope: 'ok', with as large a share of the clear turns
-        agreeing as ``contradicted`` is of them contradicting for 'wrong', agreeing in size too;
-        or, not found 'wrong', once a full window of a sway's turns agreed in size at one of the lags
-        (it stays so: the windows slide with every step, and a gyroscope followed now and then
-        would switch the beacon's rule back and forth)."""
+        """The picture vouches for the gyroscope (:meth:`confirmation`)."""
+        return self.confirmation() is not None
+
+    def confirmation(self) -> str | None:
+        """How the picture vouches for the gyroscope: ``'clear turns'`` ('ok', with as large a
+        share of them agreeing as ``contradicted`` is of them contradicting for 'wrong', agreeing in
+        size too); else, not found 'wrong', ``'sway'`` once a full window of a sway's turns agreed in
+        size at one of the lags (it stays so: the windows slide with every step, and a gyroscope
+        followed now and then would switch the beacon's rule back and forth); else None."""
         c = self.cfg
         if self.verdict == "wrong":
-            return False
-        clear = (self.verdict == "ok" and len(self.turns) - self._against() >= c.contradicted * len(self.turns)
-                 and self.agree(self.turns))
-        return clear or self.swayed
+            return None
+        if (self.verdict == "ok" and len(self.turns) - self._against() >= c.contradicted * len(self.turns)
+                and self.agree(self.turns)):
+            return "clear turns"
+        return "sway" if self.swayed else None
 
     def agree(self, pairs) -> bool:
         """(gyroscope, picture) turn rates agreeing in size: cosine and least-squares scale."""
@@ -192,6 +197,7 @@ class GyroFollow:
         self.check = GyroCheck(cfg)
         self.follow = follow
         self.confirmed_at: float | None = None
+        self.confirmed_by: str | None = None   # GyroCheck.confirmation() when first followed
         self._sums = [0.0, 0.0, 0]   # sum gyro * picture, sum gyro^2, frames: where the picture read a turn
 
     def tell(self, seen, gyro, since: float | None, at: float):
@@ -219,9 +225,10 @@ class GyroFollow:
                 self._sums[0] += gyro_dps * picture_dps
                 self._sums[1] += gyro_dps * gyro_dps
                 self._sums[2] += 1
-        ok = self.check.verdict != "wrong" and (self.follow or self.check.confirmed())
+        by = self.check.confirmation()
+        ok = self.check.verdict != "wrong" and (self.follow or by is not None)
         if ok and self.confirmed_at is None:
-            self.confirmed_at = t
+            self.confirmed_at, self.confirmed_by = t, by
         return ok
 
     def scale(self, least: int = 10) -> float | None:

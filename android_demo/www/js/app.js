@@ -344,10 +344,10 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
     // the picture's whether or not it is followed: by default the picture confirms it first
     const gyro = app.yaw.between(captured - dt, captured);
     const before = app.gyroCheck.verdict;
-    const wasConfirmed = app.gyroCheck.confirmed();
+    const wasConfirmed = app.gyroCheck.confirmation();
     const lagged = GYRO_CHECK.sway_lags_s.slice(1).map((lag) => app.yaw.between(captured - dt - lag, captured - lag));
     const verdict = picture ? app.gyroCheck.add(gyro, cameraTurn, lagged) : before;
-    const confirmed = app.gyroCheck.confirmed();
+    const confirmed = app.gyroCheck.confirmation(); // 'clear turns', 'sway' or null
     if (verdict !== before || confirmed !== wasConfirmed) {
       record({ kind: 'gyro_check', t: captured, verdict, confirmed, turns: app.gyroCheck.turns.slice(), sway: app.gyroCheck.sway.map((w) => w.slice()) });
     }

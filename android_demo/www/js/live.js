@@ -215,19 +215,25 @@ export class GyroCheck {
     return this.turns.filter(([g, p]) => g * p < 0).length;
   }
 
-  /**
-   * The picture vouches for the gyroscope: 'ok', with as large a share of the clear turns agreeing
-   * as `contradicted` is of them contradicting for 'wrong', agreeing in size too; or, not found
-   * 'wrong', once a full window of a sway's turns agreed in size at one of the lags (it stays so: the
- * windows slide with every step, and a gyroscope followed now and then would switch the rule). Then the app follows the gyroscope
-   * even when it was not turned on (app.js gyroFollowed).
-   */
+  /** The picture vouches for the gyroscope (confirmation()). Then the app follows the gyroscope
+   * even when it was not turned on (app.js gyroFollowed). */
   confirmed() {
+    return this.confirmation() !== null;
+  }
+
+  /**
+   * How the picture vouches for the gyroscope: 'clear turns' ('ok', with as large a share of them
+   * agreeing as `contradicted` is of them contradicting for 'wrong', agreeing in size too); else, not
+   * found 'wrong', 'sway' once a full window of a sway's turns agreed in size at one of the lags (it
+   * stays so: the windows slide with every step, and a gyroscope followed now and then would switch
+   * the rule); else null.
+   */
+  confirmation() {
     const c = this.cfg;
-    if (this.verdict === 'wrong') return false;
-    const clear = this.verdict === 'ok' && this.turns.length - this.against() >= c.contradicted * this.turns.length
-      && agree(this.turns, c);
-    return clear || this.swayed;
+    if (this.verdict === 'wrong') return null;
+    if (this.verdict === 'ok' && this.turns.length - this.against() >= c.contradicted * this.turns.length
+      && agree(this.turns, c)) return 'clear turns';
+    return this.swayed ? 'sway' : null;
   }
 }
 
