@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from crossing_assist.errors import UserError, run_cli
 from crossing_assist.runtime.beacon import BeaconConfig, CuePlayer
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE, DEFAULT_CLIP
 from crossing_assist.runtime.gyro import GYRO_CHECK, GyroFollow, YawIntegrator
@@ -56,6 +57,9 @@ def walk_frames(clip: Path, t_walk: float):
 
 def play(clip: Path, rule: str, extra_s: float, bundle: Path) -> dict:
     truth = load_truth(clip)
+    if truth is None or "walk" not in (truth.get("phase") or ()):
+        raise UserError(f"{clip.with_suffix('.json')} is not a synthetic clip's truth with a walk phase "
+                        "(crossing-data synth --video writes one)")
     fps = float(truth["fps"])
     phase = truth["phase"]
     k_walk = phase.index("walk")
@@ -112,19 +116,20 @@ def main(argv=None) -> int:
     ap.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE)
     a = ap.parse_args(argv)
     rules = a.rules.split(",")
+    return run_cli(lambda _args: measure(a.clips, rules, a.extra, a.bundle), [])
+
+
+def measure(clips: list[Path], rules: list[str], extra_s: float, bundle: Path) -> int:
     if bad := [r for r in rules if r not in RULES]:
-        print(f"error: unknown rule(s) {', '.join(bad)}; valid: {', '.join(RULES)}", file=sys.stderr)
-        return 2
-    for clip in a.clips:
+        raise UserError(f"unknown rule(s) {', '.join(bad)}; valid: {', '.join(RULES)}")
+    for clip in clips:
         for need in (clip, clip.with_suffix(".json"), clip.with_suffix(".imu.csv")):
             if not need.is_file():
-                print(f"error: {need} does not exist (a clip needs its .json truth and .imu.csv log beside it)",
-                      file=sys.stderr)
-                return 2
+                raise UserError(f"{need} does not exist (a clip needs its .json truth and .imu.csv log beside it)")
     pooled = {r: [0, 0, 0, []] for r in rules}
-    for clip in a.clips:
+    for clip in clips:
         for rule in rules:
-            r = play(clip, rule, a.extra, a.bundle)
+            r = play(clip, rule, extra_s, bundle)
             conf = "-" if r["confirmed_s"] is None else f"{r['confirmed_s']:.1f} s"
             print(f"{r['clip']:18s} {rule:8s} walk {r['walk_s']:.1f} s, {r['decisions']:3d} decisions: "
                   f"on {100 * r['on'] / max(1, r['decisions']):5.1f} %, heading error median {r['median']:.1f} deg "
@@ -134,7 +139,7 @@ def main(argv=None) -> int:
             p[1] += r["on"]
             p[2] += r["wrong"]
             p[3].append(r["confirmed_s"])
-    if len(a.clips) > 1:
+    if len(clips) > 1:
         for rule, (n, on, wrong, conf) in pooled.items():
             got = [c for c in conf if c is not None]
             print(f"pooled {rule:8s}: {n} decisions, on {100 * on / max(1, n):5.1f} %, >= 2 strips off {wrong}; "
