@@ -18,7 +18,7 @@ from crossing_assist.data_tools.augment import roll as roll_image
 from crossing_assist.data_tools.synth import ClipConfig, clip_pose, clip_scene, imu_path, synth_clip
 from crossing_assist.runtime import demo
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE, DEFAULT_CLIP
-from crossing_assist.runtime.gyro import MAX_SAMPLE_GAP_S, YawIntegrator
+from crossing_assist.runtime.gyro import MAX_SAMPLE_GAP_S, YawIntegrator, integrate
 from crossing_assist.runtime.imu import ImuError, ImuLog, align, picture_turns
 from crossing_assist.runtime.offline import OfflineConfig, run_offline
 from crossing_assist.runtime.sources import VideoSource
@@ -203,13 +203,19 @@ def test_the_live_demo_follows_a_replayed_log(tmp_path):
     assert f"its turn told on {told} of {len(trace)} decisions" in proc.stdout
 
 
-def test_many_turns_at_once_are_the_turns_one_by_one(tmp_path):
+def test_many_turns_at_once_are_the_live_rule_s_turns(tmp_path):
+    """The log's vectorised integral is :func:`gyro.integrate`'s (the live YawIntegrator's rule)
+    over all its samples, also before the first sample, after the last and across gaps."""
     rng = np.random.default_rng(3)
     t = np.cumsum(rng.choice([0.01, 0.35], 500, p=[0.95, 0.05]))   # gaps longer than a sensor's
-    log = ImuLog.load(write_log(tmp_path / "g.csv", t, rng.normal(0, 30, 500)))
+    yaw = rng.normal(0, 30, 500)
+    log = ImuLog.load(write_log(tmp_path / "g.csv", t, yaw))
     t0 = rng.uniform(-1, t[-1] + 1, 300)
     t1 = t0 + rng.uniform(0, 0.4, 300)
-    np.testing.assert_allclose(log.turns(t0, t1), [log.turn(a, b) for a, b in zip(t0, t1)], atol=1e-9)
+    samples = list(zip(log.t, log.yaw_dps))
+    want = [integrate(samples, a, b) for a, b in zip(t0, t1)]
+    np.testing.assert_allclose(log.turns(t0, t1), want, atol=1e-9)
+    assert [log.turn(a, b) for a, b in zip(t0, t1)] == pytest.approx(want, abs=1e-9)
 
 
 @pytest.fixture(scope="module")

@@ -144,7 +144,7 @@ class GyroCheck:
         c = self.cfg
         if self.verdict == "wrong" or not (math.isfinite(gyro_dps) and math.isfinite(camera_dps)):
             return self.verdict
-        for window, g in zip(self.sway, (gyro_dps, *lagged)):
+        for window, g in zip(self.sway if not self.swayed else (), (gyro_dps, *lagged)):   # once swayed, done
             if camera_dps != 0 and max(abs(g), abs(camera_dps)) >= c.sway_dps \
                     and abs(g) < c.sway_max_dps and abs(camera_dps) < c.sway_max_dps:
                 window.append((g, camera_dps))   # NaN fails the comparisons
@@ -210,7 +210,7 @@ class GyroFollow:
         gyro_dps = gyro.between(since, at) if since is not None else 0.0
         picture_dps = seen.yaw_rate_dps if seen.yaw_source == "camera" else None
         lagged = [gyro.between(since - lag, at - lag) for lag in self.check.cfg.sway_lags_s[1:]] \
-            if since is not None and picture_dps is not None else []
+            if since is not None and picture_dps is not None and not self.check.swayed else []
         if self.followed(seen.t, gyro_dps, picture_dps, lagged):
             return replace(seen, yaw_rate_dps=gyro_dps, yaw_source="gyro")
         return seen

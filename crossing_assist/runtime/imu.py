@@ -38,7 +38,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from crossing_assist.errors import UserError
-from crossing_assist.runtime.gyro import MAX_SAMPLE_GAP_S, YawIntegrator, integrate
+from crossing_assist.runtime.gyro import MAX_SAMPLE_GAP_S, YawIntegrator
 from crossing_assist.runtime.visual_yaw import VisualYaw
 
 MAX_RATE_DPS = 2000.0   # a phone gyroscope's full scale: a larger rate is in another unit (rad/s given as deg/s
@@ -113,16 +113,10 @@ class ImuLog:
             raise ImuError(f"IMU log {path} has {len(t)} rows; needs at least 2 samples")
         return cls(path, tuple(v - offset for v in t), tuple(yaw), tuple(roll) if has_roll else None)
 
-    def _around(self, t0: float, t1: float) -> list[tuple[float, float]]:
-        """The samples that can cover [t0, t1]: from the one before the first after ``t0`` to
-        the first at or after ``t1``."""
-        i0 = max(0, bisect.bisect_right(self.t, t0) - 1)
-        i1 = min(len(self.t), bisect.bisect_left(self.t, t1) + 1)
-        return list(zip(self.t[i0:i1], self.yaw_dps[i0:i1]))
-
     def turn(self, t0: float, t1: float) -> float:
-        """Degrees turned over [t0, t1], by :class:`~crossing_assist.runtime.gyro.YawIntegrator`'s rule."""
-        return integrate(self._around(t0, t1), t0, t1) if t1 > t0 else 0.0
+        """Degrees turned over [t0, t1], by :class:`~crossing_assist.runtime.gyro.YawIntegrator`'s
+        rule (:meth:`turns`)."""
+        return float(self.turns(np.asarray(t0), np.asarray(t1))) if t1 > t0 else 0.0
 
     def between(self, t0: float, t1: float) -> float:
         """Mean turn rate (deg/s) over [t0, t1] (0 when t1 <= t0)."""
@@ -160,7 +154,8 @@ class ImuLog:
         return xs, ys
 
     def turns(self, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
-        """:meth:`turn` over many intervals at once (arrays of their starts and ends)."""
+        """Degrees turned over many intervals at once (arrays of their starts and ends, each end
+        after its start)."""
         xs, ys = self._angle
         return np.interp(t1, xs, ys) - np.interp(t0, xs, ys)
 

@@ -179,8 +179,8 @@ def gyro_line(imu: ImuLog, follow: GyroFollow, times: list[float], told: int, al
     if follow.follow:
         return head + " (--follow-gyro: followed from the start, unchecked)"
     if follow.confirmed_at is not None:
-        by = {"sway": " by the walker's sway"}.get(follow.confirmed_by, " by clear turns")
-        return head + f", from {follow.confirmed_at:.1f} s, once the picture's turn had confirmed it{by}"
+        by = "the walker's sway" if follow.confirmed_by == "sway" else "clear turns"
+        return head + f", from {follow.confirmed_at:.1f} s, once the picture's turn had confirmed it by {by}"
     c = follow.check.cfg
     return (head + f"; the picture's turn never confirmed it (that takes clear turns, {c.turn_dps:g} deg/s, in both, "
             f"or {c.sway_window} frames of a walker's sway read alike by both), so the turn read from the frames "

@@ -196,7 +196,7 @@ export class GyroCheck {
   add(gyroDps, cameraDps, lagged = []) {
     const c = this.cfg;
     if (this.verdict === 'wrong' || !(Number.isFinite(gyroDps) && Number.isFinite(cameraDps))) return this.verdict;
-    [gyroDps, ...lagged].slice(0, this.sway.length).forEach((g, k) => {
+    if (!this.swayed) [gyroDps, ...lagged].slice(0, this.sway.length).forEach((g, k) => { // once swayed, done
       if (cameraDps !== 0 && Math.max(Math.abs(g), Math.abs(cameraDps)) >= c.sway_dps
           && Math.abs(g) < c.sway_max_dps && Math.abs(cameraDps) < c.sway_max_dps) { // NaN fails the comparisons
         this.sway[k].push([g, cameraDps]);
