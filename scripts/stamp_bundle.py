@@ -1,6 +1,6 @@
 """Stamp a bundle's held-out figures (and, on request, held-out gate scales and the current
 geometry schema) into its bundle.json and the graph's embedded copy, writing a new bundle
-atomically. The graph itself is left as it is.
+atomically. The graph itself is left as it is, unless ``--share-alike``.
 
     .venv/bin/python scripts/stamp_bundle.py SRC OUT --cv runs/default/cv --gate-json gate_mirror.json
         [--rescale-gate [--narrow-fov 42]] [--wide-fov 60] [--view-crop] [--sensor-aspect 4:3]
@@ -36,6 +36,9 @@ atomically. The graph itself is left as it is.
   ``camera_fov_deg`` describes, 1..3; a number or a ratio, ``4:3`` = 1.3333333333333333): frames narrower than it (9:16
   video) get their crop's default FOV (crossing_assist/geometry.py ``default_fov``). Schema 2 or 3
   bundles; the schema is kept.
+* ``--share-alike``: the graph runs once what it computes more than once: an ensemble merged before
+  ``crossing-export ensemble`` shared its members' frame fitting and frozen blocks
+  (crossing_assist/export/ensemble.py ``share_alike``); the outputs are unchanged bit for bit.
 Each stamp is appended to ``provenance.stamped`` (a list, oldest first; a single earlier record
 becomes its first entry), so a bundle stamped twice keeps both records.
 """
@@ -51,6 +54,7 @@ from pathlib import Path
 import onnx
 
 from crossing_assist.bundle import BundleError, read_bundle, write_bundle
+from crossing_assist.export.ensemble import share_alike
 from crossing_assist.export.graph import model_bytes, set_metadata
 from crossing_assist.geometry import FOV_RANGE_DEG, GeometryError, check_sensor_aspect, parse_ratio
 
@@ -160,6 +164,9 @@ def main(argv=None) -> int:
     ap.add_argument("--view-crop", action="store_true", help="current schema, geometry.view_crop true")
     ap.add_argument("--sensor-aspect", metavar="X", help="geometry.sensor_aspect = X (long / short side of the "
                     "sensor camera_fov_deg describes, 1..3; a number or a ratio such as 4:3)")
+    ap.add_argument("--share-alike", action="store_true",
+                    help="run once what the graph computes more than once (an ensemble's shared frozen blocks); "
+                         "the outputs are unchanged")
     a = ap.parse_args(argv)
     if a.narrow_fov is not None and not a.rescale_gate:
         ap.error("--narrow-fov needs --rescale-gate")
@@ -167,8 +174,9 @@ def main(argv=None) -> int:
         ap.error("--rescale-gate needs --cv")
     if a.rescale_gate and a.gate_from is not None:
         ap.error("--gate-from and --rescale-gate: one gate at a time")
-    if a.cv is None and a.gate_from is None and not a.view_crop and a.sensor_aspect is None and a.wide_fov is None:
-        ap.error("nothing to stamp: give --cv, --gate-from, --wide-fov, --view-crop or --sensor-aspect")
+    if (a.cv is None and a.gate_from is None and not a.view_crop and a.sensor_aspect is None and a.wide_fov is None
+            and not a.share_alike):
+        ap.error("nothing to stamp: give --cv, --gate-from, --wide-fov, --view-crop, --sensor-aspect or --share-alike")
     for flag, fov in (("--narrow-fov", a.narrow_fov), ("--wide-fov", a.wide_fov)):
         if fov is not None and not FOV_RANGE_DEG[0] <= fov <= FOV_RANGE_DEG[1]:
             ap.error(f"{flag} {fov:g}: valid {FOV_RANGE_DEG[0]:g}..{FOV_RANGE_DEG[1]:g} degrees")
@@ -216,12 +224,16 @@ def main(argv=None) -> int:
             return 2
         meta["geometry"]["sensor_aspect"] = aspect
         stamped.append(f"geometry.sensor_aspect {aspect:g}")
+    model = onnx.load_model_from_string(b.model_path.read_bytes())
+    if a.share_alike:
+        before = len(model.graph.node)
+        dropped = share_alike(model)
+        stamped.append(f"graph: {dropped} of {before} nodes computed alike run once")
     if stamped:
         earlier = meta["provenance"].get("stamped", [])
         record = {"what": stamped, "by": "scripts/stamp_bundle.py " + " ".join(sys.argv[1:] if argv is None else argv),
                   "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
         meta["provenance"]["stamped"] = [*(earlier if isinstance(earlier, list) else [earlier]), record]
-    model = onnx.load_model_from_string(b.model_path.read_bytes())
     set_metadata(model, meta)
     write_bundle(a.out, model_bytes(model), meta)
     b = read_bundle(a.out)

@@ -14,9 +14,10 @@ from runtime_toy import bar_dataset, bar_frame, make_toy_bundle
 
 from crossing_assist.actions import UNKNOWN, bin_center_x
 from crossing_assist.bundle import read_bundle
-from crossing_assist.export.ensemble import merge_graphs
+from crossing_assist.export.ensemble import merge_graphs, share_alike
 from crossing_assist.inference import predict_bundle
 from crossing_assist.runtime.engine import Engine
+from crossing_assist.runtime.demo import DEFAULT_BUNDLE
 from crossing_assist.runtime.listen import Listener, summarise
 
 #: Deterministic toys (no dropout, no noise) that see the same bar with different sharpness, and
@@ -63,6 +64,78 @@ def test_merged_graph_pools_the_members_samples_exactly(tmp_path):
     np.testing.assert_allclose(got["votes"], np.mean([o["votes"] for o in outs], 0), atol=1e-6)
     assert got["mutual_info"].min() > 1e-5      # each member alone is sure (0); together they disagree
     assert (got["probs"].argmax(1)[:3] == [1, 5, 12]).all()
+
+
+def seeded(model):
+    """A copy of ``model`` whose random draws are seeded (one seed each, in graph order), so that
+    onnxruntime draws alike in two graphs whose random nodes come in the same order."""
+    m = onnx.ModelProto()
+    m.CopyFrom(model)
+    for i, node in enumerate(n for n in m.graph.node if n.op_type == "RandomUniformLike"):
+        node.attribute.append(onnx.helper.make_attribute("seed", float(i + 1)))
+    return m
+
+
+def outputs(model, frames):
+    import onnxruntime as ort
+
+    return ort.InferenceSession(model.SerializeToString()).run(None, {"frames": np.stack(frames)})
+
+
+def _ops(model, op):
+    return sum(n.op_type == op for n in model.graph.node)
+
+
+def test_merged_graph_runs_what_its_members_compute_alike_once(tmp_path):
+    """Members that fit the frame alike share those nodes in the merged graph (the toys' resize and
+    normalisation; the default's frozen blocks); each keeps its own random draws, even two members
+    alike (their dropout masks stay two sets), and the outputs are those of the graph merged side
+    by side, bit for bit."""
+    noisy = dict(drop_p=0.3, noise=0.5, samples=4)
+    members = [make_toy_bundle(tmp_path / name, gain=gain, **noisy) for name, gain in (("a", 12.0), ("b", 12.0), ("c", 3.0))]
+    models = [onnx.load(str(read_bundle(m).model_path)) for m in members]
+    apart, shared = merge_graphs(models, share=False), merge_graphs(models)
+    assert len(shared.graph.node) < len(apart.graph.node)
+    assert (_ops(apart, "Resize"), _ops(shared, "Resize")) == (3, 1)        # the frame fitted once
+    assert (_ops(apart, "Tile"), _ops(shared, "Tile")) == (3, 2)            # a and b alike up to their draws
+    assert _ops(shared, "RandomUniformLike") == _ops(apart, "RandomUniformLike") == 6   # each member's own
+    assert share_alike(shared) == 0                                         # nothing left computed twice
+    frames = [bar_frame(bin_center_x(s)) for s in (2, 7, 11)] + [bar_frame(None, noise=0.4)]
+    for got, want in zip(outputs(seeded(shared), frames), outputs(seeded(apart), frames)):
+        np.testing.assert_array_equal(got, want)
+
+
+def test_share_alike_knows_weights_by_their_values_not_their_names():
+    """Two members' weights under their own names (``m0/w``, ``m1/w``) are one weight when their
+    values agree (the members' frozen blocks), two when they differ; what reads a graph output
+    stays."""
+    from onnx import TensorProto, helper, numpy_helper
+
+    w = np.arange(6, dtype=np.float32).reshape(3, 2)
+    weights = [numpy_helper.from_array(v, name) for name, v in (("m0/w", w), ("m1/w", w.copy()), ("m2/w", w + 1))]
+    nodes = [helper.make_node("MatMul", ["frames", f"m{i}/w"], [f"m{i}/y"]) for i in range(3)]
+    nodes += [helper.make_node("Relu", [f"m{i}/y"], [f"m{i}/r"]) for i in range(3)]
+    nodes += [helper.make_node("Sum", ["m0/r", "m1/r", "m2/r"], ["out"]), helper.make_node("Relu", ["m0/y"], ["kept"])]
+    graph = helper.make_graph(nodes, "g", [helper.make_tensor_value_info("frames", TensorProto.FLOAT, [1, 3])],
+                              [helper.make_tensor_value_info(n, TensorProto.FLOAT, [1, 2]) for n in ("out", "kept")],
+                              initializer=weights)
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    before = outputs(model, [np.array([1.0, -2.0, 3.0], np.float32)])
+    assert share_alike(model) == 2                     # m1's MatMul and Relu; "kept" names an output
+    assert [n.op_type for n in model.graph.node] == ["MatMul", "MatMul", "Relu", "Relu", "Sum", "Relu"]
+    assert sorted(t.name for t in model.graph.initializer) == ["m0/w", "m2/w"]
+    onnx.checker.check_model(model)
+    for got, want in zip(outputs(model, [np.array([1.0, -2.0, 3.0], np.float32)]), before):
+        np.testing.assert_array_equal(got, want)
+
+
+def test_the_default_bundle_runs_what_its_members_share_once():
+    """The shipped ensemble's graph computes nothing twice (its members' frozen blocks run once)
+    and draws each member's dropout masks apart."""
+    bundle = read_bundle(DEFAULT_BUNDLE)
+    model = onnx.load(str(bundle.model_path))
+    assert bundle.mc.members == 3 and _ops(model, "RandomUniformLike") == 3
+    assert share_alike(model) == 0
 
 
 def test_ensemble_bundle_refits_its_thresholds_and_runs_in_the_runtime(tmp_path):

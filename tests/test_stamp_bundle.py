@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from runtime_toy import make_toy_bundle
 
@@ -259,3 +260,37 @@ def test_gate_from_judges_a_bundle_at_another_bundles_gate(shipped, tmp_path):
         last = r.stderr.strip().splitlines()[-1]   # argparse's usage lines come before its error line
         assert r.returncode == 2 and last.count("error:") == 1 and says in last, r.stderr
     assert not (tmp_path / "a").exists()
+
+
+def test_share_alike_rewrites_an_ensemble_merged_side_by_side_to_run_its_shared_nodes_once(tmp_path):
+    """A bundle merged before its members' shared nodes ran once (as the default until 2026-12-07):
+    --share-alike rewrites its graph, and nothing else changes, the outputs least of all."""
+    import onnx
+    from test_export_ensemble import outputs, seeded
+
+    from crossing_assist.bundle import write_bundle
+    from crossing_assist.export.ensemble import merge_graphs
+    from crossing_assist.export.graph import model_bytes, set_metadata
+    from runtime_toy import bar_frame
+
+    members = [make_toy_bundle(tmp_path / n, gain=g, drop_p=0.3, samples=4) for n, g in (("a", 12.0), ("b", 3.0))]
+    meta = json.loads((members[0] / "bundle.json").read_text())
+    meta["mc"]["members"] = 2
+    apart = merge_graphs([onnx.load(str(m / "model.onnx")) for m in members], share=False)
+    set_metadata(apart, meta)
+    src = write_bundle(tmp_path / "src", model_bytes(apart), meta)
+    r = _stamp(src, tmp_path / "out", "--share-alike")
+    assert r.returncode == 0, r.stderr
+    assert "nodes computed alike run once" in r.stdout
+    out = read_bundle(tmp_path / "out")
+    shared = onnx.load(str(out.model_path))
+    assert len(shared.graph.node) < len(apart.graph.node) and out.model_size < read_bundle(src).model_size
+    frames = [bar_frame(x) for x in (0.2, 0.7)]
+    for got, want in zip(outputs(seeded(shared), frames), outputs(seeded(apart), frames)):
+        np.testing.assert_array_equal(got, want)
+    stamped = json.loads((tmp_path / "out" / "bundle.json").read_text())
+    assert "--share-alike" in stamped["provenance"].pop("stamped")[-1]["by"]
+    for m in (stamped, meta):
+        for k in ("model_sha256", "model_size"):
+            m.pop(k, None)
+    assert stamped == meta
