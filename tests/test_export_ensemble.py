@@ -190,8 +190,29 @@ def test_ensemble_refuses_members_exported_differently_or_alone(tmp_path):
         assert r.stderr.startswith("error:") and re.search(message, r.stderr), r.stderr
         assert not (tmp_path / "ens").exists()
     assert _cli(a, _det(tmp_path / "b", **SOFT), "--out", tmp_path / "ens", "--calib-data", data).returncode == 0
-    r = _cli(a, tmp_path / "ens", "--out", tmp_path / "ens2", "--calib-data", data)
-    assert r.returncode == 2 and "is an ensemble already" in r.stderr
+    r = _cli(tmp_path / "ens", other, "--out", tmp_path / "ens2", "--calib-data", data)   # an ensemble: but for
+    assert r.returncode == 2 and re.search("differs from .* in 'mc'", r.stderr), r.stderr  # its members, alike
+
+
+def test_an_ensemble_as_a_member_counts_as_its_members(tmp_path):
+    """A member added to an ensemble bundle (whose members' own bundles may be gone): the result is
+    the ensemble of all the members merged at once, output for output, and its bundle.json lists
+    them all."""
+    a, b, c = (_det(tmp_path / name, **kw) for name, kw in (("a", SHARP), ("b", SOFT), ("c", DOUBTFUL)))
+    data = bar_dataset(tmp_path / "data", n=12)
+    assert _cli(a, b, "--out", tmp_path / "ab", "--calib-data", data).returncode == 0
+    r = _cli(tmp_path / "ab", c, "--out", tmp_path / "abc", "--calib-data", data)
+    assert r.returncode == 0, r.stderr
+    assert "3 members" in r.stdout
+    abc = read_bundle(tmp_path / "abc")
+    assert abc.mc.members == 3
+    assert [m["bundle"] for m in abc.training["ensemble"]] == [str(a), str(b), str(c)]
+    assert len(abc.metrics["members"]) == len(abc.raw["provenance"]["members"]) == 3
+    frames = [bar_frame(bin_center_x(s)) for s in (1, 6, 12)] + [bar_frame(None, noise=0.4)]
+    at_once = merge_graphs([onnx.load(str(read_bundle(m).model_path)) for m in (a, b, c)])
+    for got, want in zip(outputs(onnx.load(str(abc.model_path)), frames), outputs(at_once, frames)):
+        np.testing.assert_allclose(got, want, atol=1e-7)
+    assert len(onnx.load(str(abc.model_path)).graph.node) == len(at_once.graph.node)   # the old pooling dropped
 
 
 def test_average_refuses_plays_of_other_clips(tmp_path):

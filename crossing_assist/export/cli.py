@@ -83,9 +83,11 @@ def ensemble_parser() -> argparse.ArgumentParser:
     d = {f.name: f.default for f in fields(EnsembleConfig)}
     p = argparse.ArgumentParser(prog="crossing-export ensemble",
                                 description="Merge bundles exported alike (e.g. one recipe, several seeds) into one "
-                                            "ensemble bundle: their graphs side by side, their MC samples pooled, the "
-                                            "thresholds fitted again on labelled frames through the merged graph.")
-    p.add_argument("members", nargs="+", help="the member bundles' folders (at least 2)")
+                                            "ensemble bundle: their graphs side by side (what they compute alike run "
+                                            "once), their MC samples pooled, the thresholds fitted again on labelled "
+                                            "frames through the merged graph. An ensemble bundle among them counts as "
+                                            "its members.")
+    p.add_argument("members", nargs="+", help="the member bundles' folders (at least 2; an ensemble counts as its members)")
     p.add_argument("--out", required=True, help=HELP["out"])
     p.add_argument("--calib-data", required=True, help=HELP["calib_data"])
     for name in ("calib_split", "min_calib", "coverage", "measure", "gate_scale", "gate_scale_portrait", "batch", "seed"):

@@ -94,11 +94,31 @@ class EnsembleConfig:
                 raise ExportError(f"Invalid --{name.replace('_', '-')} {v}; valid: 0.05..20")
 
 
+def merged_members(model: Any) -> int:
+    """How many members a graph pools: k for one :func:`merge_graphs` made (``ensemble_of_k``), else 1."""
+    name = model.graph.name
+    return int(name.removeprefix("ensemble_of_")) if name.startswith("ensemble_of_") else 1
+
+
+def _prune(graph: Any, wanted: set[str]) -> None:
+    """Keep only the nodes of ``graph`` that the tensors ``wanted`` need (in place)."""
+    needed, keep = set(wanted), []
+    for node in reversed(graph.node):
+        if needed.intersection(node.output):
+            keep.append(type(node).FromString(node.SerializeToString()))
+            needed.update(node.input)
+    del graph.node[:]
+    graph.node.extend(reversed(keep))
+
+
 def merge_graphs(models: Sequence[Any], share: bool = True) -> Any:
     """One ``onnx.ModelProto`` running every model of ``models`` on the shared ``frames`` input
     and pooling their summaries (module docstring), what they compute alike run once
-    (:func:`share_alike`; ``share=False``: side by side, as merged before 2026-12-07). The models
-    must share their opsets."""
+    (:func:`share_alike`; ``share=False``: side by side, as merged before 2026-12-07). A model
+    that is itself a merged ensemble (:func:`merged_members`) counts as its members: its pooling
+    is dropped and theirs pooled with the others', as if they had been merged one by one (so a
+    member can be added to a shipped ensemble whose members' bundles are gone). The models must
+    share their opsets."""
     import onnx
     from onnx import TensorProto, compose, helper, numpy_helper
 
@@ -110,10 +130,19 @@ def merge_graphs(models: Sequence[Any], share: bool = True) -> Any:
             raise ExportError(f"member {i + 1}'s graph uses other opsets than member 1's "
                               f"({sorted(o.version for o in m.opset_import)} vs {sorted(v for _, v in opsets)}); "
                               "export them with one crossing_assist version")
-    graphs = [compose.add_prefix(m, f"m{i}/", rename_inputs=False).graph for i, m in enumerate(models)]
-    k = len(models)
+    graphs, heads = [], []   # heads: each member's output prefix in the merged graph
+    for i, m in enumerate(models):
+        g = compose.add_prefix(m, f"m{i}/", rename_inputs=False).graph
+        if (k_i := merged_members(m)) > 1:   # an ensemble: its members' own outputs, not its pooling
+            members = [f"m{i}/m{j}/" for j in range(k_i)]
+            _prune(g, {head + name for head in members for name in OUTPUT_NAMES})
+            heads += members
+        else:
+            heads.append(f"m{i}/")
+        graphs.append(g)
+    k = len(heads)
     n = helper.make_node
-    out = lambda i, name: f"m{i}/{name}"  # noqa: E731
+    out = lambda i, name: heads[i] + name  # noqa: E731
     const = lambda name, value, dtype=np.float32: n(  # noqa: E731
         "Constant", [], [name], value=numpy_helper.from_array(np.asarray(value, dtype), name + "_v"))
     tail = [
@@ -139,16 +168,17 @@ def merge_graphs(models: Sequence[Any], share: bool = True) -> Any:
         n("Sub", ["ens/moment", "ens/probs2"], ["ens/var_raw"]),
         n("Max", ["ens/var_raw", "ens/zero"], ["variance"]),
     ]
-    first = graphs[0]
-    a = next(o for o in first.output if o.name == out(0, "probs")).type.tensor_type.shape.dim[1].dim_value or "A"
+    a = next(o for o in models[0].graph.output if o.name == "probs").type.tensor_type.shape.dim[1].dim_value or "A"
     f = TensorProto.FLOAT
     outputs = {"probs": ["N", a], "entropy": ["N"], "mutual_info": ["N"], "variance": ["N", a], "votes": ["N", a]}
+    used = {i for g in graphs for node in g.node for i in node.input}
+    made = {o for g in graphs for node in g.node for o in node.output}
     graph = helper.make_graph(
         [node for g in graphs for node in g.node] + tail, f"ensemble_of_{k}",
-        [next(i for i in first.input if i.name == INPUT_NAME)],
+        [next(i for i in graphs[0].input if i.name == INPUT_NAME)],
         [helper.make_tensor_value_info(name, f, outputs[name]) for name in OUTPUT_NAMES],
-        initializer=[t for g in graphs for t in g.initializer],
-        value_info=[v for g in graphs for v in g.value_info])
+        initializer=[t for g in graphs for t in g.initializer if t.name in used],
+        value_info=[v for g in graphs for v in g.value_info if v.name in made])
     model = helper.make_model(graph, opset_imports=list(models[0].opset_import),
                               producer_name="crossing_assist.export.ensemble")
     model.ir_version = max(m.ir_version for m in models)
@@ -218,14 +248,15 @@ def share_alike(model: Any) -> int:
 
 
 def _members(paths: Sequence[str]) -> tuple[list[Bundle], list[dict]]:
-    """The member bundles, read and checked to agree on :data:`SHARED` and the MC settings."""
+    """The member bundles, read and checked to agree on :data:`SHARED`, the MC settings (an
+    ensemble bundle among them: but for how many members it has) and the precision."""
     bundles = [read_bundle(p) for p in paths]
     metas = [b.raw for b in bundles]
-    if nested := [p for p, b in zip(paths, bundles) if b.mc.members > 1]:
-        raise ExportError(f"member {nested[0]} is an ensemble already; pass its own members instead")
+    alike = lambda meta, key: ({k: v for k, v in meta[key].items() if k != "members"}  # noqa: E731
+                               if key == "mc" else meta.get(key))
     for i, meta in enumerate(metas[1:], 1):
         for key in (*SHARED, "mc", "precision"):
-            if meta.get(key) != metas[0].get(key):
+            if alike(meta, key) != alike(metas[0], key):
                 raise ExportError(f"member {paths[i]} differs from {paths[0]} in {key!r} "
                                   f"({json.dumps(meta.get(key))[:80]} vs {json.dumps(metas[0].get(key))[:80]}); "
                                   "an ensemble's members must be exported alike")
@@ -243,24 +274,32 @@ def ensemble_bundle(cfg: EnsembleConfig, log: Callable[[str], None] = print) -> 
     except BundleError as exc:
         raise ExportError(str(exc)) from None
     model = merge_graphs([onnx.load(str(b.model_path)) for b in bundles])
-    log(f"merged {len(bundles)} graphs: {len(model.graph.node)} nodes, {model.ByteSize() / 1e6:.1f} MB")
+    n_members = merged_members(model)
+    log(f"merged {len(bundles)} graphs, {n_members} members: {len(model.graph.node)} nodes, {model.ByteSize() / 1e6:.1f} MB")
     first = metas[0]
     meta = {k: v for k, v in first.items() if k not in ("model_sha256", "model_size")}
-    meta["mc"] = {**first["mc"], "members": len(bundles)}
-    meta["training"] = {"ensemble": [
-        {**m["training"], "temperature": m["calibration"]["temperature"], "bundle": str(p),
-         "checkpoint_metrics": m.get("metrics", {}).get("checkpoint", {})}
-        for p, m in zip(cfg.members, metas)]}
+    meta["mc"] = {**first["mc"], "members": n_members}
+
+    def each(m: dict, one: Callable[[dict], Any], many: Callable[[dict], list]) -> list:
+        """A member bundle's records: its members' (an ensemble) or its own."""
+        return many(m) if m["mc"].get("members", 1) > 1 else [one(m)]
+
+    meta["training"] = {"ensemble": [r for p, m in zip(cfg.members, metas) for r in each(
+        m, lambda m: {**m["training"], "temperature": m["calibration"]["temperature"], "bundle": str(p),
+                      "checkpoint_metrics": m.get("metrics", {}).get("checkpoint", {})},
+        lambda m: m["training"]["ensemble"])]}
     meta["provenance"] = {"command": " ".join(shlex.quote(a) for a in sys.argv) if sys.argv else "",
                           "created": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
                           "calib_data": cfg.calib_data, "calib_split": cfg.calib_split,
-                          "members": [m.get("provenance", {}) for m in metas]}
+                          "members": [r for m in metas for r in each(m, lambda m: m.get("provenance", {}),
+                                                                     lambda m: m["provenance"].get("members", []))]}
     n = bundles[0].actions.n
     data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress, bundles[0].geometry, bundles[0].input.size)
     check_calib_size(cfg.calib_data, cfg.calib_split, data.actions, cfg.min_calib)
     meta["calibration"] = cal.CalibrationResult(1.0, cfg.coverage, 0.0, 0, cfg.measure, 1.0).spec().to_json()
     calib, metrics = _fit_and_measure(model, meta, data, cfg, 1.0, None, log)
     meta["calibration"] = calib.spec().to_json()
-    meta["metrics"] = {**metrics, "members": [m.get("metrics", {}).get("full_split", {}) for m in metas]}
+    meta["metrics"] = {**metrics, "members": [r for m in metas for r in each(
+        m, lambda m: m.get("metrics", {}).get("full_split", {}), lambda m: m.get("metrics", {}).get("members", []))]}
     set_metadata(model, meta)
     return write_bundle(cfg.out, model_bytes(model), meta, force=cfg.force)   # validated as it is written
