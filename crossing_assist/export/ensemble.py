@@ -263,6 +263,23 @@ def _members(paths: Sequence[str]) -> tuple[list[Bundle], list[dict]]:
     return bundles, metas
 
 
+def _records(paths: Sequence[str], metas: Sequence[dict]) -> tuple[list, list, list]:
+    """Each member's training record, provenance and figures on the calibration split, in order;
+    an ensemble bundle's members each in turn."""
+    training, provenance, measured = [], [], []
+    for p, m in zip(paths, metas):
+        if m["mc"].get("members", 1) > 1:
+            training += m["training"]["ensemble"]
+            provenance += m["provenance"].get("members", [])
+            measured += m.get("metrics", {}).get("members", [])
+        else:
+            training.append({**m["training"], "temperature": m["calibration"]["temperature"], "bundle": str(p),
+                             "checkpoint_metrics": m.get("metrics", {}).get("checkpoint", {})})
+            provenance.append(m.get("provenance", {}))
+            measured.append(m.get("metrics", {}).get("full_split", {}))
+    return training, provenance, measured
+
+
 def ensemble_bundle(cfg: EnsembleConfig, log: Callable[[str], None] = print) -> Path:
     """Merge ``cfg.members`` into one bundle at ``cfg.out``, its thresholds fitted on
     ``cfg.calib_data`` through the merged graph; returns the bundle's folder."""
@@ -279,27 +296,18 @@ def ensemble_bundle(cfg: EnsembleConfig, log: Callable[[str], None] = print) -> 
     first = metas[0]
     meta = {k: v for k, v in first.items() if k not in ("model_sha256", "model_size")}
     meta["mc"] = {**first["mc"], "members": n_members}
-
-    def each(m: dict, one: Callable[[dict], Any], many: Callable[[dict], list]) -> list:
-        """A member bundle's records: its members' (an ensemble) or its own."""
-        return many(m) if m["mc"].get("members", 1) > 1 else [one(m)]
-
-    meta["training"] = {"ensemble": [r for p, m in zip(cfg.members, metas) for r in each(
-        m, lambda m: {**m["training"], "temperature": m["calibration"]["temperature"], "bundle": str(p),
-                      "checkpoint_metrics": m.get("metrics", {}).get("checkpoint", {})},
-        lambda m: m["training"]["ensemble"])]}
+    training, provenance, measured = _records(cfg.members, metas)
+    meta["training"] = {"ensemble": training}
     meta["provenance"] = {"command": " ".join(shlex.quote(a) for a in sys.argv) if sys.argv else "",
                           "created": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
                           "calib_data": cfg.calib_data, "calib_split": cfg.calib_split,
-                          "members": [r for m in metas for r in each(m, lambda m: m.get("provenance", {}),
-                                                                     lambda m: m["provenance"].get("members", []))]}
+                          "members": provenance}
     n = bundles[0].actions.n
     data = load_labelled(cfg.calib_data, cfg.calib_split, n, cfg.progress, bundles[0].geometry, bundles[0].input.size)
     check_calib_size(cfg.calib_data, cfg.calib_split, data.actions, cfg.min_calib)
     meta["calibration"] = cal.CalibrationResult(1.0, cfg.coverage, 0.0, 0, cfg.measure, 1.0).spec().to_json()
     calib, metrics = _fit_and_measure(model, meta, data, cfg, 1.0, None, log)
     meta["calibration"] = calib.spec().to_json()
-    meta["metrics"] = {**metrics, "members": [r for m in metas for r in each(
-        m, lambda m: m.get("metrics", {}).get("full_split", {}), lambda m: m.get("metrics", {}).get("members", []))]}
+    meta["metrics"] = {**metrics, "members": measured}
     set_metadata(model, meta)
     return write_bundle(cfg.out, model_bytes(model), meta, force=cfg.force)   # validated as it is written
