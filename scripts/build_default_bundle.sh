@@ -8,10 +8,12 @@
 #       scripts/build_default_bundle.sh   # what ships since 2026-12-04 (docs/models.md)
 #   GATE_TOP=16 ...   # the held-out thresholds of choose_gate.py --max-scale 16 (gate…_top16….json)
 #
-# MEMBERS: more runs of the same recipe (other seeds; a folder holding a bundle is taken as it is),
-# each exported as RUN is; the bundle is their ensemble with RUN (crossing-export ensemble: the graphs
-# side by side, their samples pooled, K times one model's cost a frame), its gate thresholds those
-# scripts/choose_gate.py --ensemble chose for the ensemble of the CV runs (CV_DIR/gate…_ensembleK.json).
+# MEMBERS: more runs of the same recipe (other seeds; a folder holding a bundle is taken as it is, an
+# ensemble bundle as its members, e.g. the embedded default: a seed added to it), each exported as RUN
+# is; the bundle is their ensemble with RUN (crossing-export ensemble: the graphs side by side, what
+# they compute alike run once, their samples pooled), its gate thresholds those
+# scripts/choose_gate.py --ensemble chose for the ensemble of the K CV runs (CV_DIR/gate…_ensembleK.json,
+# K the members counted).
 #
 # The run is built by scripts/build_default_model.sh (weights/best.pt). Calibration (temperature,
 # conformal threshold, gate threshold) is fitted on PTL's val split; its held-out coverage is
@@ -130,9 +132,10 @@ if [ -n "$MEMBERS" ]; then
     "$PY" -m crossing_assist.export ensemble "${PARTS[@]}" --out "$TMP/ensemble" --calib-data "$DATA" --calib-split val "${MIN_CALIB_ARGS[@]}" \
         --measure "$GATE_MEASURE" --quiet
     SRC="$TMP/ensemble"
-    STAMP_JSON="${STAMP_JSON%.json}_ensemble${#PARTS[@]}.json"
+    K=$("$PY" -c "import json,sys; print(json.load(open(sys.argv[1]))['mc']['members'])" "$SRC/bundle.json")
+    STAMP_JSON="${STAMP_JSON%.json}_ensemble$K.json"
     if [ -f "$CV_DIR/$STAMP_JSON" ]; then
-        echo "an ensemble of ${#PARTS[@]}: gate thresholds from $CV_DIR/$STAMP_JSON" >&2
+        echo "an ensemble of $K: gate thresholds from $CV_DIR/$STAMP_JSON" >&2
     else
         echo "no $CV_DIR/$STAMP_JSON (scripts/choose_gate.py $CV_DIR --also ... --ensemble ${MIRROR_ARGS[*]} --measure $GATE_MEASURE): the ensemble's gate as fitted on val" >&2
     fi

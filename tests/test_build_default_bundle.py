@@ -104,3 +104,11 @@ def test_build_default_bundle_with_members_ships_their_ensemble_at_its_held_out_
     unc = read_bundle(tmp_path / "top").calibration.uncertainty
     assert (unc.threshold, unc.portrait_threshold, unc.narrow_threshold, unc.narrow_fov_deg) == (0.02, 0.03, 0.0617, 42.0)
     assert unc.wide_fov_deg is None and unc.threshold_for("landscape", 52.8) == 0.02   # WIDE_FOV=: by orientation
+    # a seed added to a shipped ensemble: the ensemble bundle counts as its 3 members, the choice for 4 is taken
+    (cv / "gate_mirror_far_mass_ensemble4.json").write_text(json.dumps(fm(0.025) | {"portrait": fm(0.035)}))
+    r = _build(tmp_path, OUT=str(tmp_path / "four"), MEMBERS=str(tmp_path / "ens"), **env)
+    assert r.returncode == 0, r.stderr
+    assert "an ensemble of 4: gate thresholds from" in r.stderr
+    four = read_bundle(tmp_path / "four")
+    assert four.mc.members == 4 and len(four.training["ensemble"]) == 4
+    assert (four.calibration.uncertainty.threshold, four.calibration.uncertainty.portrait_threshold) == (0.025, 0.035)
