@@ -1,6 +1,7 @@
 """Runtime test helpers: the toy bundles (built by :mod:`crossing_assist.testing.toy_bundle`,
-the one toy builder), bright-bar frames and clips, the shared ``toy_bundle`` fixture, and
-``needs_audio`` (skips a test without the system PortAudio).
+the one toy builder), bright-bar frames and clips, the shared ``toy_bundle`` fixture,
+``needs_audio`` (skips a test without the system PortAudio), and a graph's outputs with its random
+draws seeded (``seeded``, ``graph_outputs``: two graphs compared bit for bit).
 
 The toy finds the brightest vertical strip: a bright bar on a dark frame -> that strip's bin with
 high confidence; a frame with no bar (flat, or noise) -> near-uniform, high-entropy probabilities.
@@ -91,3 +92,22 @@ try:
         return make_toy_bundle(tmp_path_factory.mktemp("toy") / "bundle")
 except ImportError:  # pragma: no cover
     pass
+
+
+def seeded(model):
+    """A copy of ``model`` whose random draws are seeded (one seed each, in graph order), so that
+    onnxruntime draws alike in two graphs whose random nodes come in the same order."""
+    import onnx
+
+    m = onnx.ModelProto()
+    m.CopyFrom(model)
+    for i, node in enumerate(n for n in m.graph.node if n.op_type == "RandomUniformLike"):
+        node.attribute.append(onnx.helper.make_attribute("seed", float(i + 1)))
+    return m
+
+
+def graph_outputs(model, frames):
+    """The outputs of ``model`` (an ``onnx.ModelProto``) on ``frames`` stacked, in onnxruntime."""
+    import onnxruntime as ort
+
+    return ort.InferenceSession(model.SerializeToString()).run(None, {"frames": np.stack(frames)})

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import onnx
 import pytest
-from runtime_toy import bar_dataset, bar_frame, make_toy_bundle
+from runtime_toy import bar_dataset, bar_frame, graph_outputs, make_toy_bundle, seeded
 
 from crossing_assist.actions import UNKNOWN, bin_center_x
 from crossing_assist.bundle import read_bundle
@@ -66,22 +66,6 @@ def test_merged_graph_pools_the_members_samples_exactly(tmp_path):
     assert (got["probs"].argmax(1)[:3] == [1, 5, 12]).all()
 
 
-def seeded(model):
-    """A copy of ``model`` whose random draws are seeded (one seed each, in graph order), so that
-    onnxruntime draws alike in two graphs whose random nodes come in the same order."""
-    m = onnx.ModelProto()
-    m.CopyFrom(model)
-    for i, node in enumerate(n for n in m.graph.node if n.op_type == "RandomUniformLike"):
-        node.attribute.append(onnx.helper.make_attribute("seed", float(i + 1)))
-    return m
-
-
-def outputs(model, frames):
-    import onnxruntime as ort
-
-    return ort.InferenceSession(model.SerializeToString()).run(None, {"frames": np.stack(frames)})
-
-
 def _ops(model, op):
     return sum(n.op_type == op for n in model.graph.node)
 
@@ -101,7 +85,7 @@ def test_merged_graph_runs_what_its_members_compute_alike_once(tmp_path):
     assert _ops(shared, "RandomUniformLike") == _ops(apart, "RandomUniformLike") == 6   # each member's own
     assert share_alike(shared) == 0                                         # nothing left computed twice
     frames = [bar_frame(bin_center_x(s)) for s in (2, 7, 11)] + [bar_frame(None, noise=0.4)]
-    for got, want in zip(outputs(seeded(shared), frames), outputs(seeded(apart), frames)):
+    for got, want in zip(graph_outputs(seeded(shared), frames), graph_outputs(seeded(apart), frames)):
         np.testing.assert_array_equal(got, want)
 
 
@@ -120,12 +104,12 @@ def test_share_alike_knows_weights_by_their_values_not_their_names():
                               [helper.make_tensor_value_info(n, TensorProto.FLOAT, [1, 2]) for n in ("out", "kept")],
                               initializer=weights)
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
-    before = outputs(model, [np.array([1.0, -2.0, 3.0], np.float32)])
+    before = graph_outputs(model, [np.array([1.0, -2.0, 3.0], np.float32)])
     assert share_alike(model) == 2                     # m1's MatMul and Relu; "kept" names an output
     assert [n.op_type for n in model.graph.node] == ["MatMul", "MatMul", "Relu", "Relu", "Sum", "Relu"]
     assert sorted(t.name for t in model.graph.initializer) == ["m0/w", "m2/w"]
     onnx.checker.check_model(model)
-    for got, want in zip(outputs(model, [np.array([1.0, -2.0, 3.0], np.float32)]), before):
+    for got, want in zip(graph_outputs(model, [np.array([1.0, -2.0, 3.0], np.float32)]), before):
         np.testing.assert_array_equal(got, want)
 
 
@@ -210,7 +194,7 @@ def test_an_ensemble_as_a_member_counts_as_its_members(tmp_path):
     assert len(abc.metrics["members"]) == len(abc.raw["provenance"]["members"]) == 3
     frames = [bar_frame(bin_center_x(s)) for s in (1, 6, 12)] + [bar_frame(None, noise=0.4)]
     at_once = merge_graphs([onnx.load(str(read_bundle(m).model_path)) for m in (a, b, c)])
-    for got, want in zip(outputs(onnx.load(str(abc.model_path)), frames), outputs(at_once, frames)):
+    for got, want in zip(graph_outputs(onnx.load(str(abc.model_path)), frames), graph_outputs(at_once, frames)):
         np.testing.assert_allclose(got, want, atol=1e-7)
     assert len(onnx.load(str(abc.model_path)).graph.node) == len(at_once.graph.node)   # the old pooling dropped
 

@@ -266,12 +266,11 @@ def test_share_alike_rewrites_an_ensemble_merged_side_by_side_to_run_its_shared_
     """A bundle merged before its members' shared nodes ran once (as the default until 2026-12-07):
     --share-alike rewrites its graph, and nothing else changes, the outputs least of all."""
     import onnx
-    from test_export_ensemble import outputs, seeded
 
     from crossing_assist.bundle import write_bundle
     from crossing_assist.export.ensemble import merge_graphs
     from crossing_assist.export.graph import model_bytes, set_metadata
-    from runtime_toy import bar_frame
+    from runtime_toy import bar_frame, graph_outputs, seeded
 
     members = [make_toy_bundle(tmp_path / n, gain=g, drop_p=0.3, samples=4) for n, g in (("a", 12.0), ("b", 3.0))]
     meta = json.loads((members[0] / "bundle.json").read_text())
@@ -286,7 +285,7 @@ def test_share_alike_rewrites_an_ensemble_merged_side_by_side_to_run_its_shared_
     shared = onnx.load(str(out.model_path))
     assert len(shared.graph.node) < len(apart.graph.node) and out.model_size < read_bundle(src).model_size
     frames = [bar_frame(x) for x in (0.2, 0.7)]
-    for got, want in zip(outputs(seeded(shared), frames), outputs(seeded(apart), frames)):
+    for got, want in zip(graph_outputs(seeded(shared), frames), graph_outputs(seeded(apart), frames)):
         np.testing.assert_array_equal(got, want)
     stamped = json.loads((tmp_path / "out" / "bundle.json").read_text())
     assert "--share-alike" in stamped["provenance"].pop("stamped")[-1]["by"]
