@@ -109,14 +109,18 @@ def play(clip: Path, rule: str, extra_s: float, bundle: Path) -> dict:
 
 
 def main(argv=None) -> int:
+    """Bad input in one line and exit 2 (``--debug``: the traceback)."""
+    return run_cli(_main, argv)
+
+
+def _main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("clips", nargs="*", type=Path, default=[DEFAULT_CLIP])
     ap.add_argument("--extra", type=float, default=0.1, help="seconds added to each model run (a phone's pace)")
     ap.add_argument("--rules", default=",".join(RULES))
     ap.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE)
     a = ap.parse_args(argv)
-    rules = a.rules.split(",")
-    return run_cli(lambda _args: measure(a.clips, rules, a.extra, a.bundle), [])
+    return measure(a.clips, a.rules.split(","), a.extra, a.bundle)
 
 
 def measure(clips: list[Path], rules: list[str], extra_s: float, bundle: Path) -> int:

@@ -125,9 +125,9 @@ def shift_between(prev: np.ndarray, cur: np.ndarray) -> float | None:
     if not best <= MAX_MATCH * float(np.median(scores)) or not 0 < ix < scores.shape[1] - 1:
         return None
     prof = scores.min(axis=0)                           # each dx's best over dy
-    for k in range(1, len(prof) - 1):
-        if abs(k - ix) >= 2 and prof[k] < prof[k - 1] and prof[k] <= prof[k + 1] and prof[k] <= AMBIGUOUS * best:
-            return None                                 # a repeating pattern: matched a period off as well
+    inner, k = prof[1:-1], np.arange(1, len(prof) - 1)
+    if np.any((np.abs(k - ix) >= 2) & (inner < prof[:-2]) & (inner <= prof[2:]) & (inner <= AMBIGUOUS * best)):
+        return None                                     # a repeating pattern: matched a period off as well
     ry, rx = _tiles(*tpl.shape)
     for i, rows in enumerate(np.split(tpl, ry[1:], axis=0)):
         for j, part in enumerate(np.split(rows, rx[1:], axis=1)):

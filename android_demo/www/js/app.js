@@ -345,9 +345,9 @@ async function step(frame, captured, grabbed, dt, tooRolled = false) {
     const gyro = app.yaw.between(captured - dt, captured);
     const before = app.gyroCheck.verdict;
     const wasConfirmed = app.gyroCheck.confirmation();
-    const lagged = app.gyroCheck.swayed ? []
-      : GYRO_CHECK.sway_lags_s.slice(1).map((lag) => app.yaw.between(captured - dt - lag, captured - lag));
-    const verdict = picture ? app.gyroCheck.add(gyro, cameraTurn, lagged) : before;
+    const lagged = () => (app.gyroCheck.swayed ? [] // the sway at later lags: only while it can still confirm
+      : GYRO_CHECK.sway_lags_s.slice(1).map((lag) => app.yaw.between(captured - dt - lag, captured - lag)));
+    const verdict = picture ? app.gyroCheck.add(gyro, cameraTurn, lagged()) : before;
     const confirmed = app.gyroCheck.confirmation(); // 'clear turns', 'sway' or null
     if (verdict !== before || confirmed !== wasConfirmed) {
       record({ kind: 'gyro_check', t: captured, verdict, confirmed, turns: app.gyroCheck.turns.slice(), sway: app.gyroCheck.sway.map((w) => w.slice()) });

@@ -177,7 +177,7 @@ export function shiftScores(prev, cur) {
  * left, the camera turned right; 0 under MIN_SHIFT); null when the pair cannot tell (different
  * sizes, too little texture, no shift clearly a match, the best at an end of the range searched,
  * another shift matching nearly as well, a tile of the middle vetoing it).
- * `scratch` ({scores, sorted, tiles, tplc, colsum}: Float64Arrays, grown here): VisualYaw's, so that nothing is allocated.
+ * `scratch` ({scores, sorted, tiles, tplc, colsum, prof}: Float64Arrays, grown here): VisualYaw's, so that nothing is allocated.
  */
 export function shiftBetween(prev, cur, scratch = {}) {
   if (prev.w !== cur.w || prev.h !== cur.h) return null;
@@ -203,14 +203,16 @@ export function shiftBetween(prev, cur, scratch = {}) {
   const ix = k % cols;
   const best = s[k];
   if (!(best <= MAX_MATCH * sorted[(n - 1) / 2]) || !(ix > 0 && ix < cols - 1)) return null;
-  const prof = (col) => { // the column's best over dy
-    let v = s[col];
-    for (let r = 1; r < rows; r += 1) v = Math.min(v, s[r * cols + col]);
-    return v;
-  };
+  if (!(scratch.prof?.length >= cols)) scratch.prof = new Float64Array(cols);
+  const prof = scratch.prof; // each column's best over dy
+  for (let q = 0; q < cols; q += 1) {
+    let v = s[q];
+    for (let r = 1; r < rows; r += 1) v = Math.min(v, s[r * cols + q]);
+    prof[q] = v;
+  }
   for (let q = 1; q < cols - 1; q += 1) {
-    const v = prof(q);
-    if (Math.abs(q - ix) >= 2 && v < prof(q - 1) && v <= prof(q + 1) && v <= AMBIGUOUS * best) return null; // a repeating pattern
+    const v = prof[q];
+    if (Math.abs(q - ix) >= 2 && v < prof[q - 1] && v <= prof[q + 1] && v <= AMBIGUOUS * best) return null; // a repeating pattern
   }
   const tt = TILES * TILES;
   for (let i = 0; i < TILES; i += 1) {
