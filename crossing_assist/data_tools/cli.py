@@ -23,12 +23,16 @@ def _frame_size(text: str) -> tuple[int, int]:
 
 def _cmd_import_ptl(args: argparse.Namespace) -> int:
     from crossing_assist.data_tools.ptl import PTLImportConfig, import_ptl
-    cfg = PTLImportConfig(Path(args.ptl_dir), Path(args.out), args.images, not args.quiet, args.square)
+    cfg = PTLImportConfig(Path(args.ptl_dir), Path(args.out), args.images, not args.quiet, args.square,
+                          not args.no_exif_fov)
     path = import_ptl(cfg)
+    from crossing_assist.data_tools.images import flag_value
     from crossing_assist.data_tools.manifest import read_manifest
     ds = read_manifest(path.parent)
     counts = ", ".join(f"{s} {len(ds.split(s))}" for s in ("train", "val", "test") if len(ds.split(s)))
-    print(f"wrote {path} ({len(ds)} rows: {counts}; images {args.images})")
+    fovs = sum(flag_value(r.flags, "fov") is not None for r in ds.rows)
+    print(f"wrote {path} ({len(ds)} rows: {counts}; images {args.images}"
+          + (f"; {fovs} with their camera's FOV from EXIF" if fovs else "") + ")")
     return 0
 
 
@@ -163,6 +167,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--square", choices=("squashed", "square"), default="squashed",
                    help="what a square image is: a 4:3 photo squashed, as PTL's 224x224 copies (default: "
                         "read back at 4:3), or a photo taken square; other images keep their own aspect")
+    p.add_argument("--no-exif-fov", action="store_true",
+                   help="ignore the photos' EXIF focal lengths (by default a photo that gives its camera's "
+                        "35 mm-equivalent focal length gets flag fov=DEG, its horizontal FOV, which crossing-eval "
+                        "plays it at; others get the bundle's default for their orientation)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_import_ptl)
 

@@ -4,7 +4,9 @@ PTL layout (as in ``../shared/data/ptl``): ``labels.csv`` with at least the colu
 ``image`` (path relative to the PTL folder), ``split``, ``photographer``, ``far_x`` and
 ``bin12``; ``blocked`` and ``light`` are optional and become flags. The label is the file's
 ``bin12`` (checked against ``far_x``); the source is ``ptl:<photographer>``; PTL's own split
-is kept.
+is kept. A photo whose EXIF gives its camera's 35 mm-equivalent focal length (phones write it)
+gets its horizontal FOV as an ``fov=DEG`` flag (:func:`crossing_assist.data_tools.exif.photo_fov`),
+which evaluation plays it at; PTL's own copies carry no EXIF.
 
 Images are either copied into ``<out>/images/`` (``mode="copy"``: a hard link where the file
 system allows, else a byte copy; the dataset is self-contained and may be moved) or
@@ -23,6 +25,7 @@ from pathlib import Path, PurePosixPath
 from tqdm import tqdm
 
 from crossing_assist.actions import parse_label
+from crossing_assist.data_tools.exif import photo_fov
 from crossing_assist.data_tools.images import inspect_image_file
 from crossing_assist.data_tools.manifest import SPLITS, Row, check_row, is_file, reading_csv, write_manifest
 from crossing_assist.errors import UserError
@@ -52,6 +55,7 @@ class PTLImportConfig:
     images: str = "copy"          # "copy" or "reference"
     progress: bool = True
     square: str = "squashed"      # a square file: PTL's 4:3 photo squashed ("squashed") or taken square
+    exif_fov: bool = True         # a photo's camera FOV from its EXIF focal length (flag fov=DEG)
 
 
 def _row_from_record(rec: dict[str, str]) -> tuple[Row, str]:
@@ -88,9 +92,10 @@ def _row_from_record(rec: dict[str, str]) -> tuple[Row, str]:
     return row, image
 
 
-def read_ptl_labels(ptl_dir: Path, square: str = "squashed") -> list[Row]:
+def read_ptl_labels(ptl_dir: Path, square: str = "squashed", exif_fov: bool = True) -> list[Row]:
     """Rows of ``ptl_dir/labels.csv`` with image paths relative to ``ptl_dir`` (checked to exist
-    and whole); a square file gets ``aspect=4:3`` unless ``square`` is ``"square"``."""
+    and whole); a square file gets ``aspect=4:3`` unless ``square`` is ``"square"``; with
+    ``exif_fov`` a photo whose EXIF gives its camera's FOV gets ``fov=DEG``."""
     if square not in SQUARE_MODES:
         raise PTLError(f"Unknown square mode: {square!r}; valid: {', '.join(SQUARE_MODES)}")
     path = Path(ptl_dir) / "labels.csv"
@@ -119,8 +124,12 @@ def read_ptl_labels(ptl_dir: Path, square: str = "squashed") -> list[Row]:
             bad, size = inspect_image_file(Path(ptl_dir) / image)
             if bad:
                 raise PTLError(f"{path} line {line}: image {image!r} {bad}; replace or remove it")
-            if square == "squashed" and size[0] == size[1]:
+            squashed = square == "squashed" and size[0] == size[1]
+            if squashed:
                 row = replace(row, flags=(f"aspect={PTL_ASPECT}", *row.flags))
+            fov = photo_fov(Path(ptl_dir) / image, size, 4 / 3 if squashed else None) if exif_fov else None
+            if fov is not None:
+                row = replace(row, flags=(*row.flags, f"fov={fov:.1f}"))
             rows.append(row)
     if not rows:
         raise PTLError(f"{path}: no rows")
@@ -137,7 +146,7 @@ def import_ptl(cfg: PTLImportConfig) -> Path:
     out = Path(cfg.out_dir).resolve()
     if out == ptl:
         raise PTLError(f"--out {cfg.out_dir} is the PTL folder itself; choose another folder")
-    rows = read_ptl_labels(ptl, cfg.square)
+    rows = read_ptl_labels(ptl, cfg.square, cfg.exif_fov)
     out.mkdir(parents=True, exist_ok=True)
     placed: list[Row] = []
     for row in tqdm(rows, desc="import-ptl", unit="img", disable=not cfg.progress):
