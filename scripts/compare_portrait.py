@@ -1,15 +1,15 @@
 """Portrait vs landscape localisation of bundles: where the model puts the goal.
 
-For each bundle: the argmax strip of each photo as taken and of its 3:4 portrait windows (goal
-in view only; each window a narrower camera, read at its own FOV as choose_gate.py and
-crossing-eval read it), as accuracy, share >= 2 strips off, bin MAE and the histogram of the
-strips chosen, beside the histogram of the true strips, and the placement's error in degrees (the
-chosen strip's centre read at the view's FOV, against the labelled far point). For the windows also
-the photo's own placement carried into each window (``x' = (x - x0) / w'``, from the argmax strip's
-centre, and refined by the probabilities of the strips beside it): what a window would score if it
-placed the goal, in degrees, as well as the whole photo does, i.e. how much of the windows' lower
-accuracy is their strips being narrower. No decision logic: this measures the model's placement,
-the input to everything else.
+For each bundle: the argmax strip of each photo as taken, of its 3:4 portrait windows (a narrower
+camera) and of the views of a phone held in portrait at the bundle's portrait FOV (goal in view
+only; each view read at its own FOV, as choose_gate.py and crossing-eval read it), as accuracy,
+share >= 2 strips off, bin MAE and the histogram of the strips chosen, beside the histogram of the
+true strips, and the placement's error in degrees (the chosen strip's centre read at the view's
+FOV, against the labelled far point). For the portrait views also the photo's own placement
+carried into each view (``x' = (x - x0) / w'``, from the argmax strip's centre, and refined by the
+probabilities of the strips beside it): what a view would score if it placed the goal, in
+degrees, as well as the whole photo does, i.e. how much of its lower accuracy is its strips being
+narrower. No decision logic: this measures the model's placement, the input to everything else.
 With ``--source`` the photos are one photographer's (bundles exported from leave-one-photographer-
 out folds, so the photographer is unseen); without it, every photo of ``--split``.
 
@@ -26,6 +26,7 @@ import sys
 import numpy as np
 
 from crossing_assist.actions import N_BINS, UNKNOWN, bin_center_x, x_to_heading
+from crossing_assist.bundle import read_bundle
 from crossing_assist.data_tools.augment import phone_views, portrait_views
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest
@@ -90,8 +91,8 @@ def main(argv=None) -> int:
     if a.frames:
         rng = np.random.default_rng(a.seed)
         rows = [rows[i] for i in sorted(rng.choice(len(rows), min(a.frames, len(rows)), replace=False))]
-    eng0 = Engine(a.bundles[0].partition("=")[2], threads=1)
-    train_fov, phone_fov = eng0.bundle.geometry.train_fov_deg, eng0.bundle.geometry.camera_fov_deg[1]
+    geometry = read_bundle(a.bundles[0].partition("=")[2]).geometry   # the views are cut for the first bundle's camera
+    train_fov, phone_fov = geometry.train_fov_deg, geometry.camera_fov_deg[1]
     photos = []   # (image, bin, far x)
     cuts = {"window": [], "phone": []}   # (view, bin, x in it, photo, left edge, width; fractions of the photo's width)
     for i, r in enumerate(rows):

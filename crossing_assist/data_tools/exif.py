@@ -29,7 +29,7 @@ from crossing_assist.geometry import GeometryError, check_fov
 #: The diagonal of a 36 x 24 mm frame, mm: what a 35 mm-equivalent focal length is matched on.
 FULL_FRAME_DIAGONAL_MM = math.hypot(36.0, 24.0)
 _ORIENTATION, _EXIF_IFD, _FOCAL_35MM = 0x0112, 0x8769, 0xA405
-_TYPE_SIZE = {3: 2, 4: 4}   # SHORT, LONG: the only types these tags come in
+_SHORT, _LONG = 3, 4        # the types these tags come in
 
 
 def equivalent_fov(focal_35mm: float, aspect: float) -> float:
@@ -86,8 +86,8 @@ def exif_tags(tiff: bytes) -> dict[int, int]:
             if at + 12 > len(tiff):
                 return
             tag, kind, n = struct.unpack_from(end + "HHI", tiff, at)
-            if kind in _TYPE_SIZE and n == 1:   # one value, held in the entry itself
-                yield tag, struct.unpack_from(end + ("H" if kind == 3 else "I"), tiff, at + 8)[0]
+            if kind in (_SHORT, _LONG) and n == 1:   # one value, held in the entry itself
+                yield tag, struct.unpack_from(end + ("H" if kind == _SHORT else "I"), tiff, at + 8)[0]
 
     (ifd0,) = struct.unpack_from(end + "I", tiff, 4)
     found: dict[int, int] = {}
