@@ -429,7 +429,8 @@ def test_rolled_too_far_is_beyond_the_levelled_and_trained_roll():
 def test_photo_clip_reads_each_photos_fov_from_its_shape_or_photo_fov(tmp_path, capsys):
     """photo-clip's window FOV (what crossing-demo --fov should get): from a phone's FOV for each
     photo's orientation and aspect (a 3:4 portrait photo is 53 deg across, not the landscape 67),
-    or from --photo-fov; a FOV outside 20..170 is one line."""
+    from the row's own fov flag (a 2x camera's, read from its EXIF at import), or from --photo-fov,
+    which wins; a FOV outside 20..170 is one line."""
     import json
 
     from crossing_assist.actions import bin_center_x
@@ -438,10 +439,11 @@ def test_photo_clip_reads_each_photos_fov_from_its_shape_or_photo_fov(tmp_path, 
     from crossing_assist.data_tools.manifest import Row, write_manifest
     from crossing_assist.geometry import window_fov
 
-    for name, (h, w) in (("land", (120, 160)), ("port", (160, 120))):
+    for name, (h, w), flags in (("land", (120, 160), ()), ("port", (160, 120), ()), ("tele", (120, 160), ("fov=36.9",))):
         save_rgb(tmp_path / name / "images" / "a.png", np.full((h, w, 3), 90, np.uint8))
-        write_manifest(tmp_path / name, [Row("images/a.png", 7, bin_center_x(7), "s", "val", {}, ())])
-    runs = {"land": ("3:4", None, 67.0), "port": ("9:16", None, 53.0), "port60": ("9:16", 60.0, 60.0)}
+        write_manifest(tmp_path / name, [Row("images/a.png", 7, bin_center_x(7), "s", "val", {}, flags)])
+    runs = {"land": ("3:4", None, 67.0), "port": ("9:16", None, 53.0), "port60": ("9:16", 60.0, 60.0),
+            "tele": ("3:4", None, 36.9), "tele50": ("3:4", 50.0, 50.0)}
     for tag, (aspect, photo_fov, want) in runs.items():
         out = tmp_path / f"{tag}.mp4"
         args = ["photo-clip", str(tmp_path / tag[:4]), "--out", str(out), "--aspect", aspect, "--count", "1",
@@ -449,7 +451,7 @@ def test_photo_clip_reads_each_photos_fov_from_its_shape_or_photo_fov(tmp_path, 
         assert main(args) == 0
         side = json.loads(out.with_suffix(".json").read_text())
         w = round(float(aspect.split(":")[0]) / float(aspect.split(":")[1]) * 64)
-        pw = round(64 * (160 / 120 if tag == "land" else 120 / 160))
+        pw = round(64 * (120 / 160 if tag.startswith("port") else 160 / 120))
         assert side["photo_fov_deg"] == [want]
         assert side["fov_deg"] == pytest.approx(window_fov(w / pw, want), abs=1e-3), tag
         assert f"--fov {side['fov_deg']:.1f}" in capsys.readouterr().out

@@ -191,8 +191,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--aspect", default="3:4", help="the phone frame's W:H, e.g. 3:4 (portrait) or 4:3 (landscape)")
     p.add_argument("--height", type=int, default=320, help="frame height in pixels")
     p.add_argument("--photo-fov", type=float, default=None, metavar="DEG",
-                   help="horizontal FOV of the camera that took the photos (default: a phone's for each "
-                        "photo's orientation and aspect: 67 deg for 4:3 landscape, 53 for 3:4 portrait)")
+                   help="horizontal FOV of the camera that took the photos (default: each row's fov=DEG flag, "
+                        "e.g. from its EXIF at import-ptl, else a phone's for the photo's orientation and aspect: "
+                        "67 deg for 4:3 landscape, 53 for 3:4 portrait)")
     p.set_defaults(func=_cmd_photo_clip)
 
     p = sub.add_parser("stats", help="counts per bin / action space / split, majority baseline, histogram")

@@ -7,8 +7,9 @@ the frame and out of view. The sidecar ``<clip>.json`` (the same fields as ``syn
 read by :mod:`crossing_assist.runtime.truth`) holds per frame the label (bin of the window, the
 edge strip when the goal is out of view but inferable) and the goal's bearing. The window's
 horizontal field of view follows from the photo's (``fov_deg``, the camera that took it; by
-default a phone's for the photo's orientation and aspect, 67 deg for a 4:3 landscape photo and
-53 deg for a 3:4 portrait one, :func:`~crossing_assist.geometry.letterbox_geometry`):
+default the row's own ``fov=DEG`` flag, e.g. from its EXIF at import, else a phone's for the
+photo's orientation and aspect, 67 deg for a 4:3 landscape photo and 53 deg for a 3:4 portrait
+one, :func:`~crossing_assist.geometry.letterbox_geometry`):
 ``2 atan(w'/W tan(fov/2))``; ``crossing-demo --fov`` should be given that value (printed, and in
 the sidecar's ``fov_deg``).
 """
@@ -24,7 +25,7 @@ import cv2
 import numpy as np
 
 from crossing_assist.actions import UNKNOWN, format_label, x_to_bin
-from crossing_assist.data_tools.images import load_frame
+from crossing_assist.data_tools.images import ImageError, frame_fov, load_frame
 from crossing_assist.data_tools.manifest import ManifestError, atomic_write_text, read_manifest
 from crossing_assist.geometry import GeometryError, check_fov, letterbox_geometry, window_fov
 
@@ -39,7 +40,7 @@ class PhotoClipConfig:
     fps: float = 10.0
     aspect: float = 3 / 4          # width / height of the phone's frame
     height: int = 320              # output frame height (px)
-    fov_deg: float | None = None   # horizontal FOV of the photos' camera (None: a phone's for each photo's shape)
+    fov_deg: float | None = None   # horizontal FOV of the photos' camera (None: each row's fov flag, else a phone's for its shape)
 
 
 def make_photo_clip(cfg: PhotoClipConfig) -> tuple[Path, Path, float]:
@@ -77,8 +78,8 @@ def make_photo_clip(cfg: PhotoClipConfig) -> tuple[Path, Path, float]:
             photo = load_frame(ds.image_path(r), r.flags)
             ph, pw = photo.shape[:2]
             try:
-                photo_fov = cfg.fov_deg or letterbox_geometry().camera_fov(pw, ph)
-            except GeometryError as exc:
+                photo_fov = cfg.fov_deg or frame_fov(r.flags) or letterbox_geometry().camera_fov(pw, ph)
+            except (GeometryError, ImageError) as exc:
                 raise ManifestError(f"{r.image}: {exc}; give the camera's with --photo-fov") from None
             photo_fovs.append(photo_fov)
             if w > int(round(pw * h / ph)) + 1:
