@@ -106,6 +106,22 @@ def test_import_ptl_flags_each_photo_with_its_cameras_fov_and_evaluation_reads_i
     assert all(flag_value(r.flags, "fov") is None for r in read_manifest(tmp_path / "ds2").rows)
 
 
+def test_the_import_ptl_command_says_how_many_photos_gave_their_fov(tmp_path, capsys):
+    from crossing_assist.data_tools.cli import main
+
+    root = tmp_path / "mine"
+    root.mkdir()
+    _photo(root / "a.jpg", (300, 400), focal=52)
+    _photo(root / "b.jpg", (300, 400))
+    (root / "labels.csv").write_text("image,split,photographer,far_x,bin12\na.jpg,test,ann,0.5,7\nb.jpg,test,ann,0.5,7\n")
+    assert main(["import-ptl", str(root), "--out", str(tmp_path / "ds"), "--quiet"]) == 0
+    assert "1 with their camera's FOV from EXIF" in capsys.readouterr().out
+    assert main(["import-ptl", str(root), "--out", str(tmp_path / "ds2"), "--quiet", "--no-exif-fov"]) == 0
+    assert "FOV" not in capsys.readouterr().out
+    assert [flag_value(r.flags, "fov") for r in read_manifest(tmp_path / "ds").rows] == ["36.8", None]
+    assert [flag_value(r.flags, "fov") for r in read_manifest(tmp_path / "ds2").rows] == [None, None]
+
+
 def test_heic_photos_give_their_fov_upright(tmp_path):
     """pillow-heif stores an EXIF turn as the container's rotation, which decoding applies: the FOV
     is read at the photo's upright aspect, not turned a second time."""
