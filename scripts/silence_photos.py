@@ -12,8 +12,10 @@ wheel (read where pip installed them, never copied here; none shows a street cro
     .venv/bin/python scripts/silence_photos.py \
         "$(.venv/bin/python -c 'import os, skimage; print(os.path.dirname(skimage.__file__))')/data"
 
-``--fov 41`` plays them as a narrow camera sees them (9:16 video: its portrait frames take the
-bundle's narrow camera threshold, the loosest). A missing folder, one without an image or an
+A photo whose EXIF gives its lens's 35 mm-equivalent focal length (phones write it) is played at
+the FOV that gives, as taken and turned (:mod:`crossing_assist.data_tools.exif`); others at the
+bundle's for their orientation. ``--fov 41`` plays them all as a narrow camera sees them (9:16
+video: its portrait frames take the bundle's narrow camera threshold, the loosest). A missing folder, one without an image or an
 unusable bundle is one line and exit 1 (a FOV outside 20..170 degrees: every play fails, silent);
 the figures are printed, nothing is written.
 """
@@ -29,6 +31,7 @@ import numpy as np
 
 from crossing_assist.actions import UNKNOWN
 from crossing_assist.bundle import BundleError
+from crossing_assist.data_tools.exif import focal_35mm, fov_from_focal
 from crossing_assist.data_tools.images import ImageError, load_frame
 from crossing_assist.geometry import orientation
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
@@ -94,7 +97,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("folders", nargs="+", type=Path, help="folders of photos with no crossing in view")
     ap.add_argument("--bundle", type=Path, default=DEFAULT_BUNDLE, help="bundle folder (default: the embedded one)")
     ap.add_argument("--fov", type=float, metavar="DEG", help="play every image as seen by a camera DEG across (e.g. 41: "
-                    "9:16 video, whose portrait frames take a narrow camera's gate threshold); default: the bundle's")
+                    "9:16 video, whose portrait frames take a narrow camera's gate threshold); default: the FOV "
+                    "its EXIF focal length gives, else the bundle's")
     a = ap.parse_args(argv)
     engine = open_engine(a.bundle)
     lis = Listener(engine)
@@ -105,8 +109,9 @@ def main(argv: list[str] | None = None) -> int:
         except ImageError as exc:
             print(f"skipped: {exc}")
             continue
+        focal = None if a.fov else focal_35mm(path)[0]   # a phone's photo says its lens: each view at its FOV
         for turn, view in (("as taken", frame), ("turned", np.ascontiguousarray(np.rot90(frame)))):
-            plays.append(play(lis, view, a.fov))
+            plays.append(play(lis, view, a.fov or fov_from_focal(focal, view.shape[1] / view.shape[0])))
             names.append(f"{path.name} ({turn}, {orientation(view.shape[1], view.shape[0])})")
     if not plays:
         raise SystemExit("error: no image could be read")

@@ -48,3 +48,24 @@ def test_fov_plays_the_photos_as_a_narrow_camera_sees_them(tmp_path, capsys):
     assert "| tall.png (as taken, portrait) | off |" in capsys.readouterr().out
     assert sp.main([str(tmp_path / "photos"), "--bundle", str(bundle), "--fov", "41"]) == 0
     assert "| tall.png (as taken, portrait) | ON, strip 4 |" in capsys.readouterr().out
+
+
+def test_a_photo_is_played_at_the_fov_its_exif_gives(tmp_path, capsys):
+    """A portrait photo from a 2.5x lens (65 mm: 22 deg across, EXIF) takes the narrow camera's
+    threshold and speaks, as with ``--fov``; the same pixels without the EXIF take the portrait
+    one and stay silent."""
+    Image = pytest.importorskip("PIL.Image")
+    from runtime_toy import make_toy_bundle
+
+    bundle = make_toy_bundle(tmp_path / "b", portrait_threshold=1e-6, narrow_threshold=1.0, narrow_fov_deg=42.0)
+    exif = Image.Exif()
+    exif.get_ifd(0x8769)[0xA405] = 65
+    (tmp_path / "tele").mkdir()
+    (tmp_path / "plain").mkdir()
+    pixels = Image.fromarray(bar_frame(bin_center_x(4), h=128, w=96))
+    pixels.save(tmp_path / "tele" / "tall.jpg", quality=95, exif=exif.tobytes())
+    pixels.save(tmp_path / "plain" / "tall.jpg", quality=95)
+    assert sp.main([str(tmp_path / "tele"), "--bundle", str(bundle)]) == 0
+    assert "| tall.jpg (as taken, portrait) | ON, strip 4 |" in capsys.readouterr().out
+    assert sp.main([str(tmp_path / "plain"), "--bundle", str(bundle)]) == 0
+    assert "| tall.jpg (as taken, portrait) | off |" in capsys.readouterr().out

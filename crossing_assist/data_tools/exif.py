@@ -99,28 +99,39 @@ def exif_tags(tiff: bytes) -> dict[int, int]:
     return found
 
 
-def photo_fov(path: str | os.PathLike, size: tuple[int, int], aspect: float | None = None) -> float | None:
-    """The horizontal FOV (degrees) of the photo at ``path`` as displayed, from its EXIF
-    35 mm-equivalent focal length, or None where it has none (or one outside 20..170 deg).
-    ``size``: its (height, width) as stored (a JPEG's EXIF orientation 5-8 turns it) or, for
-    HEIC, as decoded (upright); ``aspect`` (width / height), where the pixels do not say it (a
-    squashed copy's ``aspect=W:H`` flag), wins."""
+def focal_35mm(path: str | os.PathLike) -> tuple[float | None, bool]:
+    """The 35 mm-equivalent focal length (mm) the photo at ``path`` gives in its EXIF (None: none,
+    or 0, "unknown"), and whether its stored pixels are turned a quarter (a JPEG's EXIF orientation
+    5-8; libheif turns a HEIC upright itself)."""
     path = Path(path)
     try:
         with open(path, "rb") as fh:
             head = fh.read(1 << 17)   # an APP1 segment is at most 64 KiB, after APP0 and the like
     except OSError:
-        return None
+        return None, False
     heif = head[4:8] == b"ftyp" and head[8:12] in HEIF_BRANDS
     tiff = _heif_exif(path) if heif else _jpeg_exif(head) if head[:3] == b"\xff\xd8\xff" else None
     tags = exif_tags(tiff) if tiff else {}
-    focal = tags.get(_FOCAL_35MM, 0)
-    if not focal or not (size[0] > 0 and size[1] > 0):
-        return None
-    h, w = size
-    if not heif and tags.get(_ORIENTATION, 1) in (5, 6, 7, 8):   # libheif turns HEIC upright itself
-        h, w = w, h
+    return float(tags[_FOCAL_35MM]) if tags.get(_FOCAL_35MM) else None, not heif and tags.get(_ORIENTATION, 1) in (5, 6, 7, 8)
+
+
+def fov_from_focal(focal: float | None, aspect: float) -> float | None:
+    """:func:`equivalent_fov`, or None for no focal length or a FOV outside 20..170 deg."""
     try:
-        return check_fov(equivalent_fov(float(focal), aspect or w / h))
+        return check_fov(equivalent_fov(focal, aspect)) if focal else None
     except (GeometryError, ValueError):
         return None
+
+
+def photo_fov(path: str | os.PathLike, size: tuple[int, int], aspect: float | None = None) -> float | None:
+    """The horizontal FOV (degrees) of the photo at ``path`` as displayed, from its EXIF
+    35 mm-equivalent focal length, or None where it has none (or one outside 20..170 deg).
+    ``size``: its (height, width) as stored (a JPEG's EXIF orientation 5-8 turns it) or, for
+    HEIC, as decoded (upright), as :func:`~crossing_assist.data_tools.images.inspect_image_file`
+    gives it; ``aspect`` (width / height), where the pixels do not say it (a squashed copy's
+    ``aspect=W:H`` flag), wins."""
+    focal, turned = focal_35mm(path)
+    h, w = size[::-1] if turned else size
+    if not (h > 0 and w > 0):
+        return None
+    return fov_from_focal(focal, aspect or w / h)
