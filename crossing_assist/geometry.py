@@ -52,6 +52,8 @@ CAMERA_FOV_DEG = {"landscape": 67.0, "portrait": 53.0}
 #: The horizontal field of view assumed for the PTL training photos (phone cameras, landscape).
 TRAIN_FOV_DEG = 67.0
 FOV_RANGE_DEG = (20.0, 170.0)
+#: Two horizontal FOVs this close (degrees) are one camera (a 26 mm photo's 67.3 is the training 67).
+SAME_CAMERA_DEG = 1.0
 #: Long side / short side of the sensor ``camera_fov_deg`` describes (a phone's 4:3 main camera);
 #: the exporter writes it as ``geometry.sensor_aspect`` for letterbox models.
 SENSOR_ASPECT = 4 / 3

@@ -376,6 +376,29 @@ def test_crossing_eval_plays_each_frame_at_its_cameras_fov(tmp_path):
         assert r.returncode != 0 and len(lines) == 1 and lines[0].startswith("error:") and "fov" in lines[0].lower(), r.stderr
 
 
+def test_a_photo_of_the_training_camera_is_cut_into_portrait_views_even_when_its_fov_is_known(tmp_path):
+    """A landscape photo whose EXIF gave 67.3 deg (a 26 mm phone camera: the training camera) is
+    still cut into portrait views, as an unflagged one is; one from a 40 deg camera is played as it
+    is, at its FOV, and not cut."""
+    from types import SimpleNamespace
+
+    from crossing_assist.data_tools.images import save_rgb
+    from crossing_assist.data_tools.manifest import Row, read_manifest, write_manifest
+    from crossing_assist.geometry import letterbox_geometry
+    from crossing_assist.models.evaluate import _views
+
+    data = tmp_path / "data"
+    flags = ((), ("fov=67.3",), ("fov=40",))
+    for i, f in enumerate(flags):
+        save_rgb(data / "images" / f"p{i}.png", bar_frame(bin_center_x(6), h=120, w=160))
+    write_manifest(data, [Row(f"images/p{i}.png", 6, bin_center_x(6), "src:0", "val", {}, f) for i, f in enumerate(flags)])
+    ds = read_manifest(data)
+    views = _views(SimpleNamespace(portrait=2, fov_deg=None), [(ds, r) for r in ds.rows], letterbox_geometry())
+    assert [v[4] for v in views["landscape"]] == [None, 67.3, 40.0]
+    assert len(views["portrait"]) == len(views["portrait_window"]) == 4   # 2 views of each of the first two
+    assert {v[4] for v in views["portrait"]} == {53.0}
+
+
 def test_adding_negatives_leaves_the_figures_on_crossings_as_they_were(tmp_path):
     """A noisy toy (every MC sample differs): crossing-eval with --negatives gives the same
     figures on the frames with a crossing, every view, as without (the negatives' draws used to

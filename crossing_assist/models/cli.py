@@ -185,7 +185,8 @@ def eval_parser() -> argparse.ArgumentParser:
     p.add_argument("--fov", type=float, metavar="DEG",
                    help="bundles: the frames' camera, horizontal FOV in degrees, as crossing-demo --fov (a row's "
                         "fov=DEG flag, from crossing-data frames --fov, wins; default: the bundle's for each "
-                        "frame's orientation); such frames are not cut into portrait views")
+                        "frame's orientation); such frames are cut into portrait views only when that is the "
+                        "training camera's FOV (within 1 deg)")
     p.add_argument("--scan", type=float, default=0.0, metavar="DEG_PER_S",
                    help="bundles: also play each photo as a user scanning for the crossing, the camera turned "
                         "0 -> +20 -> -20 -> 0 deg at this rate (e.g. 30), the turn told to the decision logic by a "

@@ -203,16 +203,19 @@ def _views(cfg: EvalConfig, rows: list, geometry) -> dict[str, list[tuple[np.nda
     camera FOV (None = the bundle's default): each photo as taken (landscape) and, with
     ``cfg.portrait``, its portrait views (:func:`~crossing_assist.data_tools.augment.user_views`:
     a phone held in portrait at the bundle's portrait FOV, and 3:4 windows).
-    A frame whose camera is known (its ``fov=`` flag, or ``--fov``) is played at that FOV and not
-    cut into portrait views, which assume a photo of the training camera."""
+    A frame whose camera is known (its ``fov=`` flag, e.g. from its EXIF, or ``--fov``) is played at
+    that FOV, and cut into portrait views only when that is the training camera's (within
+    ``SAME_CAMERA_DEG``): the views assume a photo of the training camera."""
     from ..data_tools.augment import PORTRAIT_SETS, user_views
+    from ..geometry import SAME_CAMERA_DEG
 
     views: dict[str, list] = {"landscape": [], **({k: [] for k in PORTRAIT_SETS} if cfg.portrait else {})}
     for ds, r in rows:
         fov = _fov(cfg, ds, r)
+        training_camera = fov is None or abs(fov - geometry.train_fov_deg) <= SAME_CAMERA_DEG
         for name, vs in user_views(load_frame(ds.image_path(r), r.flags), r.far_x, r.label,
-                                   cfg.portrait if fov is None else 0, geometry).items():
-            views[name] += [v if fov is None else (*v[:4], fov) for v in vs]
+                                   cfg.portrait if training_camera else 0, geometry).items():
+            views[name] += [(*v[:4], fov) if name == "landscape" and fov is not None else v for v in vs]
     return views
 
 

@@ -417,6 +417,7 @@ def fov_mismatch(ds: Dataset, fov_deg: float) -> str | None:
     """A line when rows' ``fov=`` flags (their camera, from ``crossing-data frames --fov``) differ
     from ``--fov`` by over a degree: the yaw views and the far point's heading assume ``--fov``."""
     from ..data_tools.images import ImageError, frame_fov
+    from ..geometry import SAME_CAMERA_DEG
 
     seen: dict[float, int] = {}
     for r in ds.rows:
@@ -424,7 +425,7 @@ def fov_mismatch(ds: Dataset, fov_deg: float) -> str | None:
             f = frame_fov(r.flags)
         except ImageError as exc:
             raise ConfigError(f"{ds.image_path(r)}: {exc}") from None
-        if f is not None and abs(f - fov_deg) > 1.0:
+        if f is not None and abs(f - fov_deg) > SAME_CAMERA_DEG:
             seen[f] = seen.get(f, 0) + 1
     if not seen:
         return None
