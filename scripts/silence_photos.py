@@ -15,9 +15,9 @@ wheel (read where pip installed them, never copied here; none shows a street cro
 A photo whose EXIF gives its lens's 35 mm-equivalent focal length (phones write it) is played at
 the FOV that gives, as taken and turned (:mod:`crossing_assist.data_tools.exif`); others at the
 bundle's for their orientation. ``--fov 41`` plays them all as a narrow camera sees them (9:16
-video: its portrait frames take the bundle's narrow camera threshold, the loosest). A missing folder, one without an image or an
-unusable bundle is one line and exit 1 (a FOV outside 20..170 degrees: every play fails, silent);
-the figures are printed, nothing is written.
+video: its portrait frames take the bundle's narrow camera threshold, the loosest). A missing
+folder, one without an image or an unusable bundle is one line and exit 1 (a FOV outside 20..170
+degrees: every play fails, silent); the figures are printed, nothing is written.
 """
 
 from __future__ import annotations

@@ -14,7 +14,8 @@ from the EXIF) and play it through the runtime (``crossing-eval --bundle``); imp
     .venv/bin/crossing-data import-ptl runs/zoom2 --out runs/data/zoom2_default --images reference --no-exif-fov
     .venv/bin/crossing-eval --bundle crossing_assist/assets/default_bundle --data runs/data/zoom2 --split val --portrait 0
 
-The crops are upscaled by the model's fitting, so they are softer than a real telephoto's photo.
+Each crop has 1/zoom of the photo's pixels across (PTL's copies are 299 x 224 read back at 4:3),
+so it is softer than a real telephoto's photo.
 Needs Pillow (to write the EXIF); reads the photos through ``--data`` (an imported PTL).
 """
 
