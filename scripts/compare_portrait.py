@@ -25,27 +25,29 @@ import sys
 
 import numpy as np
 
-from crossing_assist.actions import N_BINS, UNKNOWN, bin_center_x, x_to_heading
+from crossing_assist.actions import DEFAULT_FOV_DEG, N_BINS, UNKNOWN, bin_center_x, get_space, heading_to_x, x_to_heading
 from crossing_assist.bundle import read_bundle
 from crossing_assist.data_tools.augment import phone_views, portrait_views
 from crossing_assist.data_tools.images import load_frame
 from crossing_assist.data_tools.manifest import read_manifest
 from crossing_assist.geometry import window_fov
+from crossing_assist.runtime.belief import belief_heading
 from crossing_assist.runtime.engine import Engine
 
-_CENTRES = np.array([bin_center_x(b) for b in range(1, N_BINS + 1)])
+_STRIPS = get_space(N_BINS + 1)
 
 
 def placed_x(probs: np.ndarray, refine: bool) -> float:
     """Where ``probs`` (unknown first, then the strips left to right) put the goal, as a fraction of
-    the frame's width: the most likely strip's centre, or with ``refine`` the mean of its and its
-    neighbours' centres weighted by their probabilities (a finer place than a strip)."""
-    p = np.asarray(probs, dtype=np.float64)[1:]
-    a = int(np.argmax(p))
+    the frame's width, unknown left aside: the most likely strip's centre, or with ``refine`` the
+    place the runtime plays (:func:`~crossing_assist.runtime.belief.belief_heading`: the mean of
+    that strip's and its neighbours' centres weighted by their probabilities)."""
+    p = np.asarray(probs, dtype=np.float64).copy()
+    p[UNKNOWN] = 0.0
     if not refine:
-        return float(_CENTRES[a])
-    lo, hi = max(0, a - 1), min(N_BINS, a + 2)
-    return float(np.dot(p[lo:hi], _CENTRES[lo:hi]) / p[lo:hi].sum())
+        return bin_center_x(int(np.argmax(p)))
+    _, heading = belief_heading(p, _STRIPS, DEFAULT_FOV_DEG)   # any FOV: read back at the same one
+    return heading_to_x(heading, DEFAULT_FOV_DEG)
 
 
 def carried_bin(x: float, x0: float, width: float) -> int:

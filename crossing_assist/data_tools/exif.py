@@ -23,7 +23,7 @@ import os
 import struct
 from pathlib import Path
 
-from crossing_assist.data_tools.images import HEIF_BRANDS
+from crossing_assist.data_tools.images import HEIF_BRANDS, iso_brand
 from crossing_assist.geometry import GeometryError, check_fov
 
 #: The diagonal of a 36 x 24 mm frame, mm: what a 35 mm-equivalent focal length is matched on.
@@ -109,7 +109,7 @@ def focal_35mm(path: str | os.PathLike) -> tuple[float | None, bool]:
             head = fh.read(1 << 17)   # an APP1 segment is at most 64 KiB, after APP0 and the like
     except OSError:
         return None, False
-    heif = head[4:8] == b"ftyp" and head[8:12] in HEIF_BRANDS
+    heif = iso_brand(head[:12]) in HEIF_BRANDS
     tiff = _heif_exif(path) if heif else _jpeg_exif(head) if head[:3] == b"\xff\xd8\xff" else None
     tags = exif_tags(tiff) if tiff else {}
     return float(tags[_FOCAL_35MM]) if tags.get(_FOCAL_35MM) else None, not heif and tags.get(_ORIENTATION, 1) in (5, 6, 7, 8)

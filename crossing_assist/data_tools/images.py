@@ -26,7 +26,7 @@ HEIF_BRANDS = frozenset({b"heic", b"heix", b"heim", b"heis", b"hevc", b"hevx", b
 AVIF_BRANDS = frozenset({b"avif", b"avis"})
 
 
-def _brand(head: bytes) -> bytes | None:
+def iso_brand(head: bytes) -> bytes | None:
     """The major brand of an ISO base media file (HEIC, AVIF) from its first 12 bytes, else None."""
     return head[8:12] if len(head) >= 12 and head[4:8] == b"ftyp" else None
 
@@ -76,7 +76,7 @@ def load_rgb(path: str | os.PathLike) -> np.ndarray:
     if not path.is_file():
         raise ImageError(f"{path}: image not found")
     data = np.fromfile(str(path), dtype=np.uint8)
-    brand = _brand(data[:12].tobytes())
+    brand = iso_brand(data[:12].tobytes())
     if brand in HEIF_BRANDS:
         return _load_heif(path)
     if brand in AVIF_BRANDS:
