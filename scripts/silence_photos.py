@@ -31,7 +31,7 @@ import numpy as np
 
 from crossing_assist.actions import UNKNOWN
 from crossing_assist.bundle import BundleError
-from crossing_assist.data_tools.exif import focal_35mm, fov_from_focal
+from crossing_assist.data_tools.exif import ExifCamera, read_camera
 from crossing_assist.data_tools.images import ImageError, load_frame
 from crossing_assist.geometry import orientation
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
@@ -109,9 +109,9 @@ def main(argv: list[str] | None = None) -> int:
         except ImageError as exc:
             print(f"skipped: {exc}")
             continue
-        focal = None if a.fov else focal_35mm(path)[0]   # a phone's photo says its lens: each view at its FOV
+        camera = ExifCamera() if a.fov else read_camera(path)   # a phone's photo says its lens: each view at its FOV
         for turn, view in (("as taken", frame), ("turned", np.ascontiguousarray(np.rot90(frame)))):
-            plays.append(play(lis, view, a.fov or fov_from_focal(focal, view.shape[1] / view.shape[0])))
+            plays.append(play(lis, view, a.fov or camera.fov(view.shape[1] / view.shape[0])))
             names.append(f"{path.name} ({turn}, {orientation(view.shape[1], view.shape[0])})")
     if not plays:
         raise SystemExit("error: no image could be read")

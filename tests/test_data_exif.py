@@ -13,13 +13,16 @@ from crossing_assist.data_tools.ptl import PTLImportConfig, import_ptl
 Image = pytest.importorskip("PIL.Image")   # writes the EXIF the tests read (the reader needs no Pillow)
 
 
-def _photo(path, hw, focal=None, orientation=None, big_endian=False):
-    """A JPEG of stored size ``hw`` with the EXIF given (Pillow writes it little- or big-endian)."""
+def _photo(path, hw, focal=None, orientation=None, big_endian=False, recorded=None):
+    """A JPEG of stored size ``hw`` with the EXIF given (Pillow writes it little- or big-endian);
+    ``recorded``: the (width, height) the camera wrote as its image's size."""
     exif = Image.Exif()
     if orientation is not None:
         exif[0x0112] = orientation
     if focal is not None:
         exif.get_ifd(0x8769)[0xA405] = focal
+    if recorded is not None:
+        exif.get_ifd(0x8769).update({0xA002: recorded[0], 0xA003: recorded[1]})
     img = Image.fromarray(np.full((*hw, 3), 90, np.uint8))
     raw = exif.tobytes()
     if big_endian:   # the same tags, Motorola order (Canon, some Samsungs)
@@ -120,6 +123,26 @@ def test_the_import_ptl_command_says_how_many_photos_gave_their_fov(tmp_path, ca
     assert "FOV" not in capsys.readouterr().out
     assert [flag_value(r.flags, "fov") for r in read_manifest(tmp_path / "ds").rows] == ["36.8", None]
     assert [flag_value(r.flags, "fov") for r in read_manifest(tmp_path / "ds2").rows] == [None, None]
+
+
+def test_a_photo_cropped_after_capture_is_read_as_a_crop_of_the_recorded_image(tmp_path):
+    """The focal length describes the image the camera recorded (its size in the EXIF): a square or
+    16:9 cut of a 26 mm 4:3 photo is its largest centred crop (53.1 / 67.3 deg, as the bundles'
+    default takes a frame narrower than the sensor), not a 26 mm photo of that aspect (60.9 / 71.9)."""
+    def fov(hw, recorded, **kw):
+        return photo_fov(_photo(tmp_path / f"{hw}{recorded}{kw}.jpg", hw, focal=26, recorded=recorded, **kw), hw)
+
+    assert fov((300, 300), (4032, 3024)) == pytest.approx(53.1, abs=0.1)     # a square, full height
+    assert fov((300, 300), None) == pytest.approx(60.9, abs=0.1)             # no recorded size: its own diagonal
+    assert fov((225, 400), (4032, 3024)) == pytest.approx(67.3, abs=0.1)     # 16:9, full width
+    assert fov((225, 400), None) == pytest.approx(71.9, abs=0.1)
+    assert fov((300, 400), (4032, 3024)) == pytest.approx(67.3, abs=0.1)     # a smaller copy: the whole photo
+    assert fov((300, 400), (4032, 3024), orientation=6) == pytest.approx(53.1, abs=0.1)   # turned upright
+    assert fov((400, 300), (4032, 3024)) == pytest.approx(53.1, abs=0.1)     # stored portrait, either way up
+    assert fov((400, 225), (3024, 4032)) == pytest.approx(41.1, abs=0.1)     # a 9:16 cut of a portrait photo
+    # the recorded size is read from the EXIF block
+    raw = Image.open(_photo(tmp_path / "r.jpg", (30, 40), focal=26, recorded=(4032, 3024))).info["exif"]
+    assert exif_tags(raw[6:]) == {0xA405: 26, 0xA002: 4032, 0xA003: 3024}
 
 
 def test_heic_photos_give_their_fov_upright(tmp_path):
