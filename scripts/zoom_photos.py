@@ -37,9 +37,9 @@ import numpy as np
 
 from crossing_assist.actions import x_to_bin
 from crossing_assist.data_tools.images import load_frame
-from crossing_assist.geometry import parse_ratio
 from crossing_assist.data_tools.manifest import read_manifest
 from crossing_assist.errors import UserError, run_cli
+from crossing_assist.geometry import parse_ratio
 
 #: A phone main camera's 35 mm-equivalent focal length, mm (67 deg across a 4:3 landscape photo).
 MAIN_CAMERA_MM = 26
