@@ -47,7 +47,7 @@ def test_two_gloo_processes_match_one_process_and_resume(tmp_path):
             "--input-size", "64", "--batch-size", "5", "--dropout", "0", "--aux-x", "1", "--smoothing", "0.1",
             "--soft-x", "0.4", "--balance", "weights", "--unfreeze", "1", "--threads", "1", "--cache-dir", str(cache),
             "--quiet"]
-    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONFAULTHANDLER": "1"}   # a worker that dies says where
     r = subprocess.run([*TORCHRUN, *args, "--epochs", "1"], capture_output=True, text=True, env=env, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]
     assert r.stdout.count("trained 1 epochs") == 1          # rank 0 alone reports
@@ -69,3 +69,12 @@ def test_cv_under_torchrun_is_refused_with_one_line(tmp_path):
                        capture_output=True, text=True, env={**os.environ, "WORLD_SIZE": "2"})
     assert r.returncode != 0 and r.stderr.startswith("error:") and "--cv" in r.stderr
     assert r.stderr.strip().count("\n") == 0 and not (tmp_path / "cv").exists()
+
+
+def test_leave_flushes_the_output_and_exits_with_the_code_given():
+    """A torchrun worker's last words survive its hard exit (stdout to a pipe is block-buffered)."""
+    code = ("import sys; from crossing_assist.models import distributed; print('trained 2 epochs'); "
+            "print('a warning', file=sys.stderr); distributed.leave(3)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"})
+    assert (r.returncode, r.stdout, r.stderr) == (3, "trained 2 epochs\n", "a warning\n")

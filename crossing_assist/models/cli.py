@@ -158,6 +158,8 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         best = out / "weights" / "best.pt"
         if os.environ.get("RANK", "0") == "0":  # one line per run, not per torchrun rank
             print(f"trained {trained_epochs(out)} epochs -> {best} ({best.stat().st_size / 1e6:.1f} MB)")
+        if distributed.requested():
+            distributed.leave(0)
         return 0
 
     return _run(go, argv, interrupted=_resume_hint(a.out))
