@@ -31,7 +31,7 @@ import numpy as np
 
 from crossing_assist.actions import UNKNOWN
 from crossing_assist.bundle import BundleError
-from crossing_assist.data_tools.exif import ExifCamera, read_camera
+from crossing_assist.data_tools.exif import read_camera
 from crossing_assist.data_tools.images import ImageError, load_frame
 from crossing_assist.geometry import orientation
 from crossing_assist.runtime.demo import DEFAULT_BUNDLE
@@ -109,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         except ImageError as exc:
             print(f"skipped: {exc}")
             continue
-        camera = ExifCamera() if a.fov else read_camera(path)   # a phone's photo says its lens: each view at its FOV
+        camera = read_camera(path)   # a phone's photo says its lens: each view at its FOV
         for turn, view in (("as taken", frame), ("turned", np.ascontiguousarray(np.rot90(frame)))):
             plays.append(play(lis, view, a.fov or camera.fov(view.shape[1] / view.shape[0])))
             names.append(f"{path.name} ({turn}, {orientation(view.shape[1], view.shape[0])})")

@@ -128,12 +128,9 @@ class ExifCamera:
         on ``aspect``'s own diagonal. None for no focal length or a FOV outside 20..170 deg."""
         if not self.focal_35mm or not aspect > 0:
             return None
-        if self.recorded is None:
-            return fov_from_focal(self.focal_35mm, aspect)
-        full = max(self.recorded) / min(self.recorded)          # long / short side, either way up
-        whole = (fov_from_focal(self.focal_35mm, full), fov_from_focal(self.focal_35mm, 1 / full))
-        if None in whole:
-            return None
+        # long / short side of the recorded image, either way up (unknown: the view is the whole image)
+        full = max(self.recorded) / min(self.recorded) if self.recorded else max(aspect, 1 / aspect)
+        whole = (equivalent_fov(self.focal_35mm, full), equivalent_fov(self.focal_35mm, 1 / full))
         try:
             return check_fov(default_fov(aspect, 1.0, whole, sensor_aspect=full))
         except GeometryError:
@@ -156,14 +153,6 @@ def read_camera(path: str | os.PathLike) -> ExifCamera:
     return ExifCamera(focal_35mm=float(tags[_FOCAL_35MM]) if tags.get(_FOCAL_35MM) else None,
                       turned=not heif and tags.get(_ORIENTATION, 1) in (5, 6, 7, 8),
                       recorded=(w, h) if w > 0 and h > 0 else None)
-
-
-def fov_from_focal(focal: float | None, aspect: float) -> float | None:
-    """:func:`equivalent_fov`, or None for no focal length or a FOV outside 20..170 deg."""
-    try:
-        return check_fov(equivalent_fov(focal, aspect)) if focal else None
-    except (GeometryError, ValueError):
-        return None
 
 
 def photo_fov(path: str | os.PathLike, size: tuple[int, int], aspect: float | None = None) -> float | None:
